@@ -1,0 +1,1 @@
+"""Masks -> hazard sectors -> smoothing -> CAN and serial senders."""

@@ -1,0 +1,1 @@
+"""Benchmarks of bsn-edge: each module measures one thing and writes results/<name>.json + .md."""

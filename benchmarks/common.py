@@ -1,0 +1,59 @@
+"""What every benchmark shares: the machine description and the result writers."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+
+def machine() -> dict[str, Any]:
+    """The machine a result was measured on."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+            "platform": platform.platform()}
+
+
+def time_calls(fn: Callable[[int], Any], n: int, warmup: int = 3) -> list[float]:
+    """Seconds per call of ``fn(i)`` for ``i`` in ``range(n)``, after ``warmup`` calls."""
+    for i in range(warmup):
+        fn(i)
+    out = []
+    for i in range(n):
+        t0 = time.perf_counter()
+        fn(i)
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def summary(seconds: list[float]) -> dict[str, float]:
+    """Median, p95 and rate of a list of per-call times."""
+    s = sorted(seconds)
+    med = statistics.median(s)
+    return {"median_ms": 1e3 * med, "p95_ms": 1e3 * s[min(len(s) - 1, int(0.95 * len(s)))],
+            "per_second": 1.0 / med, "n": len(s)}
+
+
+def write_result(out_dir: str | Path, name: str, result: dict[str, Any], markdown: str) -> Path:
+    """Write ``<name>.json`` and ``<name>.md`` into ``out_dir``; returns the JSON path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    result = {"benchmark": name, "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+              "machine": machine(), **result}
+    (out / f"{name}.json").write_text(json.dumps(result, indent=2) + "\n")
+    m = result["machine"]
+    (out / f"{name}.md").write_text(markdown.rstrip() + f"\n\nMeasured on {m['cpu']}, "
+                                    f"{m['cores']} cores, Python {m['python']}.\n")
+    return out / f"{name}.json"

@@ -1,0 +1,42 @@
+"""``bsn-sheet``: a contact sheet PNG of one or more sequence folders."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from bsn_edge.cli.common import fail
+from bsn_edge.sequence import write_image
+from bsn_edge.synth.sheet import contact_sheet
+
+PROG = "bsn-sheet"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description="Write a contact sheet (RGB, depth, semantics, blind spots tinted red) of "
+                    "sequence folders, for a person to judge.")
+    p.add_argument("seqs", nargs="+", help="sequence folders")
+    p.add_argument("--out", required=True, help="output PNG")
+    p.add_argument("--rows", type=int, default=3, help="frames per sequence (default 3)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.rows < 1:
+        return fail(PROG, f"--rows must be >= 1, got {args.rows}")
+    try:
+        img = contact_sheet(args.seqs, rows=args.rows)
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_image(out, img)
+    except (FileNotFoundError, ValueError, OSError) as e:
+        return fail(PROG, str(e))
+    print(f"wrote {out} ({img.shape[1]}x{img.shape[0]})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

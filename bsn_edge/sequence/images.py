@@ -1,0 +1,76 @@
+"""Image files of a sequence: RGB, 16-bit depth (metres x 256), 8-bit masks; atomic writes."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+DEPTH_SCALE = 256.0  # KITTI convention: uint16 value = metres x 256, 0 = no depth
+MAX_DEPTH_M = 65535 / DEPTH_SCALE
+PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file and a rename, so readers never
+    see a half-written file and an interrupted run leaves nothing behind."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_image(path: str | os.PathLike, image: np.ndarray) -> None:
+    """Atomically write an image; the format follows the file's extension."""
+    ext = Path(path).suffix or ".png"
+    params = PNG_FAST if ext.lower() == ".png" else []
+    ok, buf = cv2.imencode(ext, image, params)
+    if not ok:
+        raise OSError(f"could not encode image for {path}")
+    atomic_write_bytes(path, buf.tobytes())
+
+
+def _read(path: str | os.PathLike, flags: int) -> np.ndarray:
+    img = cv2.imread(str(path), flags)
+    if img is None:
+        raise FileNotFoundError(f"cannot read image {path} (missing or not an image)")
+    return img
+
+
+def depth_to_png16(depth_m: np.ndarray) -> np.ndarray:
+    """Metric depth to the KITTI uint16 encoding; non-finite or non-positive -> 0 (no depth)."""
+    d = np.nan_to_num(depth_m.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    d = np.clip(d, 0.0, MAX_DEPTH_M)
+    return np.round(d * DEPTH_SCALE).astype(np.uint16)
+
+
+def write_depth(path: str | os.PathLike, depth_m: np.ndarray) -> None:
+    """Write metric depth as a 16-bit PNG, metres x 256, 0 = no depth."""
+    write_image(path, depth_to_png16(depth_m))
+
+
+def read_depth(path: str | os.PathLike) -> np.ndarray:
+    """Read a 16-bit depth PNG into float32 metres (0 = no depth)."""
+    raw = _read(path, cv2.IMREAD_UNCHANGED)
+    if raw.dtype != np.uint16 or raw.ndim != 2:
+        raise ValueError(f"{path}: depth must be a single-channel 16-bit PNG, got {raw.dtype} {raw.shape}")
+    return raw.astype(np.float32) / DEPTH_SCALE
+
+
+def write_mask(path: str | os.PathLike, mask: np.ndarray) -> None:
+    """Write a boolean mask as an 8-bit PNG of 0 / 255."""
+    write_image(path, np.where(mask, 255, 0).astype(np.uint8))
+
+
+def read_mask(path: str | os.PathLike) -> np.ndarray:
+    """Read an 8-bit 0 / 255 mask PNG into a boolean array."""
+    raw = _read(path, cv2.IMREAD_GRAYSCALE)
+    return raw > 127

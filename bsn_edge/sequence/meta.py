@@ -1,0 +1,71 @@
+"""``meta.json`` of a sequence folder."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from bsn_edge.camera import Intrinsics
+from bsn_edge.sequence.images import atomic_write_bytes
+
+META_NAME = "meta.json"
+
+
+@dataclass(frozen=True)
+class SequenceMeta:
+    """What a stage needs to know about a clip: rate, size, intrinsics, where it came from."""
+
+    fps: float
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    source: str
+    frames: int
+    seed: int | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.fps > 0:
+            raise ValueError(f"fps must be positive, got {self.fps}")
+        if self.frames < 0:
+            raise ValueError(f"frames must be >= 0, got {self.frames}")
+        self.intrinsics  # noqa: B018 - validates size and intrinsics
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return Intrinsics(self.fx, self.fy, self.cx, self.cy, self.width, self.height)
+
+    def to_json(self) -> str:
+        d = asdict(self)
+        extra = d.pop("extra")
+        d.update(extra)
+        return json.dumps(d, indent=2, sort_keys=True)
+
+    def write(self, seq_dir: str | os.PathLike) -> None:
+        atomic_write_bytes(Path(seq_dir) / META_NAME, (self.to_json() + "\n").encode())
+
+    @classmethod
+    def read(cls, seq_dir: str | os.PathLike) -> SequenceMeta:
+        path = Path(seq_dir) / META_NAME
+        if not path.is_file():
+            raise FileNotFoundError(f"{seq_dir}: not a sequence folder (no {META_NAME})")
+        try:
+            d = json.loads(path.read_text())
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{path}: invalid JSON: {e}") from None
+        known = {"fps", "width", "height", "fx", "fy", "cx", "cy", "source", "frames", "seed"}
+        missing = sorted(known - {"seed"} - d.keys())
+        if missing:
+            raise ValueError(f"{path}: missing keys {missing}")
+        extra = {k: v for k, v in d.items() if k not in known}
+        return cls(
+            fps=float(d["fps"]), width=int(d["width"]), height=int(d["height"]),
+            fx=float(d["fx"]), fy=float(d["fy"]), cx=float(d["cx"]), cy=float(d["cy"]),
+            source=str(d["source"]), frames=int(d["frames"]), seed=d.get("seed"), extra=extra,
+        )

@@ -1,0 +1,84 @@
+"""Camera trajectories: KITTI odometry (3x4 row-major per line) and TUM (``t tx ty tz qx qy qz qw``).
+
+Poses are camera-to-world ``T_wc`` 4x4 matrices, shape ``[N, 4, 4]``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from bsn_edge.sequence.images import atomic_write_bytes
+
+
+def write_kitti_poses(path: str | os.PathLike, poses: np.ndarray) -> None:
+    """Write ``[N, 4, 4]`` camera-to-world poses in the KITTI odometry text format."""
+    poses = np.asarray(poses, dtype=np.float64)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+        raise ValueError(f"poses must be [N, 4, 4], got {poses.shape}")
+    lines = [" ".join(f"{v:.9e}" for v in T[:3].reshape(-1)) for T in poses]
+    atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
+
+
+def read_kitti_poses(path: str | os.PathLike) -> np.ndarray:
+    """Read a KITTI odometry pose file (12 numbers per line) into ``[N, 4, 4]``."""
+    rows = []
+    for lineno, line in enumerate(Path(path).read_text().splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            vals = [float(v) for v in line.split()]
+        except ValueError as e:
+            raise ValueError(f"{path}:{lineno}: not a number in KITTI pose line: {e}") from None
+        if len(vals) != 12:
+            raise ValueError(f"{path}:{lineno}: a KITTI pose line has 12 numbers, found {len(vals)}")
+        T = np.eye(4)
+        T[:3] = np.reshape(vals, (3, 4))
+        rows.append(T)
+    if not rows:
+        raise ValueError(f"{path}: no poses found")
+    return np.stack(rows)
+
+
+def quat_to_rot(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix from a quaternion ``(qx, qy, qz, qw)`` (normalised here)."""
+    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def read_tum_poses(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Read a TUM trajectory; returns ``(timestamps [N], poses [N, 4, 4])``."""
+    stamps, poses = [], []
+    for lineno, line in enumerate(Path(path).read_text().splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            vals = [float(v) for v in line.split()]
+        except ValueError as e:
+            raise ValueError(f"{path}:{lineno}: not a number in TUM pose line: {e}") from None
+        if len(vals) != 8:
+            raise ValueError(f"{path}:{lineno}: a TUM line has 8 numbers (t tx ty tz qx qy qz qw), "
+                             f"found {len(vals)}")
+        T = np.eye(4)
+        T[:3, :3] = quat_to_rot(np.array(vals[4:8]))
+        T[:3, 3] = vals[1:4]
+        stamps.append(vals[0])
+        poses.append(T)
+    if not poses:
+        raise ValueError(f"{path}: no poses found")
+    return np.array(stamps), np.stack(poses)
+
+
+def read_poses(path: str | os.PathLike) -> np.ndarray:
+    """Read KITTI or TUM poses, telling them apart by the count of numbers per line."""
+    first = next((ln for ln in Path(path).read_text().splitlines()
+                  if ln.strip() and not ln.lstrip().startswith("#")), "")
+    if len(first.split()) == 8:
+        return read_tum_poses(path)[1]
+    return read_kitti_poses(path)

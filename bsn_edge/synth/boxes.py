@@ -1,0 +1,140 @@
+"""Axis-aligned boxes, the one primitive of the synthetic world.
+
+The road network is a grid, so every building, vehicle, person, pole and tree
+is an axis-aligned box in the z-up world frame. Stored as arrays (one row per
+box) so culling and shading run vectorized.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Appearance kinds: how a box is textured.
+KIND_BUILDING = 0
+KIND_VEHICLE = 1
+KIND_PERSON = 2
+KIND_POLE = 3
+KIND_TRUNK = 4
+KIND_CROWN = 5
+
+
+@dataclass(frozen=True)
+class Boxes:
+    """``N`` axis-aligned boxes.
+
+    lo, hi:   ``[N, 3]`` world corners (x, y, z), metres, ``lo < hi``.
+    cls:      ``[N]`` Cityscapes trainId of the box's pixels.
+    kind:     ``[N]`` appearance kind (``KIND_*``).
+    color:    ``[N, 3]`` float32 base colour, BGR in [0, 1].
+    grounded: ``[N]`` the box stands on the ground, so the ground under it is never visible.
+    track:    ``[N]`` stable id of the object across frames.
+    """
+
+    lo: np.ndarray
+    hi: np.ndarray
+    cls: np.ndarray
+    kind: np.ndarray
+    color: np.ndarray
+    grounded: np.ndarray
+    track: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.lo)
+        for name in ("hi", "cls", "kind", "color", "grounded", "track"):
+            if len(getattr(self, name)) != n:
+                raise ValueError(f"Boxes.{name} has {len(getattr(self, name))} rows, expected {n}")
+        if n and not np.all(self.hi > self.lo):
+            raise ValueError("every box needs hi > lo on all three axes")
+
+    def __len__(self) -> int:
+        return len(self.lo)
+
+    @classmethod
+    def empty(cls) -> Boxes:
+        return cls(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.uint8), np.zeros(0, np.uint8),
+                   np.zeros((0, 3), np.float32), np.zeros(0, bool), np.zeros(0, np.int32))
+
+    @classmethod
+    def make(cls, lo, hi, sem_cls, kind, color, grounded=True, track=None) -> Boxes:
+        """Build from per-box values; scalars broadcast over all boxes."""
+        lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
+        hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
+        n = len(lo)
+        color = np.broadcast_to(np.asarray(color, np.float32), (n, 3)).copy()
+        track = np.arange(n, dtype=np.int32) if track is None else np.asarray(track, np.int32)
+        return cls(lo, hi,
+                   np.broadcast_to(np.asarray(sem_cls, np.uint8), (n,)).copy(),
+                   np.broadcast_to(np.asarray(kind, np.uint8), (n,)).copy(),
+                   color, np.broadcast_to(np.asarray(grounded, bool), (n,)).copy(),
+                   np.broadcast_to(track, (n,)).copy())
+
+    @staticmethod
+    def concat(parts: list[Boxes]) -> Boxes:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return Boxes.empty()
+        return Boxes(*(np.concatenate([getattr(p, f) for p in parts]) for f in
+                       ("lo", "hi", "cls", "kind", "color", "grounded", "track")))
+
+    def take(self, idx: np.ndarray) -> Boxes:
+        return Boxes(self.lo[idx], self.hi[idx], self.cls[idx], self.kind[idx], self.color[idx],
+                     self.grounded[idx], self.track[idx])
+
+    def corners(self) -> np.ndarray:
+        """``[N, 8, 3]`` world corners."""
+        sel = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=bool)
+        return np.where(sel[None], self.hi[:, None, :], self.lo[:, None, :])
+
+    def to_array(self) -> np.ndarray:
+        """``[N, 8]`` float32 rows ``trainId, xmin, ymin, zmin, xmax, ymax, zmax, track``."""
+        return np.concatenate([self.cls[:, None], self.lo, self.hi, self.track[:, None]],
+                              axis=1).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class Agents:
+    """Boxes that move in a straight line along a world axis at constant speed.
+
+    ``boxes`` holds their pose at t = 0; ``velocity`` is ``[N, 2]`` m/s in x and y (one of the
+    two is zero); positions wrap inside ``[wrap_lo, wrap_hi]`` along the axis of motion so the
+    traffic density stays constant for any clip length.
+    """
+
+    boxes: Boxes
+    velocity: np.ndarray
+    wrap_lo: np.ndarray
+    wrap_hi: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.boxes)
+
+    @classmethod
+    def empty(cls) -> Agents:
+        return cls(Boxes.empty(), np.zeros((0, 2)), np.zeros(0), np.zeros(0))
+
+    def centres_at(self, t: np.ndarray | float) -> np.ndarray:
+        """``[N, T, 2]`` x-y centres at the times ``t`` (seconds)."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        c0 = 0.5 * (self.boxes.lo[:, :2] + self.boxes.hi[:, :2])
+        c = c0[:, None, :] + self.velocity[:, None, :] * t[None, :, None]
+        axis = np.abs(self.velocity).argmax(axis=1)
+        span = (self.wrap_hi - self.wrap_lo)[:, None]
+        rows = np.arange(len(self))
+        along = c[rows, :, axis]
+        c[rows, :, axis] = self.wrap_lo[:, None] + np.mod(along - self.wrap_lo[:, None], span)
+        return c
+
+    def at(self, t: float) -> Boxes:
+        """Their boxes at time ``t``."""
+        if not len(self):
+            return Boxes.empty()
+        c0 = 0.5 * (self.boxes.lo[:, :2] + self.boxes.hi[:, :2])
+        shift = self.centres_at(t)[:, 0, :] - c0
+        lo = self.boxes.lo.copy()
+        hi = self.boxes.hi.copy()
+        lo[:, :2] += shift
+        hi[:, :2] += shift
+        b = self.boxes
+        return Boxes(lo, hi, b.cls, b.kind, b.color, b.grounded, b.track)

@@ -1,0 +1,144 @@
+"""Rendering a whole clip into a sequence folder."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from bsn_edge.camera import Intrinsics, look_pose
+from bsn_edge.sequence import SequenceMeta, write_depth, write_image, write_kitti_poses, write_mask
+from bsn_edge.sequence.images import atomic_write_bytes
+from bsn_edge.synth.config import SynthConfig
+from bsn_edge.synth.populate import Scenario, build_scenario
+from bsn_edge.synth.render import Frame, Renderer
+
+PITCH_DEG = (0.0, 3.0)   # camera tilt range, degrees down
+OUTPUTS = ("rgb", "depth", "semantic", "bsgt", "boxes", "meta.json", "poses.txt", "video.mp4",
+           "synth_config.json")
+
+
+@dataclass(frozen=True)
+class Clip:
+    """A scenario with its camera: everything needed to render frame ``i``."""
+
+    config: SynthConfig
+    scenario: Scenario
+    intrinsics: Intrinsics
+    poses: np.ndarray   # [N, 4, 4] T_wc
+    pitch: float
+
+    @property
+    def times(self) -> np.ndarray:
+        return np.arange(self.config.frames) / self.config.fps
+
+
+def make_clip(cfg: SynthConfig) -> Clip:
+    """Build the world, the route and the camera poses of a clip (no rendering yet)."""
+    sc = build_scenario(cfg)
+    rng = np.random.default_rng([cfg.seed, 0x706F7365])
+    pitch = float(np.radians(rng.uniform(*PITCH_DEG)))
+    times = np.arange(cfg.frames) / cfg.fps
+    xy, yaw = sc.route.at(sc.start_s + times * sc.speed)
+    poses = np.stack([look_pose(np.array([x, y, cfg.camera_height]), a, pitch)
+                      for (x, y), a in zip(xy, yaw, strict=True)])
+    intr = Intrinsics.from_fov(cfg.width, cfg.height, cfg.hfov_deg)
+    return Clip(cfg, sc, intr, poses, pitch)
+
+
+def render_frames(clip: Clip, renderer: Renderer | None = None) -> Iterator[Frame]:
+    """Render the clip's frames in order."""
+    r = renderer or Renderer(clip.intrinsics, far=clip.config.far, bs_range=clip.config.bs_range)
+    for i, (T, t) in enumerate(zip(clip.poses, clip.times, strict=True)):
+        yield r.render(clip.scenario.world, T, float(t), frame_index=i)
+
+
+def prepare_output(out: Path, force: bool) -> None:
+    """Create ``out``; refuse a non-empty folder unless ``force``, then clear only what we write."""
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"{out} exists and is not a folder")
+    if out.exists() and any(out.iterdir()):
+        if not force:
+            raise FileExistsError(f"{out} already exists and is not empty; pass --force to overwrite it")
+        for name in (*OUTPUTS, "labels"):
+            p = out / name
+            if p.is_dir():
+                shutil.rmtree(p)
+            elif p.exists():
+                p.unlink()
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bool = True,
+               progress: Callable[[int], None] | None = None) -> Path:
+    """Render ``cfg`` into the sequence folder ``out`` and return its path.
+
+    Writes meta.json, poses.txt (KITTI), rgb/, depth/, semantic/, bsgt/, boxes/ (per-frame
+    ``[N, 8]`` float32 .npy: trainId, xmin, ymin, zmin, xmax, ymax, zmax, track), video.mp4
+    and synth_config.json. ``progress`` is called with 1 after each frame.
+    """
+    out = Path(out)
+    prepare_output(out, force)
+    clip = make_clip(cfg)
+    for sub in ("rgb", "depth", "semantic", "bsgt", "boxes"):
+        (out / sub).mkdir()
+    writer = None
+    if video:
+        writer = cv2.VideoWriter(str(out / "video.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), cfg.fps,
+                                 (cfg.width, cfg.height))
+        if not writer.isOpened():
+            raise OSError(f"OpenCV cannot write {out / 'video.mp4'} (no mp4v encoder?)")
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        pending = []
+        for i, fr in enumerate(render_frames(clip)):
+            name = f"{i:06d}"
+            pending += [
+                pool.submit(write_image, out / "rgb" / f"{name}.png", fr.rgb),
+                pool.submit(write_depth, out / "depth" / f"{name}.png", fr.depth),
+                pool.submit(write_image, out / "semantic" / f"{name}.png", fr.semantic),
+                pool.submit(write_mask, out / "bsgt" / f"{name}.png", fr.bsgt),
+                pool.submit(_write_npy, out / "boxes" / f"{name}.npy", _near_boxes(fr, clip.poses[i])),
+            ]
+            if writer is not None:
+                writer.write(fr.rgb)
+            if progress:
+                progress(1)
+            if len(pending) > 64:
+                for f in pending:
+                    f.result()
+                pending.clear()
+        for f in pending:
+            f.result()
+    if writer is not None:
+        writer.release()
+    write_kitti_poses(out / "poses.txt", clip.poses)
+    sc = clip.scenario
+    atomic_write_bytes(out / "synth_config.json", (json.dumps({
+        "config": cfg.to_dict(), "speed_mps": sc.speed, "pitch_deg": float(np.degrees(clip.pitch)),
+        "turns": sc.route.turns, "static_boxes": len(sc.world.static), "agents": len(sc.world.agents),
+    }, indent=2) + "\n").encode())
+    k = clip.intrinsics
+    SequenceMeta(fps=cfg.fps, width=cfg.width, height=cfg.height, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy,
+                 source="synth", frames=cfg.frames, seed=cfg.seed,
+                 extra={"style": cfg.style, "video": "video.mp4" if video else None,
+                        "camera_height": cfg.camera_height, "bs_range": cfg.bs_range}).write(out)
+    return out
+
+
+def _near_boxes(fr: Frame, T_wc: np.ndarray, radius: float = 120.0) -> np.ndarray:
+    c = 0.5 * (fr.boxes.lo[:, :2] + fr.boxes.hi[:, :2])
+    keep = np.linalg.norm(c - T_wc[:2, 3], axis=1) < radius
+    return fr.boxes.take(np.where(keep)[0]).to_array()
+
+
+def _write_npy(path: Path, arr: np.ndarray) -> None:
+    import io
+    buf = io.BytesIO()
+    np.save(buf, arr)
+    atomic_write_bytes(path, buf.getvalue())

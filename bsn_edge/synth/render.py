@@ -1,0 +1,173 @@
+"""Ray-cast rendering of the synthetic world: RGB, exact depth, semantics and true blind spots.
+
+Every pixel's ray is intersected with the ground plane (z = 0) analytically and
+with the boxes whose screen footprint covers it. Depth is the z-depth in the
+camera frame (the ray's parameter, since rays have unit z).
+
+True blind spots (BS-GT): pixels whose first hit is an object and whose ray,
+continued through that object, reaches traversable ground (road or sidewalk)
+that lies within ``bs_range`` metres of the camera (horizontal distance) and is
+not under a box standing on the ground.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bsn_edge import semantics as sm
+from bsn_edge.camera import Intrinsics
+from bsn_edge.synth.boxes import Boxes
+from bsn_edge.synth.shading import Shader
+from bsn_edge.synth.world import World
+
+_EDGES = np.array([(a, b) for a in range(8) for b in range(a + 1, 8)
+                   if bin(a ^ b).count("1") == 1])  # the 12 edges of a box, corner-index pairs
+
+
+@dataclass(frozen=True)
+class Trace:
+    """Geometry of one frame before shading (all ``[H, W]``)."""
+
+    t: np.ndarray          # depth of the first hit; inf where nothing is hit within range
+    box: np.ndarray        # index into the frame's boxes of the first hit, -1 for ground or sky
+    ground: np.ndarray     # the ray meets the ground within range
+    gx: np.ndarray         # where (nan where it does not)
+    gy: np.ndarray
+    tg: np.ndarray         # depth of that ground point
+    under: np.ndarray      # that ground point lies under a grounded box
+    dirs: tuple[np.ndarray, np.ndarray, np.ndarray]  # world ray directions
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One rendered frame."""
+
+    rgb: np.ndarray        # [H, W, 3] uint8, BGR
+    depth: np.ndarray      # [H, W] float32 metres, 0 = sky / no depth
+    semantic: np.ndarray   # [H, W] uint8 trainIds
+    bsgt: np.ndarray       # [H, W] bool, true blind spots
+    boxes: Boxes           # the boxes that existed at this instant
+
+
+class Renderer:
+    """Renders a :class:`World` through a pinhole camera."""
+
+    def __init__(self, intrinsics: Intrinsics, far: float = 250.0, bs_range: float = 50.0,
+                 near: float = 0.05) -> None:
+        if not 0 < near < far:
+            raise ValueError(f"need 0 < near < far, got near={near} far={far}")
+        self.intr = intrinsics
+        self.far, self.near, self.bs_range = float(far), float(near), float(bs_range)
+        rays = intrinsics.rays()
+        self._rx = np.ascontiguousarray(rays[..., 0])
+        self._ry = np.ascontiguousarray(rays[..., 1])
+        self.shader = Shader(intrinsics.height, intrinsics.width)
+
+    # -- geometry ---------------------------------------------------------------------------
+    def _world_dirs(self, R: np.ndarray):
+        R = R.astype(np.float32)
+        return tuple(R[i, 0] * self._rx + R[i, 1] * self._ry + R[i, 2] for i in range(3))
+
+    def _screen_boxes(self, boxes: Boxes, T_wc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Indices of boxes in view and their pixel rectangles ``[n, 4]`` (u0, v0, u1, v1)."""
+        if not len(boxes):
+            return np.zeros(0, np.intp), np.zeros((0, 4), np.intp)
+        C = T_wc[:3, 3]
+        centre = 0.5 * (boxes.lo + boxes.hi)
+        radius = 0.5 * np.linalg.norm(boxes.hi - boxes.lo, axis=1)
+        cand = np.where(np.linalg.norm(centre[:, :2] - C[:2], axis=1) - radius < self.far)[0]
+        if not len(cand):
+            return cand, np.zeros((0, 4), np.intp)
+        R_cw = T_wc[:3, :3].T
+        corners = (boxes.take(cand).corners() - C) @ R_cw.T          # [n, 8, 3] camera frame
+        z = corners[..., 2]
+        front = z >= self.near
+        in_view = front.any(axis=1)
+        corners, z, front, cand = corners[in_view], z[in_view], front[in_view], cand[in_view]
+        # clip the box's edges at the near plane: crossing points join the corners in front
+        p0, p1 = corners[:, _EDGES[:, 0]], corners[:, _EDGES[:, 1]]
+        z0, z1 = z[:, _EDGES[:, 0]], z[:, _EDGES[:, 1]]
+        cross = (z0 - self.near) * (z1 - self.near) < 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (self.near - z0) / (z1 - z0)
+            pc = p0 + s[..., None] * (p1 - p0)
+        pts = np.concatenate([corners, pc], axis=1)
+        valid = np.concatenate([front, cross], axis=1)
+        zz = np.where(valid, pts[..., 2], 1.0)
+        u = np.where(valid, self.intr.fx * pts[..., 0] / zz + self.intr.cx, np.nan)
+        v = np.where(valid, self.intr.fy * pts[..., 1] / zz + self.intr.cy, np.nan)
+        rect = np.stack([np.nanmin(u, 1), np.nanmin(v, 1), np.nanmax(u, 1), np.nanmax(v, 1)], axis=1)
+        rect = np.floor(rect).astype(np.int64)
+        rect[:, 2:] += 2
+        rect[:, [0, 2]] = np.clip(rect[:, [0, 2]], 0, self.intr.width)
+        rect[:, [1, 3]] = np.clip(rect[:, [1, 3]], 0, self.intr.height)
+        ok = (rect[:, 2] > rect[:, 0]) & (rect[:, 3] > rect[:, 1])
+        return cand[ok], rect[ok]
+
+    def trace(self, boxes: Boxes, T_wc: np.ndarray) -> Trace:
+        """Intersect every pixel's ray with the ground and the boxes."""
+        C = T_wc[:3, 3].astype(np.float64)
+        dx, dy, dz = self._world_dirs(T_wc[:3, :3])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tg = np.where(dz < 0, np.float32(-C[2]) / dz, np.float32(np.inf)).astype(np.float32)
+            ground = tg < self.far
+            gx = np.where(ground, np.float32(C[0]) + tg * dx, np.float32(np.nan))
+            gy = np.where(ground, np.float32(C[1]) + tg * dy, np.float32(np.nan))
+            inv = (np.float32(1.0) / dx, np.float32(1.0) / dy, np.float32(1.0) / dz)
+        t = np.where(ground, tg, np.float32(np.inf))
+        box = np.full(t.shape, -1, np.int32)
+        under = np.zeros(t.shape, bool)
+        idx, rects = self._screen_boxes(boxes, T_wc)
+        lo = (boxes.lo[idx] - C).astype(np.float32)
+        hi = (boxes.hi[idx] - C).astype(np.float32)
+        grounded = boxes.grounded[idx]
+        near = np.float32(self.near)
+        with np.errstate(invalid="ignore", over="ignore"):
+            for k in range(len(idx)):
+                u0, v0, u1, v1 = rects[k]
+                sl = (slice(v0, v1), slice(u0, u1))
+                tn = tf = None
+                for a in range(3):
+                    ia = inv[a][sl]
+                    p, q = lo[k, a] * ia, hi[k, a] * ia
+                    if tn is None:
+                        tn, tf = np.minimum(p, q), np.maximum(p, q)
+                    else:
+                        np.maximum(tn, np.minimum(p, q), out=tn)
+                        np.minimum(tf, np.maximum(p, q), out=tf)
+                tb = t[sl]
+                hit = (tn <= tf) & (tn > near) & (tn < tb)
+                np.copyto(tb, tn, where=hit)
+                np.copyto(box[sl], np.int32(idx[k]), where=hit)
+                if grounded[k]:
+                    gxs, gys = gx[sl], gy[sl]
+                    ub = under[sl]
+                    ub |= (gxs >= lo[k, 0] + C[0]) & (gxs <= hi[k, 0] + C[0]) & \
+                          (gys >= lo[k, 1] + C[1]) & (gys <= hi[k, 1] + C[1])
+        return Trace(t, box, ground, gx, gy, tg, under, (dx, dy, dz))
+
+    # -- frame ------------------------------------------------------------------------------
+    def render(self, world: World, T_wc: np.ndarray, time_s: float = 0.0,
+               frame_index: int = 0) -> Frame:
+        """Render ``world`` at time ``time_s`` from the camera pose ``T_wc``."""
+        boxes = world.boxes_at(time_s)
+        tr = self.trace(boxes, T_wc)
+        obj = tr.box >= 0
+        ground_cls = np.full(tr.t.shape, sm.SKY, np.uint8)
+        marking = np.zeros(tr.t.shape, bool)
+        curb = np.zeros(tr.t.shape, bool)
+        g = tr.ground
+        ground_cls[g], marking[g], curb[g] = world.layout.ground(tr.gx[g], tr.gy[g])
+        semantic = ground_cls.copy()
+        semantic[obj] = boxes.cls[tr.box[obj]]
+        hit = obj | g
+        depth = np.where(hit, tr.t, np.float32(0.0)).astype(np.float32)
+        C = T_wc[:3, 3]
+        dist = np.hypot(tr.gx - np.float32(C[0]), tr.gy - np.float32(C[1]))
+        with np.errstate(invalid="ignore"):
+            in_range = dist <= self.bs_range
+        bsgt = obj & g & sm.is_traversable(ground_cls) & ~tr.under & in_range
+        rgb = self.shader.shade(world, boxes, tr, ground_cls, marking, curb, obj, T_wc, frame_index)
+        return Frame(rgb, depth, semantic, bsgt, boxes)

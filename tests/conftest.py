@@ -1,0 +1,31 @@
+import numpy as np
+import pytest
+
+from bsn_edge import semantics as sm
+from bsn_edge.camera import Intrinsics, look_pose
+from bsn_edge.synth import Agents, Boxes, RoadLayout, World
+from bsn_edge.synth.boxes import KIND_VEHICLE
+
+
+@pytest.fixture
+def straight_road() -> RoadLayout:
+    """One road along y at x = 0: one lane each way (3.2 m), 2.2 m parking, 2.5 m sidewalks."""
+    return RoadLayout(np.array([0.0]), np.array([1]), np.array([]), np.array([], int))
+
+
+@pytest.fixture
+def small_camera() -> Intrinsics:
+    return Intrinsics.from_fov(256, 128, 80.0)
+
+
+def ego_pose(x: float = 1.6, y: float = 0.0, pitch: float = 0.02) -> np.ndarray:
+    """Camera 1.5 m up, in the right lane, looking along +y."""
+    return look_pose(np.array([x, y, 1.5]), np.pi / 2, pitch)
+
+
+def car(x0, y0, x1, y1, h=1.5) -> Boxes:
+    return Boxes.make([(x0, y0, 0.0)], [(x1, y1, h)], sm.CAR, KIND_VEHICLE, (0.5, 0.5, 0.5))
+
+
+def world_with(layout: RoadLayout, boxes: Boxes) -> World:
+    return World(layout, boxes, Agents.empty())
