@@ -64,22 +64,24 @@ class Renderer:
         self._rx = np.ascontiguousarray(rays[..., 0])
         self._ry = np.ascontiguousarray(rays[..., 1])
         self.shader = Shader(intrinsics.height, intrinsics.width)
+        self.shader.set_rays(rays)
 
     # -- geometry ---------------------------------------------------------------------------
     def _world_dirs(self, R: np.ndarray):
         R = R.astype(np.float32)
         return tuple(R[i, 0] * self._rx + R[i, 1] * self._ry + R[i, 2] for i in range(3))
 
-    def _screen_boxes(self, boxes: Boxes, T_wc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Indices of boxes in view and their pixel rectangles ``[n, 4]`` (u0, v0, u1, v1)."""
+    def _screen_boxes(self, boxes: Boxes, T_wc: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Boxes in view: indices, pixel rectangles ``[n, 4]`` (u0, v0, u1, v1) and nearest depth."""
         if not len(boxes):
-            return np.zeros(0, np.intp), np.zeros((0, 4), np.intp)
+            return np.zeros(0, np.intp), np.zeros((0, 4), np.intp), np.zeros(0)
         C = T_wc[:3, 3]
         centre = 0.5 * (boxes.lo + boxes.hi)
         radius = 0.5 * np.linalg.norm(boxes.hi - boxes.lo, axis=1)
         cand = np.where(np.linalg.norm(centre[:, :2] - C[:2], axis=1) - radius < self.far)[0]
         if not len(cand):
-            return cand, np.zeros((0, 4), np.intp)
+            return cand, np.zeros((0, 4), np.intp), np.zeros(0)
         R_cw = T_wc[:3, :3].T
         corners = (boxes.take(cand).corners() - C) @ R_cw.T          # [n, 8, 3] camera frame
         z = corners[..., 2]
@@ -95,6 +97,7 @@ class Renderer:
             pc = p0 + s[..., None] * (p1 - p0)
         pts = np.concatenate([corners, pc], axis=1)
         valid = np.concatenate([front, cross], axis=1)
+        zmin = np.where(valid, pts[..., 2], np.inf).min(axis=1)
         zz = np.where(valid, pts[..., 2], 1.0)
         u = np.where(valid, self.intr.fx * pts[..., 0] / zz + self.intr.cx, np.nan)
         v = np.where(valid, self.intr.fy * pts[..., 1] / zz + self.intr.cy, np.nan)
@@ -104,7 +107,7 @@ class Renderer:
         rect[:, [0, 2]] = np.clip(rect[:, [0, 2]], 0, self.intr.width)
         rect[:, [1, 3]] = np.clip(rect[:, [1, 3]], 0, self.intr.height)
         ok = (rect[:, 2] > rect[:, 0]) & (rect[:, 3] > rect[:, 1])
-        return cand[ok], rect[ok]
+        return cand[ok], rect[ok], zmin[ok]
 
     def trace(self, boxes: Boxes, T_wc: np.ndarray) -> Trace:
         """Intersect every pixel's ray with the ground and the boxes."""
@@ -119,29 +122,36 @@ class Renderer:
         t = np.where(ground, tg, np.float32(np.inf))
         box = np.full(t.shape, -1, np.int32)
         under = np.zeros(t.shape, bool)
-        idx, rects = self._screen_boxes(boxes, T_wc)
+        idx, rects, zmin = self._screen_boxes(boxes, T_wc)
+        # Front to back, so a box whose screen rectangle is already covered by nearer surfaces is
+        # skipped. Its footprint still matters where it lies within range: a ray that passes
+        # through a hidden box and lands under it does not see traversable ground.
+        order = np.argsort(zmin, kind="stable")
+        idx, rects, zmin = idx[order], rects[order], zmin[order].astype(np.float32)
         lo = (boxes.lo[idx] - C).astype(np.float32)
         hi = (boxes.hi[idx] - C).astype(np.float32)
-        grounded = boxes.grounded[idx]
+        gap = np.maximum(np.maximum(lo[:, :2], -hi[:, :2]), 0.0)
+        footprint_matters = boxes.grounded[idx] & (np.hypot(gap[:, 0], gap[:, 1]) <= self.bs_range)
         near = np.float32(self.near)
         with np.errstate(invalid="ignore", over="ignore"):
             for k in range(len(idx)):
                 u0, v0, u1, v1 = rects[k]
                 sl = (slice(v0, v1), slice(u0, u1))
-                tn = tf = None
-                for a in range(3):
-                    ia = inv[a][sl]
-                    p, q = lo[k, a] * ia, hi[k, a] * ia
-                    if tn is None:
-                        tn, tf = np.minimum(p, q), np.maximum(p, q)
-                    else:
-                        np.maximum(tn, np.minimum(p, q), out=tn)
-                        np.minimum(tf, np.maximum(p, q), out=tf)
                 tb = t[sl]
-                hit = (tn <= tf) & (tn > near) & (tn < tb)
-                np.copyto(tb, tn, where=hit)
-                np.copyto(box[sl], np.int32(idx[k]), where=hit)
-                if grounded[k]:
+                if tb.max() > zmin[k]:
+                    tn = tf = None
+                    for a in range(3):
+                        ia = inv[a][sl]
+                        p, q = lo[k, a] * ia, hi[k, a] * ia
+                        if tn is None:
+                            tn, tf = np.minimum(p, q), np.maximum(p, q)
+                        else:
+                            np.maximum(tn, np.minimum(p, q), out=tn)
+                            np.minimum(tf, np.maximum(p, q), out=tf)
+                    hit = (tn <= tf) & (tn > near) & (tn < tb)
+                    np.copyto(tb, tn, where=hit)
+                    np.copyto(box[sl], np.int32(idx[k]), where=hit)
+                if footprint_matters[k]:
                     gxs, gys = gx[sl], gy[sl]
                     ub = under[sl]
                     ub |= (gxs >= lo[k, 0] + C[0]) & (gxs <= hi[k, 0] + C[0]) & \

@@ -66,19 +66,20 @@ class Shader:
         r2 = ((xx - width / 2) / (width / 2)) ** 2 + ((yy - height / 2) / (height / 2)) ** 2
         self.vignette = (1.0 - 0.18 * r2 / 2)[..., None].astype(np.float32)
         self.sensor = rng.standard_normal((NOISE_FRAMES, height, width, 3)).astype(np.float32)
+        self._ray_norm2: np.ndarray | None = None
+        self._cache_key: tuple | None = None
+        self._cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def set_rays(self, rays: np.ndarray) -> None:
+        """Camera-frame rays ``[H, W, 3]``; their squared lengths normalise elevation."""
+        self._ray_norm2 = (rays**2).sum(axis=-1).astype(np.float32)
 
     def shade(self, world: World, boxes: Boxes, tr: Trace, ground_cls: np.ndarray,
               marking: np.ndarray, curb: np.ndarray, obj: np.ndarray, T_wc: np.ndarray,
               frame_index: int) -> np.ndarray:
         look = world.look
-        h, w = obj.shape
-        dx, dy, dz = tr.dirs
-        out = np.empty((h, w, 3), np.float32)
-        # sky: a gradient from the horizon to the zenith
-        elev = dz / np.sqrt(dx * dx + dy * dy + dz * dz)
-        mix = np.clip(elev * 2.5, 0.0, 1.0)[..., None]
-        hor = np.asarray(look.sky_horizon, np.float32)
-        out[:] = hor + mix * (np.asarray(look.sky_zenith, np.float32) - hor)
+        sky, gain, noise = self._per_clip(look, tr.dirs[2], T_wc)
+        out = sky.copy()
         flat = out.reshape(-1, 3)
         sun = np.asarray(look.sun, np.float32)
         amb = np.float32(look.ambient)
@@ -94,10 +95,25 @@ class Shader:
             fog = np.exp(-tr.t.reshape(-1)[hit] / np.float32(look.fog_distance))[:, None]
             haze = np.asarray(look.haze, np.float32)
             flat[hit] = flat[hit] * fog + haze * (1 - fog)
-        gain = np.asarray(look.tint, np.float32) * np.float32(look.exposure * 255.0)
-        img = out * self.vignette * gain
-        img += self.sensor[frame_index % NOISE_FRAMES] * np.float32(look.noise_sigma)
-        return np.clip(img, 0, 255).astype(np.uint8)
+        out *= gain
+        out += noise[frame_index % NOISE_FRAMES]
+        np.clip(out, 0, 255, out=out)
+        return out.astype(np.uint8)
+
+    def _per_clip(self, look, dz: np.ndarray, T_wc: np.ndarray):
+        """Sky gradient, vignetted gain and scaled sensor noise; constant while the look and the
+        camera's pitch are (the sky depends on the rays' world z only, which yaw leaves alone)."""
+        key = (look, tuple(T_wc[2, :3].tolist()))
+        if self._cache_key != key:
+            elev = dz / np.sqrt(self._ray_norm2)
+            mix = np.clip(elev * 2.5, 0.0, 1.0)[..., None]
+            hor = np.asarray(look.sky_horizon, np.float32)
+            sky = hor + mix * (np.asarray(look.sky_zenith, np.float32) - hor)
+            gain = self.vignette * (np.asarray(look.tint, np.float32) * np.float32(look.exposure * 255.0))
+            self._cache = (sky.astype(np.float32), gain.astype(np.float32),
+                           self.sensor * np.float32(look.noise_sigma))
+            self._cache_key = key
+        return self._cache
 
     def _ground(self, look, tr, ground_cls, marking, curb, gi, amb, sun) -> np.ndarray:
         cls = ground_cls.reshape(-1)[gi]
@@ -125,20 +141,25 @@ class Shader:
         C = T_wc[:3, 3].astype(np.float32)
         bi = tr.box.reshape(-1)[oi]
         t = tr.t.reshape(-1)[oi]
-        p = np.stack([C[a] + t * tr.dirs[a].reshape(-1)[oi] for a in range(3)], axis=1)
-        lo = boxes.lo[bi].astype(np.float32)
-        hi = boxes.hi[bi].astype(np.float32)
-        half = 0.5 * (hi - lo)
-        rel = (p - (lo + half)) / half
-        rel[:, 2] = np.maximum(rel[:, 2], 0.0)  # bottoms are never seen
-        axis = np.abs(rel).argmax(axis=1)
-        sign = np.sign(rel[np.arange(len(rel)), axis])
-        ndotl = sun[axis] * sign
+        px, py, pz = (C[a] + t * tr.dirs[a].reshape(-1)[oi] for a in range(3))
+        # per-box constants first (few boxes), then one gather per pixel
+        lo_b = boxes.lo.astype(np.float32)
+        hi_b = boxes.hi.astype(np.float32)
+        mid_b = 0.5 * (lo_b + hi_b)
+        inv_half_b = 2.0 / (hi_b - lo_b)
+        rx = (px - mid_b[bi, 0]) * inv_half_b[bi, 0]
+        ry = (py - mid_b[bi, 1]) * inv_half_b[bi, 1]
+        rz = np.maximum((pz - mid_b[bi, 2]) * inv_half_b[bi, 2], 0.0)  # bottoms are never seen
+        ax, ay = np.abs(rx), np.abs(ry)
+        on_x = (ax >= ay) & (ax >= rz)
+        on_y = ~on_x & (ay >= rz)
+        side_face = on_x | on_y
+        ndotl = np.where(on_x, sun[0] * np.sign(rx), np.where(on_y, sun[1] * np.sign(ry), sun[2]))
         light = amb + (1 - amb) * np.maximum(ndotl, 0.0)
-        side_face = axis < 2
-        u = np.where(axis == 0, p[:, 1] - lo[:, 1], p[:, 0] - lo[:, 0])
-        z = p[:, 2] - lo[:, 2]
-        height = hi[:, 2] - lo[:, 2]
+        lo = lo_b[bi]
+        u = np.where(on_x, py - lo[:, 1], px - lo[:, 0])
+        z = pz - lo[:, 2]
+        height = (hi_b[:, 2] - lo_b[:, 2])[bi]
         kind = boxes.kind[bi]
         track = boxes.track[bi]
         col = boxes.color[bi].copy()
