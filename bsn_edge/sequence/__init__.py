@@ -12,7 +12,13 @@ from bsn_edge.sequence.images import (
     write_mask,
 )
 from bsn_edge.sequence.meta import SequenceMeta
-from bsn_edge.sequence.poses import read_kitti_poses, read_poses, read_tum_poses, write_kitti_poses
+from bsn_edge.sequence.poses import (
+    read_kitti_poses,
+    read_poses,
+    read_tum_poses,
+    write_kitti_poses,
+    write_tum_poses,
+)
 
 __all__ = [
     "SequenceMeta",
@@ -26,4 +32,5 @@ __all__ = [
     "write_image",
     "write_kitti_poses",
     "write_mask",
+    "write_tum_poses",
 ]

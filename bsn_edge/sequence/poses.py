@@ -52,6 +52,35 @@ def quat_to_rot(q: np.ndarray) -> np.ndarray:
     ])
 
 
+def rot_to_quat(R: np.ndarray) -> np.ndarray:
+    """Quaternion ``(qx, qy, qz, qw)`` of a rotation matrix (Shepperd's method, ``qw >= 0``)."""
+    R = np.asarray(R, dtype=np.float64)
+    tr = np.trace(R)
+    if tr > 0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = np.array([(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s])
+    else:
+        i = int(np.argmax(np.diag(R)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
+        q = np.zeros(4)
+        q[i] = 0.25 * s
+        q[j] = (R[j, i] + R[i, j]) / s
+        q[k] = (R[k, i] + R[i, k]) / s
+        q[3] = (R[k, j] - R[j, k]) / s
+    q /= np.linalg.norm(q)
+    return q if q[3] >= 0 else -q
+
+
+def write_tum_poses(path: str | os.PathLike, stamps: np.ndarray, poses: np.ndarray) -> None:
+    """Write a TUM trajectory (``t tx ty tz qx qy qz qw`` per line)."""
+    if len(stamps) != len(poses):
+        raise ValueError(f"{len(stamps)} timestamps for {len(poses)} poses")
+    lines = [" ".join(f"{v:.9f}" for v in (t, *T[:3, 3], *rot_to_quat(T[:3, :3])))
+             for t, T in zip(stamps, poses, strict=True)]
+    atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
+
+
 def read_tum_poses(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Read a TUM trajectory; returns ``(timestamps [N], poses [N, 4, 4])``."""
     stamps, poses = [], []

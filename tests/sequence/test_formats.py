@@ -100,3 +100,11 @@ def test_intrinsics_scaling_is_one_place():
     assert (u - k.cx) / k.fx == pytest.approx(((u + 0.5) / 2 - 0.5 - s.cx) / s.fx)
     with pytest.raises(ValueError):
         Intrinsics(0, 1, 0, 0, 10, 10)
+
+
+def test_tum_write_read_roundtrip(tmp_path):
+    from bsn_edge.sequence import write_tum_poses
+    rng = np.random.default_rng(1)
+    poses = np.stack([look_pose(rng.normal(size=3), *rng.uniform(-3, 3, 2)) for _ in range(20)])
+    write_tum_poses(tmp_path / "t.txt", np.arange(20) * 0.1, poses)
+    np.testing.assert_allclose(read_tum_poses(tmp_path / "t.txt")[1], poses, atol=1e-8)

@@ -1,0 +1,131 @@
+"""T-frame blind-spot labels for one sequence folder."""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bsn_edge import semantics as sm
+from bsn_edge.labels.config import LabelConfig
+from bsn_edge.labels.sources import ClipData, frame_count
+from bsn_edge.labels.sources.registry import make_depth, make_poses, make_seg
+from bsn_edge.labels.warp import Cloud, Warper, label_frame
+from bsn_edge.sequence import SequenceMeta, read_mask, write_mask
+from bsn_edge.sequence.images import atomic_write_bytes
+
+
+class ClipRejected(Exception):
+    """The clip cannot give trustworthy labels (e.g. depth does not fit the landmarks)."""
+
+
+@dataclass(frozen=True)
+class Sources:
+    """Spec strings of the three sources (see ``bsn_edge.labels.sources``)."""
+
+    depth: str = "files"
+    seg: str = "files"
+    poses: str = "files"
+
+
+def resample(frames: int, fps: float, rate: float) -> np.ndarray:
+    """Indices of the clip's frames at ``rate`` frames/s (nearest frame to each tick)."""
+    if rate > fps + 1e-9:
+        raise ValueError(f"label rate {rate:g} frames/s is above the clip's {fps:g} frames/s")
+    step = fps / rate
+    n = int(np.floor((frames - 1) / step + 1e-9)) + 1
+    return np.unique(np.rint(np.arange(n) * step).astype(int))
+
+
+def labels_dir(seq: Path, cfg: LabelConfig) -> Path:
+    return Path(seq) / "labels" / cfg.name
+
+
+def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sources | None = None,
+                   progress: Callable[[int], None] | None = None,
+                   on_total: Callable[[int], None] | None = None) -> dict[str, Any]:
+    """Write labels for ``seq`` under ``labels/T<T>s/`` and return the report (also written as
+    ``report.json``). Finished frames are skipped, so a rerun resumes. Raises
+    :class:`ClipRejected` for a clip whose sources cannot be trusted (the report says why)."""
+    cfg = cfg or LabelConfig()
+    sources = sources or Sources()
+    seq = Path(seq)
+    t_start = time.perf_counter()
+    meta = SequenceMeta.read(seq)
+    clip = ClipData(seq, meta, frame_count(seq))
+    out = labels_dir(seq, cfg)
+    for sub in ("blindspot", "visibility"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    report: dict[str, Any] = {
+        "sequence": str(seq), "config": cfg.to_dict(), "sources": vars(sources),
+        "frames": clip.frames, "fps": meta.fps, "size": [meta.height, meta.width],
+    }
+    try:
+        poses, pose_info = make_poses(sources.poses, clip)
+        depth, seg = make_depth(sources.depth, clip, poses, cfg), make_seg(sources.seg, clip)
+    except ClipRejected as e:
+        report.update(status="rejected", reason=str(e))
+        _write_report(out, report)
+        raise
+    report["sources_detail"] = {"depth": depth.describe(), "seg": seg.describe(), "poses": pose_info}
+
+    idx = resample(clip.frames, meta.fps, cfg.rate)
+    T = cfg.horizon_frames
+    todo = list(range(max(len(idx) - T, 0)))
+    if on_total:
+        on_total(len(todo))
+    min_area = cfg.min_area_px(meta.height, meta.width)
+    warper = Warper(meta.intrinsics, origin=poses[0, :3, 3])
+    clouds: dict[int, Cloud] = {}
+
+    def cloud(k: int) -> Cloud:
+        if k not in clouds:
+            i = int(idx[k])
+            clouds[k] = warper.cloud(depth(i), sm.is_traversable(seg(i)), poses[i])
+        return clouds[k]
+
+    per_frame = []
+    skipped = 0
+    for k in todo:
+        i = int(idx[k])
+        name = f"{i:06d}.png"
+        bs_path, vis_path = out / "blindspot" / name, out / "visibility" / name
+        if bs_path.exists() and vis_path.exists():
+            omega, vis = read_mask(bs_path), read_mask(vis_path)
+            per_frame.append({"frame": i, "blindspot_px": int(omega.sum()), "visible_px": int(vis.sum()),
+                              "blindspot_in_v_px": int((omega & vis).sum()), "resumed": True})
+            skipped += 1
+        else:
+            for old in [c for c in clouds if c <= k]:
+                del clouds[old]
+            d_t, sem_t = depth(i), seg(i)
+            lab = label_frame(warper, [cloud(k + j) for j in range(1, T + 1)], d_t,
+                              sm.is_traversable(sem_t), sem_t == sm.SKY, poses[i],
+                              cfg.depth_tol, cfg.vis_range, min_area, cfg.shrink_margin)
+            write_mask(bs_path, lab.omega)
+            write_mask(vis_path, lab.visibility)
+            per_frame.append({
+                "frame": i, "blindspot_px": int(lab.omega.sum()), "visible_px": int(lab.visibility.sum()),
+                "blindspot_in_v_px": int((lab.omega & lab.visibility).sum()),
+                "warped_px": int(lab.warped.sum()), "removed_by_depth_px": lab.removed_by_depth,
+                "removed_by_area_px": lab.removed_by_area,
+            })
+        if progress:
+            progress(1)
+    elapsed = time.perf_counter() - t_start
+    report.update(
+        status="ok", label_frames=len(todo), resumed_frames=skipped,
+        unlabelled_tail_frames=int(len(idx) - len(todo)), resampled_indices=idx.tolist(),
+        min_area_px=min_area, seconds=round(elapsed, 3), per_frame=per_frame,
+    )
+    _write_report(out, report)
+    return report
+
+
+def _write_report(out: Path, report: dict[str, Any]) -> None:
+    atomic_write_bytes(out / "report.json", (json.dumps(report, indent=1) + "\n").encode())

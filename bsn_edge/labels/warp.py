@@ -1,0 +1,190 @@
+"""Forward warping of traversable pixels into an earlier frame, and the label of that frame.
+
+For a label frame t and each later frame t+j (j = 1..T) the traversable pixels of t+j
+are lifted to 3D with their depth, moved into t's camera and splatted to the nearest
+pixel, z-buffered per j so the nearest point wins. Then (paper, Section 3):
+
+    s      = OR_j warped_j                      road seen from some later frame
+    omega  = s AND NOT r(t)                     ... that is not visible road in t
+    d_a    = mean_j warped depth_j              aggregated depth where warped
+    omega &= |d(t) - d_a| >= l_d                points that agree with t's depth are visible
+                                                (within one pixel, see ``depth_agrees``)
+    omega  = drop components < min area
+    V      = sky(t) OR d(t) < L
+
+Speed: each later frame is lifted to world coordinates once and reused by every label
+frame that looks at it. A point that shrinks by at least 2^k when seen from t only needs
+every 2^k-th pixel in both directions to cover its footprint, so the warp takes each point
+from the coarsest grid its shrink allows (``levels``); the shrink is bounded below by the
+depth of the point and the distance between the two cameras.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from bsn_edge.camera import Intrinsics
+
+LEVELS = 4  # pixel grids of 1, 2, 4, 8
+
+
+@dataclass(frozen=True)
+class Cloud:
+    """Traversable points of one frame in world coordinates, grouped by grid level.
+
+    ``levels[k]`` holds the points on the 2^k pixel grid but not the 2^(k+1) one (the last
+    level holds everything on its grid), each sorted by depth in their own frame:
+    ``(x, y, z, depth)`` float32 arrays.
+    """
+
+    centre: np.ndarray
+    levels: tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], ...]
+
+    @property
+    def size(self) -> int:
+        return sum(len(lv[3]) for lv in self.levels)
+
+
+def _grid_level(height: int, width: int) -> np.ndarray:
+    """Per pixel, the largest k < LEVELS with both coordinates divisible by 2^k."""
+    v, u = np.mgrid[0:height, 0:width]
+    lvl = np.zeros((height, width), np.int8)
+    for k in range(1, LEVELS):
+        lvl[(u % (1 << k) == 0) & (v % (1 << k) == 0)] = k
+    return lvl
+
+
+class Warper:
+    """Builds clouds and labels for one camera (intrinsics fixed for the clip)."""
+
+    def __init__(self, intrinsics: Intrinsics, origin: np.ndarray | None = None) -> None:
+        self.intr = intrinsics
+        h, w = intrinsics.height, intrinsics.width
+        rays = intrinsics.rays()
+        self._rx, self._ry = rays[..., 0], rays[..., 1]
+        self._level = _grid_level(h, w)
+        # world coordinates relative to this origin keep float32 precise for large coordinates
+        self.origin = np.zeros(3) if origin is None else np.asarray(origin, np.float64)
+
+    def cloud(self, depth: np.ndarray, traversable: np.ndarray, T_wc: np.ndarray) -> Cloud:
+        """Lift a frame's traversable pixels with valid depth to world coordinates."""
+        m = traversable & (depth > 0)
+        d = depth[m].astype(np.float32)
+        x_c, y_c = self._rx[m] * d, self._ry[m] * d
+        R = T_wc[:3, :3].astype(np.float32)
+        t = (T_wc[:3, 3] - self.origin).astype(np.float32)
+        world = [R[i, 0] * x_c + R[i, 1] * y_c + R[i, 2] * d + t[i] for i in range(3)]
+        lvl = self._level[m]
+        levels = []
+        for k in range(LEVELS):
+            sel = lvl == k if k < LEVELS - 1 else lvl >= k
+            order = np.argsort(d[sel], kind="stable")
+            levels.append(tuple(a[sel][order] for a in (*world, d)))
+        return Cloud(centre=t.astype(np.float64), levels=tuple(levels))
+
+    def _pick(self, cloud: Cloud, baseline: float, margin: float):
+        """The points of ``cloud`` needed to cover its footprint seen from a camera ``baseline``
+        metres away: a point at depth d may shrink to d / (d + margin * baseline)."""
+        parts = []
+        b = margin * baseline
+        for k in range(LEVELS):
+            x, y, z, d = cloud.levels[k]
+            # points on grid level k are needed when their shrink is worse than 1 / 2^(k+1),
+            # i.e. d >= b / (2^(k+1) - 1); the coarsest level is always needed
+            if k < LEVELS - 1:
+                start = np.searchsorted(d, b / ((1 << (k + 1)) - 1)) if b > 0 else 0
+            else:
+                start = 0
+            if start < len(d):
+                parts.append((x[start:], y[start:], z[start:]))
+        if not parts:
+            e = np.zeros(0, np.float32)
+            return e, e, e
+        return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+
+    def splat(self, clouds: list[Cloud], T_wc: np.ndarray, margin: float = 0.5
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Warp ``clouds`` into the camera ``T_wc``.
+
+        Returns ``(s, d_a, hits)``: the OR of the warped masks, the mean of the per-cloud
+        z-buffered depths (0 where nothing landed) and how many clouds landed on each pixel.
+        """
+        h, w = self.intr.height, self.intr.width
+        n_px = h * w
+        R_cw = T_wc[:3, :3].T.astype(np.float32)
+        C = (T_wc[:3, 3] - self.origin).astype(np.float32)
+        keys, depths = [], []
+        for j, cl in enumerate(clouds):
+            base = float(np.linalg.norm(cl.centre - C))
+            x, y, z = self._pick(cl, base, margin)
+            x, y, z = x - C[0], y - C[1], z - C[2]
+            zc = R_cw[2, 0] * x + R_cw[2, 1] * y + R_cw[2, 2] * z
+            ok = zc > 0.05
+            x, y, z, zc = x[ok], y[ok], z[ok], zc[ok]
+            inv = 1.0 / zc
+            u = (self.intr.fx * (R_cw[0, 0] * x + R_cw[0, 1] * y + R_cw[0, 2] * z) * inv + self.intr.cx)
+            v = (self.intr.fy * (R_cw[1, 0] * x + R_cw[1, 1] * y + R_cw[1, 2] * z) * inv + self.intr.cy)
+            ui = np.rint(u).astype(np.int32)
+            vi = np.rint(v).astype(np.int32)
+            ok = (ui >= 0) & (ui < w) & (vi >= 0) & (vi < h)
+            keys.append(j * n_px + vi[ok] * w + ui[ok])
+            depths.append(zc[ok])
+        zbuf = np.full(len(clouds) * n_px, np.inf, np.float32)
+        if keys:
+            np.minimum.at(zbuf, np.concatenate(keys), np.concatenate(depths))
+        zbuf = zbuf.reshape(len(clouds), h, w)
+        landed = np.isfinite(zbuf)
+        hits = landed.sum(axis=0)
+        total = np.where(landed, zbuf, 0.0).sum(axis=0)
+        d_a = np.divide(total, hits, out=np.zeros((h, w), np.float32), where=hits > 0)
+        return hits > 0, d_a.astype(np.float32), hits
+
+
+def remove_small_components(mask: np.ndarray, min_area: int) -> np.ndarray:
+    """Drop 8-connected components of ``mask`` smaller than ``min_area`` pixels."""
+    if min_area <= 1 or not mask.any():
+        return mask
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] >= min_area
+    keep[0] = False
+    return keep[lab]
+
+
+@dataclass(frozen=True)
+class FrameLabel:
+    """Label of one frame and the intermediate masks (for reports and tests)."""
+
+    omega: np.ndarray        # T-frame blind spots
+    visibility: np.ndarray   # V
+    warped: np.ndarray       # s
+    aggregated_depth: np.ndarray  # d_a
+    removed_by_depth: int
+    removed_by_area: int
+
+
+def depth_agrees(depth: np.ndarray, d_a: np.ndarray, depth_tol: float) -> np.ndarray:
+    """``|d(t) - d_a| < l_d`` up to the warp's one-pixel localisation: a splatted point lands
+    within half a pixel of its true position, so it agrees if some depth of the 3x3
+    neighbourhood is within ``l_d`` of it. Without this, road far ahead, where one pixel row
+    spans tens of metres, never agrees with itself."""
+    known = np.where(depth > 0, depth, np.float32(np.nan)).astype(np.float32)
+    k = np.ones((3, 3), np.uint8)
+    lo = cv2.erode(np.nan_to_num(known, nan=np.inf), k)
+    hi = cv2.dilate(np.nan_to_num(known, nan=-np.inf), k)
+    return (d_a > lo - depth_tol) & (d_a < hi + depth_tol)
+
+
+def label_frame(warper: Warper, clouds: list[Cloud], depth: np.ndarray, traversable: np.ndarray,
+                sky: np.ndarray, T_wc: np.ndarray, depth_tol: float, vis_range: float,
+                min_area: int, margin: float = 0.5) -> FrameLabel:
+    """T-frame blind spots and the visibility mask of one frame from the clouds of later frames."""
+    s, d_a, _ = warper.splat(clouds, T_wc, margin)
+    omega = s & ~traversable & ~sky
+    agree = omega & depth_agrees(depth, d_a, depth_tol) if depth_tol > 0 else np.zeros_like(omega)
+    omega &= ~agree
+    kept = remove_small_components(omega, min_area)
+    vis = sky | ((depth > 0) & (depth < vis_range))
+    return FrameLabel(kept, vis, s, d_a, int(agree.sum()), int(omega.sum() - kept.sum()))

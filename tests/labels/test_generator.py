@@ -1,0 +1,130 @@
+"""``label_sequence`` and ``bsn-label`` over sequence folders."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from bsn_edge.cli import label as label_cli
+from bsn_edge.labels import LabelConfig, Sources, label_sequence, labels_dir, resample
+from bsn_edge.sequence import read_kitti_poses, read_mask, write_kitti_poses, write_tum_poses
+from bsn_edge.synth import SynthConfig, write_clip
+
+CFG = LabelConfig(rate=5.0, horizon_s=1.0)  # T = 5 label frames
+
+
+@pytest.fixture(scope="module")
+def clip_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("clips") / "town"
+    write_clip(SynthConfig(frames=30, height=64, width=128, fps=10.0, seed=2), out, video=False)
+    return out
+
+
+@pytest.fixture
+def seq(clip_dir, tmp_path):
+    dst = tmp_path / "seq"
+    shutil.copytree(clip_dir, dst)
+    return dst
+
+
+def test_resample_picks_nearest_frames():
+    assert resample(30, 10.0, 5.0).tolist() == list(range(0, 30, 2))
+    assert resample(10, 5.0, 5.0).tolist() == list(range(10))
+    assert resample(7, 15.0, 5.0).tolist() == [0, 3, 6]
+    with pytest.raises(ValueError, match="above the clip"):
+        resample(10, 5.0, 10.0)
+
+
+def test_labels_report_and_tail(seq):
+    rep = label_sequence(seq, CFG)
+    out = labels_dir(seq, CFG)
+    assert out.name == "T1s"
+    # 15 frames at 5 fps, T = 5: the last 5 have no complete window and get no label
+    assert rep["label_frames"] == 10 and rep["unlabelled_tail_frames"] == 5
+    names = sorted(p.name for p in (out / "blindspot").iterdir())
+    assert names == [f"{i:06d}.png" for i in range(0, 20, 2)], "labels carry the source frame's name"
+    assert sorted(p.name for p in (out / "visibility").iterdir()) == names
+    saved = json.loads((out / "report.json").read_text())
+    assert saved["config"]["depth_tol"] == 1.0 and saved["config"]["horizon_frames"] == 5
+    assert saved["sources"] == {"depth": "files", "seg": "files", "poses": "files"}
+    assert len(saved["per_frame"]) == 10 and saved["status"] == "ok"
+    assert read_mask(out / "visibility" / "000000.png").any()
+    assert not list(seq.rglob("*.tmp"))
+
+
+def test_rerun_resumes_and_keeps_finished_frames(seq):
+    label_sequence(seq, CFG)
+    out = labels_dir(seq, CFG)
+    first = (out / "blindspot" / "000004.png").read_bytes()
+    (out / "blindspot" / "000006.png").unlink()   # as if interrupted there
+    rep = label_sequence(seq, CFG)
+    assert rep["resumed_frames"] == 9 and rep["label_frames"] == 10
+    assert (out / "blindspot" / "000004.png").read_bytes() == first
+    assert (out / "blindspot" / "000006.png").exists()
+
+
+def test_pose_count_mismatch_is_explained(seq):
+    poses = read_kitti_poses(seq / "poses.txt")
+    write_kitti_poses(seq / "poses.txt", poses[:-3])
+    with pytest.raises(ValueError, match="27 poses for 30 frames"):
+        label_sequence(seq, CFG)
+
+
+def test_missing_depth_files_are_named(seq):
+    (seq / "depth" / "000011.png").unlink()
+    with pytest.raises(FileNotFoundError, match=r"1 of 30 frames missing \(000011\.png"):
+        label_sequence(seq, CFG)
+
+
+def test_tum_trajectory_file_gives_the_same_labels(seq, tmp_path):
+    poses = read_kitti_poses(seq / "poses.txt")
+    stamps = 1700000000.0 + np.arange(len(poses)) / 10.0 + 0.004  # a SLAM's clock, slightly off
+    write_tum_poses(tmp_path / "traj.txt", stamps, poses)
+    ref = label_sequence(seq, CFG)
+    shutil.rmtree(labels_dir(seq, CFG))
+    rep = label_sequence(seq, CFG, Sources(poses=str(tmp_path / "traj.txt")))
+    assert rep["sources_detail"]["poses"]["kind"] == "trajectory"
+    a = [f["blindspot_px"] for f in ref["per_frame"]]
+    b = [f["blindspot_px"] for f in rep["per_frame"]]
+    assert np.abs(np.subtract(a, b)).max() <= 2
+
+
+def test_tum_with_a_gap_is_explained(seq, tmp_path):
+    poses = read_kitti_poses(seq / "poses.txt")
+    stamps = np.arange(len(poses)) / 10.0
+    stamps[12:] += 1.0
+    write_tum_poses(tmp_path / "traj.txt", stamps, poses)
+    with pytest.raises(ValueError, match="no pose within half a frame of frame 12"):
+        label_sequence(seq, CFG, Sources(poses=str(tmp_path / "traj.txt")))
+
+
+def test_cli_labels_good_clips_and_reports_bad_ones(seq, tmp_path, capsys):
+    bad = tmp_path / "bad"
+    shutil.copytree(seq, bad)
+    meta = json.loads((bad / "meta.json").read_text())
+    meta["fx"] = 0.0
+    (bad / "meta.json").write_text(json.dumps(meta))
+    rc = label_cli.main([str(seq), str(bad), str(tmp_path / "nowhere"), "--T", "1", "--jobs", "2"])
+    out = capsys.readouterr().out
+    assert rc == 1
+    assert "focal lengths must be positive" in out and "not a sequence folder" in out
+    assert len(list((labels_dir(seq, CFG) / "blindspot").iterdir())) == 10, "the good clip is labelled"
+    assert label_cli.main([str(seq), "--T", "1"]) == 0
+    assert "10 frames (10 already done)" in capsys.readouterr().out
+
+
+def test_cli_rejects_bad_parameters(seq, capsys):
+    assert label_cli.main([str(seq), "--T", "0"]) == 2
+    assert "horizon T must be positive" in capsys.readouterr().err
+    assert label_cli.main([str(seq), "--depth", "lidar"]) == 1
+    assert "unknown depth source 'lidar'" in capsys.readouterr().out
+
+
+def test_labels_are_deterministic(seq, tmp_path):
+    other = tmp_path / "again"
+    shutil.copytree(seq, other)
+    label_sequence(seq, CFG)
+    label_sequence(other, CFG)
+    for p in sorted((labels_dir(seq, CFG) / "blindspot").iterdir()):
+        assert np.array_equal(read_mask(p), read_mask(labels_dir(other, CFG) / "blindspot" / p.name))
