@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from bsn_edge.labels.config import LabelConfig
-from bsn_edge.labels.generator import ClipRejected, Sources, label_sequence
+from bsn_edge.labels.generator import ClipRejectedError, Sources, label_sequence
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ def label_clip(seq: str, cfg: LabelConfig, sources: Sources,
     """Label one clip and turn every failure into a result instead of an exception."""
     try:
         rep = label_sequence(seq, cfg, sources, progress=progress, on_total=on_total)
-    except ClipRejected as e:
+    except ClipRejectedError as e:
         return ClipResult(seq, "rejected", str(e))
     except (OSError, ValueError) as e:
         return ClipResult(seq, "failed", f"{type(e).__name__}: {e}")

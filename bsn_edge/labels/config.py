@@ -51,7 +51,7 @@ class LabelConfig:
     @property
     def horizon_frames(self) -> int:
         """T in label frames."""
-        return int(round(self.horizon_s * self.rate))
+        return round(self.horizon_s * self.rate)
 
     @property
     def name(self) -> str:
@@ -61,7 +61,7 @@ class LabelConfig:
     def min_area_px(self, height: int, width: int) -> int:
         if self.min_area is not None:
             return self.min_area
-        return max(1, int(round(REF_AREA_PX * height * width / (REF_SIZE[0] * REF_SIZE[1]))))
+        return max(1, round(REF_AREA_PX * height * width / (REF_SIZE[0] * REF_SIZE[1])))
 
     def to_dict(self) -> dict:
         return {**asdict(self), "horizon_frames": self.horizon_frames, "name": self.name}

@@ -20,7 +20,7 @@ from bsn_edge.sequence import SequenceMeta, read_mask, write_mask
 from bsn_edge.sequence.images import atomic_write_bytes
 
 
-class ClipRejected(Exception):
+class ClipRejectedError(Exception):
     """The clip cannot give trustworthy labels (e.g. depth does not fit the landmarks)."""
 
 
@@ -51,7 +51,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
                    on_total: Callable[[int], None] | None = None) -> dict[str, Any]:
     """Write labels for ``seq`` under ``labels/T<T>s/`` and return the report (also written as
     ``report.json``). Finished frames are skipped, so a rerun resumes. Raises
-    :class:`ClipRejected` for a clip whose sources cannot be trusted (the report says why)."""
+    :class:`ClipRejectedError` for a clip whose sources cannot be trusted (the report says why)."""
     cfg = cfg or LabelConfig()
     sources = sources or Sources()
     seq = Path(seq)
@@ -68,7 +68,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     try:
         poses, pose_info = make_poses(sources.poses, clip)
         depth, seg = make_depth(sources.depth, clip, poses, cfg), make_seg(sources.seg, clip)
-    except ClipRejected as e:
+    except ClipRejectedError as e:
         report.update(status="rejected", reason=str(e))
         _write_report(out, report)
         raise

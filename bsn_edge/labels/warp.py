@@ -94,10 +94,8 @@ class Warper:
             x, y, z, d = cloud.levels[k]
             # points on grid level k are needed when their shrink is worse than 1 / 2^(k+1),
             # i.e. d >= b / (2^(k+1) - 1); the coarsest level is always needed
-            if k < LEVELS - 1:
-                start = np.searchsorted(d, b / ((1 << (k + 1)) - 1)) if b > 0 else 0
-            else:
-                start = 0
+            needed_from = b / ((1 << (k + 1)) - 1) if (k < LEVELS - 1 and b > 0) else 0.0
+            start = np.searchsorted(d, needed_from)
             if start < len(d):
                 parts.append((x[start:], y[start:], z[start:]))
         if not parts:
@@ -147,7 +145,7 @@ def remove_small_components(mask: np.ndarray, min_area: int) -> np.ndarray:
     """Drop 8-connected components of ``mask`` smaller than ``min_area`` pixels."""
     if min_area <= 1 or not mask.any():
         return mask
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    _, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     keep = stats[:, cv2.CC_STAT_AREA] >= min_area
     keep[0] = False
     return keep[lab]
