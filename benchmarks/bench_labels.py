@@ -54,7 +54,7 @@ def run(work: Path, seeds: list[int], frames: int, realistic: bool) -> dict:
                 seq = work / f"{style}_{seed}_p{parked:g}"
                 _render(SynthConfig(frames=frames, style=style, seed=seed, parked=parked), seq)
                 clips.append((style, seed, seq))
-        rows += _score_world(work, cfg, world, clips, seeds, realistic and world == "default")
+        rows += _score_world(work, cfg, world, clips, seeds, realistic)
     a_recall = min(r["recall"] for r in rows if r["setting"] == "a" and r["world"] == "no curb parking")
     return {"rows": rows, "config": cfg.to_dict(), "frames_per_clip": frames, "seeds": seeds,
             "worlds": WORLDS, "paper_carla": PAPER, "bar_recall_a": BAR_RECALL_A,
@@ -75,7 +75,7 @@ def _score_world(work: Path, cfg: LabelConfig, world: str, clips, seeds, realist
                 if st != style:
                     continue
                 if setting == "b":
-                    real_seq, src = prepare_realistic(seq, work / f"{style}_{seed}_b", seed)
+                    real_seq, src = prepare_realistic(seq, seq.with_name(seq.name + "_b"), seed)
                 else:
                     real_seq, src = seq, settings["a"]
                 shutil.rmtree(labels_dir(real_seq, cfg), ignore_errors=True)

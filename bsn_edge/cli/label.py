@@ -24,7 +24,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("seqs", nargs="+", metavar="SEQ", help="sequence folders")
     p.add_argument("--rate", type=float, default=5.0, help="label rate, frames/s (default 5)")
     p.add_argument("--T", dest="horizon", type=float, default=5.0, help="horizon T in seconds (default 5)")
-    p.add_argument("--depth", default="files", help="depth source: files | onnx:MODEL (default files)")
+    p.add_argument("--depth", default="files",
+                   help="depth source: files | onnx:MODEL | rel:DIR[:inverse] (default files)")
     p.add_argument("--seg", default="files", help="segmentation source: files | onnx:MODEL (default files)")
     p.add_argument("--poses", default="files",
                    help="poses: files (poses.txt) | vo (built-in visual odometry) | TRAJ.txt (KITTI or "
@@ -39,6 +40,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "100 px at 375x1242 with the image area")
     p.add_argument("--min-corr", type=float, default=0.7,
                    help="reject clips whose depth/landmark alignment correlation is below this (default 0.7)")
+    p.add_argument("--camera-height", type=float, default=None,
+                   help="camera height above the road, metres, for monocular VO's scale (default: "
+                        "meta.json's camera_height, else 1.5)")
     p.add_argument("--jobs", type=int, default=None,
                    help="clips labelled in parallel (default: one per core, at most one per clip)")
     p.add_argument("--ray", metavar="ADDRESS", default=None,
@@ -50,7 +54,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         cfg = LabelConfig(rate=args.rate, horizon_s=args.horizon, depth_tol=args.depth_tol,
-                          vis_range=args.vis_range, min_area=args.min_area, min_corr=args.min_corr)
+                          vis_range=args.vis_range, min_area=args.min_area, min_corr=args.min_corr,
+                          camera_height=args.camera_height)
     except ValueError as e:
         return fail(PROG, str(e))
     sources = Sources(depth=args.depth, seg=args.seg, poses=args.poses)

@@ -22,6 +22,8 @@ class LabelConfig:
                  scales the paper's 100 px at 375x1242 with the image area.
     min_corr:    clips whose depth-to-landmark alignment correlation is below this are rejected.
     shrink_margin: subsampling safety factor of the forward warp (see ``warp.py``).
+    camera_height: metres above the road, to put monocular VO in metres; ``None`` takes
+                 meta.json's ``camera_height`` or 1.5 m.
     """
 
     rate: float = 5.0
@@ -31,6 +33,7 @@ class LabelConfig:
     min_area: int | None = None
     min_corr: float = 0.7
     shrink_margin: float = 0.5
+    camera_height: float | None = None
 
     def __post_init__(self) -> None:
         if not self.rate > 0:
@@ -45,6 +48,8 @@ class LabelConfig:
             raise ValueError(f"min_area must be >= 0, got {self.min_area}")
         if not -1.0 <= self.min_corr <= 1.0:
             raise ValueError(f"min_corr must be in [-1, 1], got {self.min_corr}")
+        if self.camera_height is not None and not 0.2 <= self.camera_height <= 5.0:
+            raise ValueError(f"camera_height must be in [0.2, 5] m, got {self.camera_height}")
         if not 0 < self.shrink_margin <= 1:
             raise ValueError(f"shrink_margin must be in (0, 1], got {self.shrink_margin}")
 

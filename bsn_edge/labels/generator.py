@@ -13,15 +13,16 @@ import numpy as np
 
 from bsn_edge import semantics as sm
 from bsn_edge.labels.config import LabelConfig
-from bsn_edge.labels.sources import ClipData, frame_count
+from bsn_edge.labels.monocular import metric_depth_and_poses, seed_poses
+from bsn_edge.labels.sources import ClipData, FilesDepth, frame_count
+from bsn_edge.labels.sources.base import ClipRejectedError
 from bsn_edge.labels.sources.registry import make_depth, make_poses, make_seg
 from bsn_edge.labels.warp import Cloud, Warper, label_frame
 from bsn_edge.sequence import SequenceMeta, read_mask, write_mask
 from bsn_edge.sequence.images import atomic_write_bytes
 
-
-class ClipRejectedError(Exception):
-    """The clip cannot give trustworthy labels (e.g. depth does not fit the landmarks)."""
+DEFAULT_CAMERA_HEIGHT = 1.5  # metres, a car's dashcam
+SEED_WINDOW = 5  # label frames either side: the seed VO's scale drifts too much for one fit per clip
 
 
 @dataclass(frozen=True)
@@ -65,16 +66,26 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         "sequence": str(seq), "config": cfg.to_dict(), "sources": vars(sources),
         "frames": clip.frames, "fps": meta.fps, "size": [meta.height, meta.width],
     }
+    idx = resample(clip.frames, meta.fps, cfg.rate)
     try:
-        poses, pose_info = make_poses(sources.poses, clip)
-        depth, seg = make_depth(sources.depth, clip, poses, cfg), make_seg(sources.seg, clip)
+        seg = make_seg(sources.seg, clip)
+        if sources.poses == "vo" and sources.depth != "files":
+            # no metric depth to anchor VO: seed poses, align, ground-scale, re-solve (monocular.py)
+            seed, pose_info = seed_poses(clip)
+            aligned = make_depth(sources.depth, clip, seed, cfg, [int(i) for i in idx], window=SEED_WINDOW)
+            height = cfg.camera_height or clip.meta.extra.get("camera_height") or DEFAULT_CAMERA_HEIGHT
+            depth, poses, more = metric_depth_and_poses(clip, aligned, seg, idx, float(height))
+            pose_info = {"kind": "vo", "metric": True, **pose_info, **more}
+        else:
+            metric = FilesDepth(clip) if sources.depth == "files" else None
+            poses, pose_info = make_poses(sources.poses, clip, metric)
+            depth = make_depth(sources.depth, clip, poses, cfg, [int(i) for i in idx])
     except ClipRejectedError as e:
         report.update(status="rejected", reason=str(e))
         _write_report(out, report)
         raise
     report["sources_detail"] = {"depth": depth.describe(), "seg": seg.describe(), "poses": pose_info}
 
-    idx = resample(clip.frames, meta.fps, cfg.rate)
     T = cfg.horizon_frames
     todo = list(range(max(len(idx) - T, 0)))
     if on_total:

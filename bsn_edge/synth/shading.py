@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 TEX = 256            # texture tile size (texels); a power of two so wrapping is a mask
 GROUND_TEXEL = 0.08  # metres per texel of the fine ground texture
 COARSE_TEXEL = 1.6   # metres per texel of the large-scale stains
-NOISE_FRAMES = 4     # sensor-noise frames cycled through (cheaper than drawing fresh noise)
+NOISE_PAD = 97       # sensor noise: each frame reads a window of a larger tile at its own offset
 
 WINDOW = np.array([0.32, 0.27, 0.22], np.float32)
 GLASS = np.array([0.16, 0.14, 0.13], np.float32)
@@ -65,7 +65,11 @@ class Shader:
         yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
         r2 = ((xx - width / 2) / (width / 2)) ** 2 + ((yy - height / 2) / (height / 2)) ** 2
         self.vignette = (1.0 - 0.18 * r2 / 2)[..., None].astype(np.float32)
-        self.sensor = rng.standard_normal((NOISE_FRAMES, height, width, 3)).astype(np.float32)
+        # Fresh-looking noise every frame without drawing it: a frame's window into this tile
+        # starts at an offset of its own. Noise that repeats in image space would give a
+        # feature tracker corners that never move.
+        self.sensor = rng.standard_normal((height + NOISE_PAD, width + NOISE_PAD, 3)).astype(np.float32)
+        self._shape = (height, width)
         self._ray_norm2: np.ndarray | None = None
         self._cache_key: tuple | None = None
         self._cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -96,7 +100,9 @@ class Shader:
             haze = np.asarray(look.haze, np.float32)
             flat[hit] = flat[hit] * fog + haze * (1 - fog)
         out *= gain
-        out += noise[frame_index % NOISE_FRAMES]
+        h, w = self._shape
+        dy, dx = (frame_index * 37) % NOISE_PAD, (frame_index * 61 + 13) % NOISE_PAD
+        out += noise[dy:dy + h, dx:dx + w]
         np.clip(out, 0, 255, out=out)
         return out.astype(np.uint8)
 

@@ -12,6 +12,10 @@ import numpy as np
 from bsn_edge.sequence import SequenceMeta
 
 
+class ClipRejectedError(Exception):
+    """The clip cannot give trustworthy labels (e.g. depth does not fit the landmarks)."""
+
+
 @dataclass(frozen=True)
 class ClipData:
     """What every source may look at: the folder, its meta and its frame count."""

@@ -1,0 +1,58 @@
+"""Sparse feature tracks between frames (OpenCV corners + pyramidal Lucas-Kanade)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+MAX_CORNERS = 1200
+FB_MAX_PX = 1.0   # forward-backward consistency, pixels
+
+
+def detect(gray: np.ndarray, mask: np.ndarray | None = None, max_corners: int = MAX_CORNERS) -> np.ndarray:
+    """``[N, 2]`` float32 corner positions."""
+    pts = cv2.goodFeaturesToTrack(gray, max_corners, 0.005, 6, mask=None if mask is None
+                                  else mask.astype(np.uint8), blockSize=5)
+    return np.zeros((0, 2), np.float32) if pts is None else pts.reshape(-1, 2)
+
+
+def track(g0: np.ndarray, g1: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Track ``pts`` from ``g0`` to ``g1``; returns positions in ``g1`` and a mask of tracks that
+    survive the forward-backward check."""
+    if not len(pts):
+        return pts, np.zeros(0, bool)
+    p0 = pts.reshape(-1, 1, 2).astype(np.float32)
+    lk = {"winSize": (21, 21), "maxLevel": 3,
+          "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)}
+    p1, st1, _ = cv2.calcOpticalFlowPyrLK(g0, g1, p0, None, **lk)
+    back, st2, _ = cv2.calcOpticalFlowPyrLK(g1, g0, p1, None, **lk)
+    fb = np.linalg.norm((back - p0).reshape(-1, 2), axis=1)
+    h, w = g0.shape[:2]
+    p1 = p1.reshape(-1, 2)
+    ok = (st1.ravel() == 1) & (st2.ravel() == 1) & (fb < FB_MAX_PX)
+    ok &= (p1[:, 0] >= 0) & (p1[:, 0] < w - 1) & (p1[:, 1] >= 0) & (p1[:, 1] < h - 1)
+    return p1, ok
+
+
+def triangulate(K: np.ndarray, T_w0: np.ndarray, T_w1: np.ndarray, p0: np.ndarray, p1: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Depths in camera 0 of matches ``p0 <-> p1`` and a mask of well-conditioned ones
+    (in front of both cameras, reprojection under 1.5 px, parallax over 1 degree)."""
+    T_10 = np.linalg.inv(T_w1) @ T_w0
+    P0 = K @ np.eye(3, 4)
+    P1 = K @ T_10[:3]
+    X = cv2.triangulatePoints(P0, P1, p0.T.astype(np.float64), p1.T.astype(np.float64))
+    X = (X[:3] / X[3]).T
+    z0 = X[:, 2]
+    X1 = X @ T_10[:3, :3].T + T_10[:3, 3]
+    z1 = X1[:, 2]
+    ok = (z0 > 0.1) & (z1 > 0.1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r0 = (X @ K.T)[:, :2] / z0[:, None] - p0
+        r1 = (X1 @ K.T)[:, :2] / z1[:, None] - p1
+        c0 = X / np.linalg.norm(X, axis=1, keepdims=True)
+        c1 = (X - (-T_10[:3, :3].T @ T_10[:3, 3])) / np.linalg.norm(
+            X - (-T_10[:3, :3].T @ T_10[:3, 3]), axis=1, keepdims=True)
+        parallax = np.degrees(np.arccos(np.clip((c0 * c1).sum(1), -1, 1)))
+    ok &= (np.linalg.norm(r0, axis=1) < 1.5) & (np.linalg.norm(r1, axis=1) < 1.5) & (parallax > 1.0)
+    return z0, ok
