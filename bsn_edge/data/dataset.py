@@ -1,0 +1,125 @@
+"""Training data: labelled sequence folders -> tensors, split by clip, geometry-honest augmentation."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from torch.utils.data import Dataset
+
+from bsn_edge import semantics as sm
+from bsn_edge.sequence import SequenceMeta, read_depth, read_mask
+from bsn_edge.sequence.frames import read_rgb
+
+IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], np.float32)
+IMAGENET_STD = np.array([0.229, 0.224, 0.225], np.float32)
+
+
+@dataclass(frozen=True)
+class Clip:
+    """A labelled sequence folder."""
+
+    path: Path
+    style: str
+    frames: tuple[int, ...]     # frames that have labels
+
+
+def find_clips(root: str | Path, label_name: str = "T5s") -> list[Clip]:
+    """Every sequence folder under ``root`` (itself included) that has labels ``label_name``."""
+    root = Path(root)
+    if not root.exists():
+        raise FileNotFoundError(f"data folder {root} not found")
+    out = []
+    for meta_path in sorted([root / "meta.json", *root.rglob("*/meta.json")]):
+        seq = meta_path.parent
+        lab = seq / "labels" / label_name / "blindspot"
+        if not meta_path.exists() or not lab.is_dir():
+            continue
+        frames = tuple(sorted(int(p.stem) for p in lab.glob("*.png")))
+        if frames:
+            meta = SequenceMeta.read(seq)
+            out.append(Clip(seq, str(meta.extra.get("style", meta.source)), frames))
+    if not out:
+        raise ValueError(f"no labelled sequence folders (labels/{label_name}) under {root}")
+    return out
+
+
+def split_clips(clips: list[Clip], val_fraction: float, test_fraction: float,
+                seed: int = 0) -> dict[str, list[Clip]]:
+    """Split by clip, never by frame: a clip's frames are near-duplicates of each other. The split
+    of a clip depends only on its folder name and the seed, so adding clips never moves others."""
+    if not 0 <= val_fraction < 1 or not 0 <= test_fraction < 1 or val_fraction + test_fraction >= 1:
+        raise ValueError(f"bad split fractions val={val_fraction} test={test_fraction}")
+    out: dict[str, list[Clip]] = {"train": [], "val": [], "test": []}
+    for c in clips:
+        h = int(hashlib.sha256(f"{seed}:{c.path.name}".encode()).hexdigest()[:8], 16) / 0xFFFFFFFF
+        key = "test" if h < test_fraction else "val" if h < test_fraction + val_fraction else "train"
+        out[key].append(c)
+    return out
+
+
+class BlindSpotDataset(Dataset):
+    """Samples of labelled clips resized to ``size`` (H, W).
+
+    Each item: ``image`` [3, H, W] normalised RGB, ``depth`` [1, H, W] metres (0 = none),
+    ``semantic`` [H, W] trainIds (255 ignore), ``blindspot`` and ``visibility`` [1, H, W] 0/1,
+    ``sky`` [1, H, W] bool. ``augment`` flips horizontally (everything together, so left stays
+    left of right in image, labels, depth and semantics alike) and jitters brightness/contrast.
+    """
+
+    def __init__(self, clips: list[Clip], size: tuple[int, int], augment: bool = False,
+                 label_name: str = "T5s", seed: int = 0) -> None:
+        self.items = [(c, f) for c in clips for f in c.frames]
+        if not self.items:
+            raise ValueError("dataset is empty")
+        self.size = size
+        self.augment = augment
+        self.label_name = label_name
+        self.rng = np.random.default_rng(seed)
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def load(self, k: int) -> dict[str, np.ndarray]:
+        clip, f = self.items[k]
+        name = f"{f:06d}.png"
+        h, w = self.size
+        lab = clip.path / "labels" / self.label_name
+        rgb = read_rgb(clip.path, f)
+        sem_raw = cv2.imread(str(clip.path / "semantic" / name), cv2.IMREAD_UNCHANGED)
+        sem = sem_raw if sem_raw is not None else np.full(rgb.shape[:2], sm.IGNORE, np.uint8)
+        dep_p = clip.path / "depth" / name
+        depth = read_depth(dep_p) if dep_p.exists() else np.zeros(rgb.shape[:2], np.float32)
+        out = {
+            "rgb": cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA),
+            "depth": cv2.resize(depth, (w, h), interpolation=cv2.INTER_NEAREST),
+            "semantic": cv2.resize(sem, (w, h), interpolation=cv2.INTER_NEAREST),
+            "blindspot": cv2.resize(read_mask(lab / "blindspot" / name).astype(np.uint8), (w, h),
+                                    interpolation=cv2.INTER_NEAREST),
+            "visibility": cv2.resize(read_mask(lab / "visibility" / name).astype(np.uint8), (w, h),
+                                     interpolation=cv2.INTER_NEAREST),
+        }
+        return out
+
+    def __getitem__(self, k: int) -> dict[str, torch.Tensor]:
+        a = self.load(k)
+        rgb = a["rgb"][..., ::-1].astype(np.float32) / 255.0
+        if self.augment:
+            if self.rng.random() < 0.5:
+                a = {key: v[:, ::-1] for key, v in a.items()}
+                rgb = rgb[:, ::-1]
+            rgb = np.clip(rgb * self.rng.uniform(0.8, 1.2) + self.rng.uniform(-0.08, 0.08), 0, 1)
+        img = (rgb - IMAGENET_MEAN) / IMAGENET_STD
+        sem = a["semantic"].astype(np.int64)
+        return {
+            "image": torch.from_numpy(np.ascontiguousarray(img.transpose(2, 0, 1))),
+            "depth": torch.from_numpy(np.ascontiguousarray(a["depth"]))[None].float(),
+            "semantic": torch.from_numpy(np.ascontiguousarray(sem)),
+            "blindspot": torch.from_numpy(np.ascontiguousarray(a["blindspot"]))[None].float(),
+            "visibility": torch.from_numpy(np.ascontiguousarray(a["visibility"]))[None].float(),
+            "sky": torch.from_numpy(np.ascontiguousarray(a["semantic"] == sm.SKY))[None],
+        }

@@ -1,0 +1,5 @@
+"""Evaluation of blind-spot predictions: metrics, baselines, reports."""
+
+from bsn_edge.evaluate.metrics import Counts, ThresholdSweep
+
+__all__ = ["Counts", "ThresholdSweep"]

@@ -1,0 +1,68 @@
+"""BlindSpotNet: a depth estimator D, then a blind-spot estimator B on RGB + D's depth."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from bsn_edge.models.deeplab import EncoderDecoder
+from bsn_edge.models.resnet import ResNetEncoder
+
+MIN_DEPTH_M, MAX_DEPTH_M = 0.5, 120.0   # D's output range; sky is taught as the far end
+LOG_MIN_DEPTH, LOG_MAX_DEPTH = math.log(MIN_DEPTH_M), math.log(MAX_DEPTH_M)
+DEPTH_FEATURE_M = 10.0                  # B sees 10 / (depth + 10): bounded, fine near, coarse far
+
+
+def depth_feature(depth: Tensor) -> Tensor:
+    """What B sees of the depth: ``s / (depth + s)`` in (0, 1], resolving near range finely."""
+    return DEPTH_FEATURE_M / (depth + DEPTH_FEATURE_M)
+
+
+class DepthNet(nn.Module):
+    """D: monocular metric depth. Predicts log-depth, returned as metres in [0.5, 120]."""
+
+    def __init__(self, encoder_depth: int = 18, width: int = 64, separable: bool = True,
+                 output_stride: int = 16) -> None:
+        super().__init__()
+        self.net = EncoderDecoder(ResNetEncoder(encoder_depth, 3, output_stride), 1, width, separable)
+
+    def forward(self, x: Tensor) -> Tensor:
+        log_d, _ = self.net(x)
+        return log_d.clamp(LOG_MIN_DEPTH, LOG_MAX_DEPTH).exp()
+
+
+class BlindSpotNet(nn.Module):
+    """D and B in one module: ``forward(rgb) -> (blind-spot logits, depth metres, B's decoder features)``.
+
+    ``rgb`` is normalised float ``[N, 3, H, W]``. B takes RGB plus ``depth_feature`` of D's depth
+    (detached: B's loss does not train D) unless ``use_depth`` is off (the paper's BSN-D).
+    ``input_scale`` < 1 runs both networks on a smaller copy of the frame and brings the outputs
+    back to the frame's size: the cheapest lever on a CPU's frame rate.
+    """
+
+    def __init__(self, blindspot: nn.Module, depth_net: DepthNet, use_depth: bool = True,
+                 input_scale: float = 1.0) -> None:
+        super().__init__()
+        if not 0.1 <= input_scale <= 1.0:
+            raise ValueError(f"input_scale must be in [0.1, 1], got {input_scale}")
+        self.depth_net = depth_net
+        self.blindspot = blindspot
+        self.use_depth = use_depth
+        self.input_scale = input_scale
+
+    def forward(self, rgb: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        size = rgb.shape[2:]
+        x = rgb
+        if self.input_scale != 1.0:
+            x = F.interpolate(rgb, scale_factor=self.input_scale, mode="bilinear", align_corners=False,
+                              antialias=False)
+        depth = self.depth_net(x)
+        inp = torch.cat([x, depth_feature(depth.detach())], 1) if self.use_depth else x
+        logits, feats = self.blindspot(inp)
+        if self.input_scale != 1.0:
+            logits = F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
+            depth = F.interpolate(depth, size=size, mode="bilinear", align_corners=False)
+        return logits, depth, feats

@@ -1,0 +1,86 @@
+"""The model registry: names -> specs -> modules."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from torch import nn
+
+from bsn_edge.models.bsn import BlindSpotNet, DepthNet
+from bsn_edge.models.deeplab import EncoderDecoder
+from bsn_edge.models.resnet import ResNetEncoder
+from bsn_edge.models.unet import UNet
+from bsn_edge.semantics import NUM_CLASSES
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """What a registry name stands for.
+
+    arch: ``deeplab`` (ResNet + ASPP + DeepLabV3+ decoder) or ``unet``.
+    encoder_depth: ResNet depth of B. decoder_width / separable: B's decoder (256 dense is the
+    paper's; 64 separable is the light one). use_depth: B sees D's depth. distill: trained with
+    the teacher's pairwise-similarity loss (lambda = 1) or without (lambda = 0).
+    """
+
+    arch: str = "deeplab"
+    encoder_depth: int = 18
+    decoder_width: int = 256
+    separable: bool = False
+    use_depth: bool = True
+    distill: bool = True
+    depth_width: int = 64       # D's light decoder
+    output_stride: int = 16     # of both encoders
+    input_scale: float = 1.0    # both networks run on the frame resized by this
+
+    def __post_init__(self) -> None:
+        if self.arch not in ("deeplab", "unet"):
+            raise ValueError(f"unknown arch {self.arch!r}; valid: deeplab, unet")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+# The light variant is what a 2-core CPU runs in real time: a light decoder, encoders at output
+# stride 32, and both networks on the frame at half size (outputs come back at full size).
+_LIGHT = {"decoder_width": 64, "separable": True, "output_stride": 32, "input_scale": 0.5, "depth_width": 32}
+MODELS: dict[str, ModelSpec] = {
+    "small": ModelSpec(),
+    "small-light": ModelSpec(**_LIGHT),
+    "medium": ModelSpec(encoder_depth=50),
+    "large": ModelSpec(encoder_depth=101),
+    "unet": ModelSpec(arch="unet"),
+    "small-d": ModelSpec(use_depth=False),
+    "small-kd": ModelSpec(distill=False),
+    "small-light-d": ModelSpec(use_depth=False, **_LIGHT),
+    "small-light-kd": ModelSpec(distill=False, **_LIGHT),
+}
+
+
+def get_spec(name: str) -> ModelSpec:
+    try:
+        return MODELS[name]
+    except KeyError:
+        raise ValueError(f"unknown model {name!r}; valid: {', '.join(MODELS)}") from None
+
+
+def build(spec: ModelSpec) -> BlindSpotNet:
+    in_ch = 4 if spec.use_depth else 3
+    if spec.arch == "unet":
+        b: nn.Module = UNet(in_ch, 1)
+    else:
+        enc = ResNetEncoder(spec.encoder_depth, in_ch, spec.output_stride)
+        b = EncoderDecoder(enc, 1, spec.decoder_width, spec.separable)
+    d = DepthNet(18, spec.depth_width, output_stride=spec.output_stride)
+    return BlindSpotNet(b, d, spec.use_depth, spec.input_scale)
+
+
+def create_model(name: str) -> BlindSpotNet:
+    """A fresh BlindSpotNet for a registry name (``small``, ``small-light``, ``medium``, ...)."""
+    return build(get_spec(name))
+
+
+def create_teacher(encoder_depth: int = 18, width: int = 128) -> EncoderDecoder:
+    """The DeepLabV3+ segmentation teacher (Cityscapes trainIds); its decoder output is the
+    distillation target."""
+    return EncoderDecoder(ResNetEncoder(encoder_depth, 3), NUM_CLASSES, width)

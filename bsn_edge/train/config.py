@@ -1,0 +1,153 @@
+"""Training configuration: TOML file + ``key=value`` overrides -> validated frozen dataclasses."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from bsn_edge.models import get_spec
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    name: str = "small-light"
+
+    def __post_init__(self) -> None:
+        get_spec(self.name)
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    size: tuple[int, int] = (128, 256)       # training size (H, W)
+    label: str = "T5s"
+    val_fraction: float = 0.2
+    test_fraction: float = 0.0
+    split_seed: int = 0
+    train_styles: tuple[str, ...] = ()       # empty: all styles
+    finetune_styles: tuple[str, ...] = ()    # with finetune_fraction: add this share of their clips
+    finetune_fraction: float = 0.0
+    workers: int = 0
+
+    def __post_init__(self) -> None:
+        if len(self.size) != 2 or min(self.size) < 32 or any(s % 32 for s in self.size):
+            raise ValueError(f"data.size must be two multiples of 32 (H, W), got {self.size}")
+        if not 0 <= self.finetune_fraction <= 1:
+            raise ValueError(f"data.finetune_fraction must be in [0, 1], got {self.finetune_fraction}")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    steps: int = 400
+    batch_size: int = 8
+    lr: float = 1e-3
+    betas: tuple[float, float] = (0.9, 0.999)
+    eps: float = 1e-8
+    weight_decay: float = 5e-4
+    poly_power: float = 0.9
+    distill_weight: float = 1.0              # lambda
+    depth_weight: float = 1.0
+    distill_grid: tuple[int, int] = (8, 16)
+    seed: int = 0
+    threads: int = 2
+    checkpoint_every: int = 100
+
+    def __post_init__(self) -> None:
+        if self.steps < 1 or self.batch_size < 1:
+            raise ValueError("train.steps and train.batch_size must be >= 1")
+        if not self.lr > 0 or self.distill_weight < 0 or self.depth_weight < 0:
+            raise ValueError("train.lr must be positive, the loss weights non-negative")
+
+
+@dataclass(frozen=True)
+class TeacherConfig:
+    steps: int = 300
+    batch_size: int = 8
+    lr: float = 1e-3
+    encoder: int = 18
+    width: int = 128
+    checkpoint: str = ""                     # a trained teacher's folder; empty trains one first
+
+
+@dataclass(frozen=True)
+class Config:
+    model: ModelConfig = field(default_factory=ModelConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    teacher: TeacherConfig = field(default_factory=TeacherConfig)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def digest(self) -> str:
+        """Short hash of the resolved config (written into checkpoints and exported models)."""
+        return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
+
+    @property
+    def distill_weight(self) -> float:
+        """lambda as used: 0 for a registry entry trained without distillation (``*-kd``)."""
+        return self.train.distill_weight if get_spec(self.model.name).distill else 0.0
+
+
+SECTIONS = {"model": ModelConfig, "data": DataConfig, "train": TrainConfig, "teacher": TeacherConfig}
+
+
+def _coerce(cls, key: str, value: Any) -> Any:
+    f = {f.name: f for f in dataclasses.fields(cls)}[key]
+    default = f.default if f.default is not dataclasses.MISSING else None
+    if isinstance(default, tuple) and isinstance(value, list | tuple):
+        return tuple(value)
+    if isinstance(default, bool):
+        if isinstance(value, str):
+            return value.lower() in ("1", "true", "yes", "on")
+        return bool(value)
+    if isinstance(default, float) and isinstance(value, int | str):
+        return float(value)
+    if isinstance(default, int) and isinstance(value, str):
+        return int(value)
+    return value
+
+
+def parse_override(text: str) -> tuple[str, str, Any]:
+    """``section.key=value`` -> (section, key, value); the value is read as TOML if it can be."""
+    if "=" not in text or "." not in text.split("=", 1)[0]:
+        raise ValueError(f"override {text!r} must look like section.key=value (e.g. train.steps=100)")
+    dotted, raw = text.split("=", 1)
+    section, key = dotted.strip().split(".", 1)
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return section, key, value
+
+
+def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> Config:
+    """Read a TOML config and apply overrides; unknown sections or keys are errors that list the
+    valid ones."""
+    raw: dict[str, dict[str, Any]] = {}
+    if path is not None:
+        p = Path(path)
+        if not p.is_file():
+            raise FileNotFoundError(f"config {p} not found")
+        try:
+            raw = tomllib.loads(p.read_text())
+        except tomllib.TOMLDecodeError as e:
+            raise ValueError(f"{p}: invalid TOML: {e}") from None
+    for ov in overrides:
+        section, key, value = parse_override(ov)
+        raw.setdefault(section, {})[key] = value
+    parts = {}
+    for section, values in raw.items():
+        if section not in SECTIONS:
+            raise ValueError(f"unknown config section [{section}]; valid: {', '.join(SECTIONS)}")
+        cls = SECTIONS[section]
+        names = {f.name for f in dataclasses.fields(cls)}
+        bad = sorted(set(values) - names)
+        if bad:
+            raise ValueError(f"unknown key(s) {bad} in [{section}]; valid: {', '.join(sorted(names))}")
+        parts[section] = cls(**{k: _coerce(cls, k, v) for k, v in values.items()})
+    return Config(**parts)
