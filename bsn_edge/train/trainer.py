@@ -106,7 +106,7 @@ def train_teacher(cfg: Config, ds, out: Path, rank: int, world: int, progress: b
     opt = _adam(model.parameters(), t.lr, cfg)
     sched = _poly(opt, t.steps, cfg.train.poly_power)
     batches = _loader(ds, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers)
-    bar = tqdm(range(t.steps), desc="teacher", disable=not progress or rank != 0, unit="step")
+    bar = tqdm(range(t.steps), desc="teacher", disable=True if (not progress or rank) else None, unit="step")
     model.train()
     for _ in bar:
         b = next(batches)
@@ -166,7 +166,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         sched.step()
     batches = _loader(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers)
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
-               disable=not progress or rank != 0)
+               disable=True if (not progress or rank) else None)
     history = []
     t0 = time.perf_counter()
     net.train()
@@ -186,7 +186,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         loss.backward()
         opt.step()
         sched.step()
-        history.append([float(loss), float(l_bce), float(l_kd), float(l_depth)])
+        history.append([loss.item(), l_bce.item(), l_kd.item(), l_depth.item()])
         bar.set_postfix(loss=f"{loss.item():.3f}", bce=f"{l_bce.item():.3f}", kd=f"{l_kd.item():.4f}",
                         depth=f"{l_depth.item():.3f}")
         done = step + 1

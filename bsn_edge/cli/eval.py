@@ -1,0 +1,78 @@
+"""``bsn-eval``: IoU, recall and precision inside V of a trained run and the baselines."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from bsn_edge.cli.common import fail, parse_size
+from bsn_edge.data import find_clips
+from bsn_edge.evaluate.evaluator import evaluate, grid_image, load_teacher
+from bsn_edge.sequence import write_image
+from bsn_edge.sequence.images import atomic_write_bytes
+from bsn_edge.train import load_model
+
+PROG = "bsn-eval"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description="Evaluate a run on labelled clips: IoU, recall and precision inside the visibility "
+                    "mask V, overall and per clip, for BlindSpotNet (at the threshold chosen on validation) "
+                    "and the baselines Traversable, Detection-2D and Detection-3D. Writes REPORT.json and "
+                    "an image grid REPORT.png beside it.")
+    p.add_argument("--run", required=True, help="training run folder (bsn-train --out)")
+    p.add_argument("--data", required=True, help="folder of labelled sequence folders")
+    p.add_argument("--out", required=True, help="report JSON path")
+    p.add_argument("--clips", choices=("held-out", "all"), default="held-out",
+                   help="held-out (default): skip clips the run trained or validated on; all: every clip")
+    p.add_argument("--styles", nargs="*", default=None, help="only clips of these styles")
+    p.add_argument("--size", type=parse_size, default=None, metavar="HxW",
+                   help="evaluation size (default: the run's training size)")
+    p.add_argument("--no-baselines", action="store_true", help="evaluate BlindSpotNet only")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    run = Path(args.run)
+    try:
+        model, meta = load_model(run)
+        cfg = json.loads((run / "config.json").read_text()) if (run / "config.json").is_file() else {}
+        label = meta.get("label", "T5s")
+        clips = find_clips(args.data, label)
+    except (FileNotFoundError, ValueError) as e:
+        return fail(PROG, str(e))
+    if args.clips == "held-out":
+        seen = set(meta.get("train_clips", [])) | set(meta.get("val_clips", []))
+        clips = [c for c in clips if c.path.name not in seen]
+    if args.styles:
+        clips = [c for c in clips if c.style in args.styles]
+    if not clips:
+        return fail(PROG, f"no clips to evaluate in {args.data} (held-out: {args.clips == 'held-out'}, "
+                          f"styles: {args.styles or 'any'})")
+    size = tuple(args.size or meta["input_size"])
+    teacher = None if args.no_baselines else load_teacher(run, cfg)
+    res = evaluate(model, meta, clips, size, label, teacher)
+    if args.no_baselines:
+        res["overall"] = {"BSN": res["overall"]["BSN"]}
+    rows = res.pop("grid_rows")
+    report = {"run": str(run), "model": meta["model"], "size": list(size),
+              "clips": [c.path.name for c in clips], **res}
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out, (json.dumps(report, indent=1) + "\n").encode())
+    if rows:
+        write_image(out.with_suffix(".png"), grid_image(rows))
+    print(f"{'method':<14} {'IoU':>6} {'recall':>7} {'precision':>9}   "
+          f"({len(clips)} clips, {size[0]}x{size[1]})")
+    for m, r in report["overall"].items():
+        print(f"{m:<14} {r['iou']:>6.3f} {r['recall']:>7.3f} {r['precision']:>9.3f}")
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

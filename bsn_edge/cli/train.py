@@ -1,0 +1,47 @@
+"""``bsn-train``: train BlindSpotNet on labelled sequence folders."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from bsn_edge.cli.common import fail
+from bsn_edge.train.config import load_config
+from bsn_edge.train.trainer import train
+
+PROG = "bsn-train"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description="Train BlindSpotNet (D + B, with the segmentation teacher's distillation) on "
+                    "labelled sequence folders. Writes model.pt, checkpoint.json (threshold chosen on "
+                    "the validation split, intrinsics, digests) and config.json (resolved) into RUN. "
+                    "Runs under torchrun for several processes (DistributedDataParallel).")
+    p.add_argument("--config", default=None, help="TOML config (configs/smoke.toml, quick.toml, full.toml)")
+    p.add_argument("--data", required=True, help="folder of labelled sequence folders")
+    p.add_argument("--out", required=True, help="run folder")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config value, e.g. --set train.steps=100 --set model.name=small")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        cfg = load_config(args.config, args.overrides)
+    except (FileNotFoundError, ValueError) as e:
+        return fail(PROG, str(e))
+    try:
+        summary = train(cfg, args.data, args.out, resume=args.resume, progress=not args.quiet)
+    except (FileNotFoundError, ValueError) as e:
+        return fail(PROG, str(e))
+    print(json.dumps({k: v for k, v in summary.items() if k != "final_loss"}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,97 @@
+"""Running a trained run and the baselines over labelled clips."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+from bsn_edge.data import BlindSpotDataset, Clip
+from bsn_edge.evaluate.baselines import detection_2d, detection_3d, traversable_hidden
+from bsn_edge.evaluate.metrics import Counts
+from bsn_edge.models import create_teacher
+from bsn_edge.sequence import SequenceMeta, read_kitti_poses
+from bsn_edge.synth.sheet import tint
+
+METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
+
+
+def load_teacher(run: Path, cfg: dict[str, Any]) -> torch.nn.Module | None:
+    p = run / "teacher" / "teacher.pt"
+    if not p.is_file():
+        return None
+    t = cfg.get("teacher", {})
+    teacher = create_teacher(t.get("encoder", 18), t.get("width", 128))
+    teacher.load_state_dict(torch.load(p, map_location="cpu", weights_only=True))
+    return teacher.eval()
+
+
+@torch.no_grad()
+def evaluate(model, meta: dict[str, Any], clips: list[Clip], size: tuple[int, int], label: str,
+             teacher: torch.nn.Module | None, grid_frames: int = 3) -> dict[str, Any]:
+    """Metrics inside V for BSN and the baselines, overall and per clip, plus grid rows."""
+    threshold = float(meta.get("threshold", 0.5))
+    overall = {m: Counts() for m in METHODS}
+    per_clip: dict[str, dict[str, Any]] = {}
+    rows = []
+    for clip in clips:
+        ds = BlindSpotDataset([clip], size, label_name=label)
+        smeta = SequenceMeta.read(clip.path)
+        intr = smeta.intrinsics.scaled(size[1], size[0])
+        poses = read_kitti_poses(clip.path / "poses.txt") if (clip.path / "poses.txt").exists() else None
+        has_boxes = (clip.path / "boxes").is_dir() and poses is not None
+        counts = {m: Counts() for m in METHODS}
+        picks = set(np.linspace(0, len(ds) - 1, grid_frames).round().astype(int).tolist()) \
+            if grid_frames else set()
+        for k in range(len(ds)):
+            item = ds[k]
+            x = item["image"][None]
+            logits, depth, _ = model(x)
+            prob = torch.sigmoid(logits)[0, 0].numpy()
+            d = depth[0, 0].numpy()
+            label_m = item["blindspot"][0].numpy() > 0.5
+            vis = item["visibility"][0].numpy() > 0.5
+            if teacher is not None:
+                sem = teacher(x)[0].argmax(1)[0].numpy().astype(np.uint8)
+            else:
+                sem = item["semantic"].numpy().astype(np.uint8)
+            preds = {"BSN": prob >= threshold, "Traversable": traversable_hidden(sem, d, intr),
+                     "Detection-2D": detection_2d(sem)}
+            if has_boxes:
+                f = ds.items[k][1]
+                boxes = np.load(clip.path / "boxes" / f"{f:06d}.npy")
+                preds["Detection-3D"] = detection_3d(boxes, poses[f], intr, preds["Detection-2D"])
+            for m, p in preds.items():
+                counts[m].add(p, label_m, vis)
+                overall[m].add(p, label_m, vis)
+            if k in picks:
+                rgb = ds.load(k)["rgb"]
+                rows.append((rgb, label_m, vis, preds))
+        per_clip[clip.path.name] = {"style": clip.style, "frames": len(ds),
+                                    **{m: c.metrics() for m, c in counts.items() if c.tp + c.fp + c.fn}}
+    scored = {m: c.metrics() for m, c in overall.items() if c.tp + c.fp + c.fn}
+    return {"threshold": threshold, "overall": scored,
+            "per_clip": per_clip, "grid_rows": rows,
+            "segmentation": "teacher" if teacher is not None else "ground truth (no teacher in the run)"}
+
+
+def grid_image(rows, methods=METHODS) -> np.ndarray:
+    """Figure-5-style grid: frame, T-frame labels, then each method (blind spots tinted red,
+    outside V dimmed)."""
+    out = []
+    for rgb, label_m, vis, preds in rows:
+        dim = rgb.copy()
+        dim[~vis] = (dim[~vis] * 0.45).astype(np.uint8)
+        tiles = [rgb, tint(dim, label_m)] + [tint(dim, preds[m]) if m in preds else np.zeros_like(rgb)
+                                             for m in methods]
+        out.append(np.hstack(tiles))
+    grid = np.vstack(out)
+    bar = np.full((20, grid.shape[1], 3), 255, np.uint8)
+    w = rows[0][0].shape[1]
+    for i, name in enumerate(("frame", "T-frame labels", *methods)):
+        cv2.putText(bar, name, (i * w + 4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.vstack([bar, grid])
+

@@ -1,0 +1,158 @@
+"""bsn-train and bsn-eval on a tiny labelled dataset."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from bsn_edge.cli import eval as eval_cli
+from bsn_edge.cli import label as label_cli
+from bsn_edge.cli import synth as synth_cli
+from bsn_edge.cli import train as train_cli
+from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
+from bsn_edge.train import load_config, load_model
+from bsn_edge.train.losses import masked_bce
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = str(ROOT / "configs" / "smoke.toml")
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("data")
+    for style, seed in (("town", 0), ("town", 1), ("suburb", 0)):
+        assert synth_cli.main([str(root / f"{style}_{seed}"), "--frames", "30", "--size", "64x128",
+                               "--style", style, "--seed", str(seed), "--no-video"]) == 0
+    assert label_cli.main([*map(str, sorted(root.iterdir())), "--T", "2", "--jobs", "1"]) == 0
+    return root
+
+
+def test_config_overrides_and_errors(tmp_path):
+    cfg = load_config(SMOKE, ["train.steps=3", "model.name=\"small-kd\"", "data.size=[32, 64]"])
+    assert cfg.train.steps == 3 and cfg.model.name == "small-kd" and cfg.data.size == (32, 64)
+    assert cfg.distill_weight == 0.0, "the -kd ablation trains with lambda = 0"
+    with pytest.raises(ValueError, match="unknown key"):
+        load_config(SMOKE, ["train.stepz=3"])
+    with pytest.raises(ValueError, match="unknown config section"):
+        load_config(SMOKE, ["optim.lr=1"])
+    with pytest.raises(ValueError, match="unknown model"):
+        load_config(SMOKE, ["model.name=\"huge\""])
+
+
+def test_split_is_by_clip_and_stable(data):
+    clips = find_clips(data, "T2s")
+    a = split_clips(clips, 0.34, 0.0, seed=1)
+    b = split_clips(list(reversed(clips)), 0.34, 0.0, seed=1)
+    assert {c.path.name for c in a["val"]} == {c.path.name for c in b["val"]}
+    names = [c.path.name for part in a.values() for c in part]
+    assert sorted(names) == sorted(c.path.name for c in clips), "every clip in exactly one split"
+
+
+def test_flip_keeps_geometry_honest(data):
+    clips = find_clips(data, "T2s")
+    plain = BlindSpotDataset(clips, (64, 128), augment=False, label_name="T2s")
+    aug = BlindSpotDataset(clips, (64, 128), augment=True, label_name="T2s", seed=3)
+    for k in range(6):
+        a, b = plain[k], aug[k]
+        flipped = torch.equal(b["blindspot"], a["blindspot"].flip(-1))
+        same = torch.equal(b["blindspot"], a["blindspot"])
+        assert flipped or same
+        if flipped and not same:
+            for key in ("depth", "visibility", "sky"):
+                assert torch.equal(b[key], a[key].flip(-1)), key
+            assert torch.equal(b["semantic"], a["semantic"].flip(-1))
+
+
+def test_a_few_steps_reduce_the_loss(data):
+    torch.manual_seed(0)
+    from bsn_edge.models import create_model
+    ds = BlindSpotDataset(find_clips(data, "T2s")[:1], (64, 128), label_name="T2s")
+    batch = {k: torch.stack([ds[i][k] for i in range(4)]) for k in ("image", "blindspot", "visibility")}
+    m = create_model("small-light")
+    opt = torch.optim.Adam(m.parameters(), lr=1e-3)
+    losses = []
+    for _ in range(15):
+        logits, _, _ = m(batch["image"])
+        loss = masked_bce(logits, batch["blindspot"], batch["visibility"])
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert losses[-1] < 0.7 * losses[0]
+
+
+def test_smoke_config_end_to_end(data, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet",
+                           "--set", "data.label=\"T2s\"", "--set", "data.val_fraction=0.34"]) == 0
+    meta = json.loads((run / "checkpoint.json").read_text())
+    assert meta["model"] == "small-light" and 0 < meta["threshold"] < 1 and meta["input_size"] == [64, 128]
+    assert json.loads((run / "config.json").read_text())["train"]["steps"] == 6
+    assert (run / "teacher" / "teacher.pt").is_file()
+    # reload gives identical outputs
+    model, _ = load_model(run)
+    again, _ = load_model(run)
+    x = torch.randn(1, 3, 64, 128)
+    with torch.no_grad():
+        assert torch.equal(model(x)[0], again(x)[0])
+    report = tmp_path / "eval" / "report.json"
+    argv = ["--run", str(run), "--data", str(data), "--out", str(report), "--clips", "all"]
+    assert eval_cli.main(argv) == 0
+    rep = json.loads(report.read_text())
+    assert set(rep["overall"]) >= {"BSN", "Traversable", "Detection-2D", "Detection-3D"}
+    assert set(rep["per_clip"]) == {"suburb_0", "town_0", "town_1"}
+    assert report.with_suffix(".png").is_file()
+    # resume continues to more steps without starting over
+    assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet", "--resume",
+                           "--set", "data.label=\"T2s\"", "--set", "train.steps=8"]) == 0
+    assert json.loads((run / "checkpoint.json").read_text())["step"] == 8
+
+
+def test_checkpoints_refuse_tampering_and_other_architectures(data, tmp_path):
+    run = tmp_path / "run"
+    assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet",
+                           "--set", "data.label=\"T2s\"", "--set", "train.distill_weight=0"]) == 0
+    meta = json.loads((run / "checkpoint.json").read_text())
+    other = tmp_path / "other"
+    shutil.copytree(run, other)
+    meta["spec"]["decoder_width"] = 128
+    (other / "checkpoint.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="do not fit"):
+        load_model(other)
+    data_bytes = bytearray((run / "model.pt").read_bytes())
+    data_bytes[-10] ^= 0xFF
+    (other / "model.pt").write_bytes(bytes(data_bytes))
+    with pytest.raises(ValueError, match="sha256"):
+        load_model(other)
+
+
+def test_cli_errors_are_explained(data, tmp_path, capsys):
+    assert train_cli.main(["--config", str(tmp_path / "nope.toml"), "--data", str(data),
+                           "--out", str(tmp_path / "r")]) == 2
+    assert "not found" in capsys.readouterr().err
+    assert train_cli.main(["--data", str(tmp_path), "--out", str(tmp_path / "r")]) == 2
+    assert "no labelled sequence folders" in capsys.readouterr().err
+    argv = ["--run", str(tmp_path), "--data", str(data), "--out", str(tmp_path / "x.json")]
+    assert eval_cli.main(argv) == 2
+    assert "not a training run" in capsys.readouterr().err
+
+
+def test_distributed_training_with_two_processes(data, tmp_path):
+    """torchrun, 2 CPU processes, gloo: both ranks train, rank 0 writes the run."""
+    run = tmp_path / "ddp"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc-per-node", "2", "--master-port", "29531",
+           "-m", "bsn_edge.cli.train", "--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet",
+           "--set", "data.label=\"T2s\"", "--set", "train.steps=3", "--set", "train.distill_weight=0",
+           "--set", "train.threads=1"]
+    res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
+    model, _ = load_model(run)
+    assert np.isfinite(model(torch.randn(1, 3, 64, 128))[0].detach().numpy()).all()
