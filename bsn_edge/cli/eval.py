@@ -55,7 +55,8 @@ def main(argv: list[str] | None = None) -> int:
                           f"styles: {args.styles or 'any'})")
     size = tuple(args.size or meta["input_size"])
     teacher = None if args.no_baselines else load_teacher(run, cfg)
-    res = evaluate(model, meta, clips, size, label, teacher)
+    res = evaluate(model, meta, clips, size, label, teacher,
+                   teacher_scale=float(cfg.get("teacher", {}).get("scale", 0.5)))
     if args.no_baselines:
         res["overall"] = {"BSN": res["overall"]["BSN"]}
     rows = res.pop("grid_rows")

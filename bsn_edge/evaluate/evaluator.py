@@ -15,6 +15,7 @@ from bsn_edge.evaluate.metrics import Counts
 from bsn_edge.models import create_teacher
 from bsn_edge.sequence import SequenceMeta, read_kitti_poses
 from bsn_edge.synth.sheet import tint
+from bsn_edge.train.trainer import scaled
 
 METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
 
@@ -31,7 +32,8 @@ def load_teacher(run: Path, cfg: dict[str, Any]) -> torch.nn.Module | None:
 
 @torch.no_grad()
 def evaluate(model, meta: dict[str, Any], clips: list[Clip], size: tuple[int, int], label: str,
-             teacher: torch.nn.Module | None, grid_frames: int = 3) -> dict[str, Any]:
+             teacher: torch.nn.Module | None, grid_frames: int = 3, teacher_scale: float = 0.5
+             ) -> dict[str, Any]:
     """Metrics inside V for BSN and the baselines, overall and per clip, plus grid rows."""
     threshold = float(meta.get("threshold", 0.5))
     overall = {m: Counts() for m in METHODS}
@@ -55,7 +57,10 @@ def evaluate(model, meta: dict[str, Any], clips: list[Clip], size: tuple[int, in
             label_m = item["blindspot"][0].numpy() > 0.5
             vis = item["visibility"][0].numpy() > 0.5
             if teacher is not None:
-                sem = teacher(x)[0].argmax(1)[0].numpy().astype(np.uint8)
+                t_logits = teacher(scaled(x, teacher_scale))[0]
+                t_logits = torch.nn.functional.interpolate(t_logits, size=x.shape[2:], mode="bilinear",
+                                                           align_corners=False)
+                sem = t_logits.argmax(1)[0].numpy().astype(np.uint8)
             else:
                 sem = item["semantic"].numpy().astype(np.uint8)
             preds = {"BSN": prob >= threshold, "Traversable": traversable_hidden(sem, d, intr),

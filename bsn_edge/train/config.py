@@ -70,7 +70,13 @@ class TeacherConfig:
     lr: float = 1e-3
     encoder: int = 18
     width: int = 128
+    scale: float = 0.5                       # the teacher sees the frame at this scale (its features
+                                             # are pooled to a coarse grid for distillation anyway)
     checkpoint: str = ""                     # a trained teacher's folder; empty trains one first
+
+    def __post_init__(self) -> None:
+        if not 0.1 <= self.scale <= 1.0:
+            raise ValueError(f"teacher.scale must be in [0.1, 1], got {self.scale}")
 
 
 @dataclass(frozen=True)

@@ -59,6 +59,14 @@ def _loader(ds, batch: int, world: int, rank: int, seed: int, workers: int) -> I
         epoch += 1
 
 
+def scaled(x: torch.Tensor, scale: float, mode: str = "bilinear") -> torch.Tensor:
+    """``x`` resized by ``scale`` (unchanged at 1)."""
+    if scale == 1.0:
+        return x
+    kw = {"align_corners": False} if mode == "bilinear" else {}
+    return F.interpolate(x, scale_factor=scale, mode=mode, **kw)
+
+
 def _poly(opt: torch.optim.Optimizer, steps: int, power: float) -> torch.optim.lr_scheduler.LambdaLR:
     return torch.optim.lr_scheduler.LambdaLR(opt, lambda s: max(1.0 - s / steps, 0.0) ** power)
 
@@ -110,8 +118,9 @@ def train_teacher(cfg: Config, ds, out: Path, rank: int, world: int, progress: b
     model.train()
     for _ in bar:
         b = next(batches)
-        logits, _ = model(b["image"])
-        loss = F.cross_entropy(logits, b["semantic"], ignore_index=sm.IGNORE)
+        logits, _ = model(scaled(b["image"], t.scale))
+        target = scaled(b["semantic"][:, None].float(), t.scale, "nearest")[:, 0].long()
+        loss = F.cross_entropy(logits, target, ignore_index=sm.IGNORE)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -179,7 +188,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         l_kd = torch.zeros(())
         if teacher is not None:
             with torch.no_grad():
-                _, t_feats = teacher(b["image"])
+                _, t_feats = teacher(scaled(b["image"], cfg.teacher.scale))
             l_kd = distillation_loss(feats, t_feats, cfg.train.distill_grid)
             loss = loss + lam * l_kd
         opt.zero_grad(set_to_none=True)
