@@ -29,15 +29,14 @@ class DataConfig:
     test_fraction: float = 0.0
     split_seed: int = 0
     train_styles: tuple[str, ...] = ()       # empty: all styles
-    finetune_styles: tuple[str, ...] = ()    # with finetune_fraction: add this share of their clips
-    finetune_fraction: float = 0.0
+    fraction: float = 1.0                    # share of the training clips used (fine-tuning: 0.2)
     workers: int = 0
 
     def __post_init__(self) -> None:
         if len(self.size) != 2 or min(self.size) < 32 or any(s % 32 for s in self.size):
             raise ValueError(f"data.size must be two multiples of 32 (H, W), got {self.size}")
-        if not 0 <= self.finetune_fraction <= 1:
-            raise ValueError(f"data.finetune_fraction must be in [0, 1], got {self.finetune_fraction}")
+        if not 0 < self.fraction <= 1:
+            raise ValueError(f"data.fraction must be in (0, 1], got {self.fraction}")
 
 
 @dataclass(frozen=True)
@@ -55,6 +54,7 @@ class TrainConfig:
     seed: int = 0
     threads: int = 2
     checkpoint_every: int = 100
+    init: str = ""                           # start from this run's weights (fine-tuning)
 
     def __post_init__(self) -> None:
         if self.steps < 1 or self.batch_size < 1:

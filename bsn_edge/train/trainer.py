@@ -30,7 +30,7 @@ from bsn_edge.evaluate.metrics import ThresholdSweep
 from bsn_edge.models import create_model, create_teacher, get_spec
 from bsn_edge.sequence import SequenceMeta
 from bsn_edge.sequence.images import atomic_write_bytes
-from bsn_edge.train.checkpoint import CONFIG_FILE, load_state, save_model, save_state
+from bsn_edge.train.checkpoint import CONFIG_FILE, load_model, load_state, save_model, save_state
 from bsn_edge.train.config import Config
 from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce
 
@@ -81,17 +81,14 @@ def datasets(cfg: Config, data_dir: str | Path) -> dict[str, Any]:
     clips = find_clips(data_dir, cfg.data.label)
     split = split_clips(clips, cfg.data.val_fraction, cfg.data.test_fraction, cfg.data.split_seed)
     train = split["train"]
-    if cfg.data.train_styles:
-        own = [c for c in train if c.style in cfg.data.train_styles]
-        extra = []
-        if cfg.data.finetune_styles and cfg.data.finetune_fraction > 0:
-            other = [c for c in train if c.style in cfg.data.finetune_styles]
-            extra = other[: max(1, round(cfg.data.finetune_fraction * len(other)))] if other else []
-        train = own + extra
+    styles = cfg.data.train_styles
+    if styles:
+        train = [c for c in train if c.style in styles]
+    if cfg.data.fraction < 1.0 and train:
+        train = train[: max(1, round(cfg.data.fraction * len(train)))]
     if not train:
-        raise ValueError(f"no training clips (styles {cfg.data.train_styles or 'any'}) in {data_dir}")
-    val = [c for c in split["val"] if not cfg.data.train_styles or c.style in
-           (*cfg.data.train_styles, *cfg.data.finetune_styles)]
+        raise ValueError(f"no training clips (styles {styles or 'any'}) in {data_dir}")
+    val = [c for c in split["val"] if not styles or c.style in styles]
     return {"clips": split, "train": train, "val": val,
             "train_ds": BlindSpotDataset(train, cfg.data.size, augment=True, label_name=cfg.data.label,
                                          seed=cfg.train.seed),
@@ -161,6 +158,12 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     teacher = train_teacher(cfg, data["train_ds"], out, rank, world, progress) if lam > 0 else None
 
     model = create_model(cfg.model.name)
+    if cfg.train.init:
+        init, init_meta = load_model(cfg.train.init)
+        if init_meta["model"] != cfg.model.name:
+            raise ValueError(f"train.init {cfg.train.init} holds a {init_meta['model']!r} model, "
+                             f"not {cfg.model.name!r}")
+        model.load_state_dict(init.state_dict())
     start = 0
     opt = _adam(model.parameters(), cfg.train.lr, cfg)
     if resume and (out / "model.pt").is_file():

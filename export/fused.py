@@ -1,0 +1,99 @@
+"""The fused ONNX model: D and B in one graph, normalisation inside, the runtime's contract.
+
+Input ``frame``: uint8 ``[1, H, W, 3]``, BGR as OpenCV decodes it, already at the model's size.
+Outputs ``blindspot``: float32 ``[1, 1, H, W]`` probabilities; ``depth``: float32 ``[1, 1, H, W]``
+metres. ``metadata_props`` carries what the runtime needs (see ``METADATA_KEYS``).
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnx
+import torch
+from torch import Tensor, nn
+
+from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
+
+OPSET = 17
+PARITY_ATOL = 1e-3      # fp32 onnxruntime vs torch, on probabilities
+DEPTH_RTOL = 1e-3       # and on depth, relative
+METADATA_KEYS = ("bsn.model", "bsn.variant", "bsn.input_size", "bsn.threshold", "bsn.intrinsics",
+                 "bsn.quantization", "bsn.config_digest", "bsn.weights_sha256", "bsn.spec")
+
+
+class FusedModel(nn.Module):
+    """uint8 BGR NHWC frame -> (blind-spot probabilities, depth in metres)."""
+
+    def __init__(self, model: nn.Module) -> None:
+        super().__init__()
+        self.model = model
+        # BGR order, scaled for 0..255 input: (x / 255 - mean) / std == x * a + b
+        mean = torch.tensor(IMAGENET_MEAN[::-1].copy()).view(1, 3, 1, 1)
+        std = torch.tensor(IMAGENET_STD[::-1].copy()).view(1, 3, 1, 1)
+        self.register_buffer("a", 1.0 / (255.0 * std))
+        self.register_buffer("b", -mean / std)
+
+    def forward(self, frame: Tensor) -> tuple[Tensor, Tensor]:
+        x = frame.permute(0, 3, 1, 2).to(torch.float32) * self.a + self.b
+        x = x.flip(1)  # BGR -> RGB, as the networks were trained
+        logits, depth, _ = self.model(x)
+        return torch.sigmoid(logits), depth
+
+
+def to_onnx(model: nn.Module, out: str | Path, size: tuple[int, int], metadata: dict[str, Any]) -> Path:
+    """Export ``model`` (a BlindSpotNet, eval mode) fused, with ``metadata`` as ``bsn.*`` props."""
+    out = Path(out)
+    fused = FusedModel(model.eval()).eval()
+    h, w = size
+    dummy = torch.zeros(1, h, w, 3, dtype=torch.uint8)
+    tmp = out.with_suffix(".tmp.onnx")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(fused, (dummy,), str(tmp), input_names=["frame"],
+                          output_names=["blindspot", "depth"], opset_version=OPSET, dynamo=False,
+                          do_constant_folding=True)
+    m = onnx.load(str(tmp))
+    del m.metadata_props[:]
+    for k, v in metadata.items():
+        e = m.metadata_props.add()
+        e.key, e.value = k, v if isinstance(v, str) else json.dumps(v)
+    onnx.checker.check_model(m)
+    onnx.save(m, str(out))
+    tmp.unlink(missing_ok=True)
+    return out
+
+
+def session(path: str | Path, threads: int = 2, spinning: bool = True):
+    """An onnxruntime CPU session with ``threads`` intra-op threads."""
+    import onnxruntime as ort
+
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = threads
+    so.inter_op_num_threads = 1
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    if not spinning:
+        so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    return ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+
+
+def check_parity(model: nn.Module, path: str | Path, frames: list[np.ndarray]) -> dict[str, float]:
+    """Largest differences between onnxruntime and torch on ``frames`` (uint8 BGR HxWx3); raises
+    ``ValueError`` beyond the stated tolerances."""
+    sess = session(path)
+    fused = FusedModel(model.eval()).eval()
+    worst_p = worst_d = 0.0
+    for f in frames:
+        with torch.no_grad():
+            p_t, d_t = (t.numpy() for t in fused(torch.from_numpy(f[None])))
+        p_o, d_o = sess.run(None, {"frame": f[None]})
+        worst_p = max(worst_p, float(np.abs(p_o - p_t).max()))
+        worst_d = max(worst_d, float((np.abs(d_o - d_t) / np.maximum(d_t, 1e-3)).max()))
+    if worst_p > PARITY_ATOL or worst_d > DEPTH_RTOL:
+        raise ValueError(f"{path}: onnxruntime disagrees with torch (probability {worst_p:.2e} > "
+                         f"{PARITY_ATOL} or depth {worst_d:.2e} > {DEPTH_RTOL} relative)")
+    return {"max_abs_prob": worst_p, "max_rel_depth": worst_d}
