@@ -63,6 +63,12 @@ class BlindSpotNet(nn.Module):
         inp = torch.cat([x, depth_feature(depth.detach())], 1) if self.use_depth else x
         logits, feats = self.blindspot(inp)
         if self.input_scale != 1.0:
-            logits = F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
-            depth = F.interpolate(depth, size=size, mode="bilinear", align_corners=False)
+            # a constant scale factor, not the input's traced shape: exported graphs stay static,
+            # which OpenCV's DNN module needs
+            up = 1.0 / self.input_scale
+            logits = F.interpolate(logits, scale_factor=up, mode="bilinear", align_corners=False)
+            depth = F.interpolate(depth, scale_factor=up, mode="bilinear", align_corners=False)
+            if logits.shape[2:] != size:   # sizes not divisible by 1 / input_scale
+                logits = F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
+                depth = F.interpolate(depth, size=size, mode="bilinear", align_corners=False)
         return logits, depth, feats

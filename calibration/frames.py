@@ -1,0 +1,81 @@
+"""Quantization calibration sets: frames sampled evenly from a folder of images or a video,
+resized to the model's input size, cached as a ``.npz`` beside nothing the user owns."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".bmp")
+VIDEO_EXTS = (".mp4", ".avi", ".mkv", ".mov", ".m4v")
+
+
+def _images(folder: Path) -> list[Path]:
+    files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in IMAGE_EXTS)
+    # a sequence folder: take its RGB frames, not its depth or masks
+    rgb = [p for p in files if p.parent.name == "rgb"]
+    return rgb or files
+
+
+def _video_frames(path: Path, count: int) -> Iterator[np.ndarray]:
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise ValueError(f"{path}: OpenCV cannot open this video")
+    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) or 0
+    picks = set(np.linspace(0, max(n - 1, 0), count).round().astype(int).tolist()) if n else None
+    i = 0
+    try:
+        while True:
+            ok, frame = cap.read()
+            if not ok:
+                break
+            if picks is None or i in picks:
+                yield frame
+            i += 1
+    finally:
+        cap.release()
+
+
+def load_frames(source: str | os.PathLike, size: tuple[int, int], count: int = 64,
+                cache_dir: str | os.PathLike | None = None) -> np.ndarray:
+    """``[N, H, W, 3]`` uint8 BGR frames for calibration (``N <= count``), sampled evenly.
+
+    ``source`` is a folder of images (a sequence folder's ``rgb/`` is preferred) or a video file.
+    Raises ``ValueError`` when no frame can be read. With ``cache_dir`` the resized set is cached,
+    keyed by the source's path, modification time, size and count.
+    """
+    src = Path(source)
+    if not src.exists():
+        raise FileNotFoundError(f"calibration source {src} not found")
+    h, w = size
+    key = None
+    if cache_dir is not None:
+        stamp = f"{src.resolve()}|{src.stat().st_mtime_ns}|{h}x{w}|{count}"
+        key = Path(cache_dir) / f"calib-{hashlib.sha256(stamp.encode()).hexdigest()[:16]}.npz"
+        if key.is_file():
+            return np.load(key)["frames"]
+    frames = []
+    if src.is_dir():
+        files = _images(src)
+        picks = np.unique(np.linspace(0, len(files) - 1, min(count, len(files))).round().astype(int)) if files else []
+        for k in picks:
+            img = cv2.imread(str(files[k]), cv2.IMREAD_COLOR)
+            if img is not None:
+                frames.append(img)
+    elif src.suffix.lower() in VIDEO_EXTS:
+        frames = list(_video_frames(src, count))
+    else:
+        raise ValueError(f"{src}: a calibration source is a folder of images or a video "
+                         f"({', '.join(VIDEO_EXTS)})")
+    if not frames:
+        raise ValueError(f"{src}: no readable frames for calibration")
+    out = np.stack([cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in frames[:count]])
+    if key is not None:
+        key.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(key, frames=out)
+    return out
