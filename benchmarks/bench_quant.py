@@ -1,0 +1,129 @@
+"""int8 against fp32: accuracy against labels, agreement, and speed of the fused model.
+
+    python -m benchmarks.bench_quant --run RUN --data TEST_CLIPS --calib CALIB --out benchmarks/results
+
+Accuracy: IoU, recall and precision inside V of both models against the T-frame labels of the
+held-out clips, at the run's threshold, and their pixel agreement. Speed: median latency of the
+fused model at 256x512 in onnxruntime with 2 intra-op threads, over >= 50 runs after warm-up,
+all in one run of this script, for each activation/weight type pair.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from bsn_edge.calibration import load_frames
+from bsn_edge.export import QuantConfig, quantize, session, to_onnx
+
+from benchmarks.common import write_result
+from bsn_edge.data import find_clips
+from bsn_edge.evaluate.metrics import Counts
+from bsn_edge.sequence import read_mask
+from bsn_edge.sequence.frames import read_rgb
+from bsn_edge.train import load_model
+
+BAR_IOU_DROP = 0.01
+BAR_SPEEDUP, BAR_FPS, GOAL_FPS = 2.5, 60.0, 100.0
+
+
+def latency(path: Path, frame: np.ndarray, runs: int) -> float:
+    s = session(path, threads=2)
+    for _ in range(10):
+        s.run(None, {"frame": frame})
+    t = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        s.run(None, {"frame": frame})
+        t.append(time.perf_counter() - t0)
+    return statistics.median(t)
+
+
+def accuracy(paths: dict[str, Path], clips, size, threshold: float, label: str) -> dict:
+    sess = {k: session(p) for k, p in paths.items()}
+    counts = {k: Counts() for k in paths}
+    agree = []
+    h, w = size
+    for clip in clips:
+        for f in clip.frames:
+            frame = cv2.resize(read_rgb(clip.path, f), (w, h), interpolation=cv2.INTER_AREA)[None]
+            lab = clip.path / "labels" / label
+            y = cv2.resize(read_mask(lab / "blindspot" / f"{f:06d}.png").astype(np.uint8), (w, h),
+                           interpolation=cv2.INTER_NEAREST) > 0
+            v = cv2.resize(read_mask(lab / "visibility" / f"{f:06d}.png").astype(np.uint8), (w, h),
+                           interpolation=cv2.INTER_NEAREST) > 0
+            masks = {k: s.run(None, {"frame": frame})[0][0, 0] >= threshold for k, s in sess.items()}
+            for k, m in masks.items():
+                counts[k].add(m, y, v)
+            agree.append(float((masks["fp32"] == masks["int8"]).mean()))
+    return {"metrics": {k: c.metrics() for k, c in counts.items()}, "pixel_agreement": float(np.mean(agree))}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--run", required=True)
+    p.add_argument("--data", required=True, help="held-out labelled clips")
+    p.add_argument("--calib", required=True, help="calibration frames (training clips)")
+    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--runs", type=int, default=60)
+    args = p.parse_args(argv)
+    model, meta = load_model(args.run)
+    size = (256, 512)
+    label = meta.get("label", "T5s")
+    seen = set(meta.get("train_clips", [])) | set(meta.get("val_clips", []))
+    clips = [c for c in find_clips(args.data, label) if c.path.name not in seen]
+    frames = load_frames(args.calib, size, 64)
+    threshold = float(meta.get("threshold", 0.5))
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        fp32 = to_onnx(model, Path(tmp) / "fp32.onnx", size, {"bsn.model": meta["model"]})
+        frame = frames[:1]
+        t_fp32 = latency(fp32, frame, args.runs)
+        variants = {}
+        for acts, wts in (("uint8", "int8"), ("int8", "int8")):
+            q = Path(tmp) / f"int8_{acts}_{wts}.onnx"
+            quantize(fp32, q, frames, QuantConfig(activations=acts, weights=wts))
+            variants[(acts, wts)] = q
+            t = latency(q, frame, args.runs)
+            rows.append({"activations": acts, "weights": wts, "median_ms": 1e3 * t, "fps": 1 / t,
+                         "speedup": t_fp32 / t})
+        default = variants[("uint8", "int8")]
+        acc = accuracy({"fp32": fp32, "int8": default}, clips, size, threshold, label)
+    m = acc["metrics"]
+    drop = m["fp32"]["iou"] - m["int8"]["iou"]
+    best = rows[0]
+    res = {"model": meta["model"], "threshold": threshold, "size": list(size),
+           "test_clips": [c.path.name for c in clips],
+           "fp32": {**m["fp32"], "median_ms": 1e3 * t_fp32, "fps": 1 / t_fp32}, "int8": {**m["int8"], **best},
+           "pixel_agreement": acc["pixel_agreement"], "iou_drop": drop, "speed": rows,
+           "bars": {"iou_drop_max": BAR_IOU_DROP, "speedup_min": BAR_SPEEDUP, "fps_min": BAR_FPS, "fps_goal": GOAL_FPS},
+           "passes": {"iou_drop": drop <= BAR_IOU_DROP, "speedup": best["speedup"] >= BAR_SPEEDUP,
+                      "fps": best["fps"] >= BAR_FPS}}
+    md = ["# int8 quantization: accuracy and speed", "",
+          f"Model `{meta['model']}` at {size[0]}x{size[1]}, threshold {threshold:.2f}, {len(clips)} held-out clips, "
+          "inside V.", "",
+          "| model | IoU | recall | precision | ms | frames/s |", "|---|---|---|---|---|---|",
+          f"| fp32 | {m['fp32']['iou']:.4f} | {m['fp32']['recall']:.4f} | {m['fp32']['precision']:.4f} | "
+          f"{1e3 * t_fp32:.1f} | {1 / t_fp32:.1f} |",
+          f"| int8 (uint8 act., int8 weights) | {m['int8']['iou']:.4f} | {m['int8']['recall']:.4f} | "
+          f"{m['int8']['precision']:.4f} | {best['median_ms']:.1f} | {best['fps']:.1f} |", "",
+          f"Pixel agreement {100 * acc['pixel_agreement']:.2f} %, IoU drop {drop:+.4f} (bar <= {BAR_IOU_DROP}).", "",
+          "| activations | weights | ms | frames/s | speed-up over fp32 |", "|---|---|---|---|---|"]
+    md += [f"| {r['activations']} | {r['weights']} | {r['median_ms']:.1f} | {r['fps']:.1f} | {r['speedup']:.2f}x |"
+           for r in rows]
+    md += ["", f"Bars: int8 >= {BAR_SPEEDUP}x fp32 ({'passes' if res['passes']['speedup'] else 'FAILS'}), "
+           f">= {BAR_FPS:g} frames/s ({'passes' if res['passes']['fps'] else 'FAILS'}), IoU drop <= {BAR_IOU_DROP} "
+           f"({'passes' if res['passes']['iou_drop'] else 'FAILS'})."]
+    path = write_result(args.out, "quant", res, "\n".join(md))
+    print("\n".join(md))
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
