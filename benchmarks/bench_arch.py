@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from bsn_edge.export import session, to_onnx
 from torch.utils.flop_counter import FlopCounterMode
 
 from benchmarks.common import write_result
+from bsn_edge.export import session, to_onnx
 from bsn_edge.models import create_model
 
 ARCHS = ("unet", "small", "small-light", "medium", "large")

@@ -18,12 +18,12 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from bsn_edge.calibration import load_frames
-from bsn_edge.export import QuantConfig, quantize, session, to_onnx
 
 from benchmarks.common import write_result
+from bsn_edge.calibration import load_frames
 from bsn_edge.data import find_clips
 from bsn_edge.evaluate.metrics import Counts
+from bsn_edge.export import QuantConfig, quantize, session, to_onnx
 from bsn_edge.sequence import read_mask
 from bsn_edge.sequence.frames import read_rgb
 from bsn_edge.train import load_model

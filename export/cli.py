@@ -9,11 +9,11 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
 from bsn_edge.calibration import load_frames
+from bsn_edge.cli.common import fail, parse_size
 from bsn_edge.export.fused import check_parity, session, to_onnx
 from bsn_edge.export.quantize import METHODS, TYPES, QuantConfig, quantize
-
-from bsn_edge.cli.common import fail, parse_size
 from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.train import load_model
 

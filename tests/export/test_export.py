@@ -7,11 +7,11 @@ import numpy as np
 import onnx
 import pytest
 import torch
+
 from bsn_edge.calibration import load_frames
 from bsn_edge.export import FusedModel, check_parity, head_nodes, quantize, session, to_onnx
 from bsn_edge.export.cli import main as export_main
 from bsn_edge.export.fused import METADATA_KEYS
-
 from bsn_edge.models import create_model
 from bsn_edge.synth import SynthConfig, write_clip
 from bsn_edge.train.checkpoint import save_model

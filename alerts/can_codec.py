@@ -1,0 +1,102 @@
+"""AlertFrame <-> CAN frames, encoded with cantools from the shipped DBC, with E2E protection."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from bsn_edge.alerts.e2e import AliveCounter, e2e_crc
+from bsn_edge.alerts.frame import AlertFrame
+from bsn_edge.alerts.health import SystemState
+
+DBC_PATH = Path(__file__).with_name("bsn_alerts.dbc")
+HAZARD, STATUS = "BSN_Hazard", "BSN_Status"
+NO_DISTANCE = 63.5
+SAT = 255
+
+
+@lru_cache(maxsize=1)
+def database():
+    """The shipped DBC, loaded once (cantools is imported here, not at package import)."""
+    import cantools
+
+    return cantools.database.load_file(str(DBC_PATH))
+
+
+def _crc_signal(msg) -> str:
+    return next(s.name for s in msg.signals if s.name.endswith("_CRC"))
+
+
+def _counter_signal(msg) -> str:
+    return next(s.name for s in msg.signals if s.name.endswith("_Counter"))
+
+
+class CanEncoder:
+    """Encodes AlertFrames into (arbitration id, data) pairs, one counter per message."""
+
+    def __init__(self) -> None:
+        self.db = database()
+        self.counters = {HAZARD: AliveCounter(), STATUS: AliveCounter()}
+
+    def _encode(self, name: str, values: dict[str, Any]) -> tuple[int, bytes]:
+        msg = self.db.get_message_by_name(name)
+        values = {**values, _counter_signal(msg): self.counters[name].next(), _crc_signal(msg): 0}
+        data = bytearray(msg.encode(values, strict=True))
+        data[7] = e2e_crc(bytes(data[:7]), msg.frame_id)
+        return msg.frame_id, bytes(data)
+
+    def encode(self, frame: AlertFrame) -> list[tuple[int, bytes]]:
+        hz: dict[str, Any] = {}
+        for name, s in zip(("Left", "Centre", "Right"), frame.sectors, strict=True):
+            hz[f"{name}_Level"] = int(s.level)
+            hz[f"{name}_Score"] = round(min(max(s.score, 0.0), 1.0) * 127) / 127
+            hz[f"{name}_Distance"] = NO_DISTANCE if s.distance_m is None else min(round(s.distance_m * 2) / 2, 63.0)
+        f = frame.faults
+        st = {"System_State": int(frame.state), "Frame_Rate": min(round(frame.fps * 2) / 2, 127.5),
+              "Decode_Errors": min(f.get("decode_errors", 0) + f.get("size_changes", 0), SAT),
+              "Dropped_Frames": min(f.get("dropped_frames", 0), SAT),
+              "Invalid_Outputs": min(f.get("nan_outputs", 0), SAT),
+              "Tx_Errors": min(f.get("tx_errors", 0) + f.get("tx_full", 0) + f.get("serial_errors", 0), SAT)}
+        return [self._encode(HAZARD, hz), self._encode(STATUS, st)]
+
+
+@dataclass(frozen=True)
+class Decoded:
+    """A received frame: message name, decoded signals, and whether its E2E checks passed."""
+
+    name: str
+    signals: dict[str, Any]
+    crc_ok: bool
+    counter: int
+
+
+def decode(frame_id: int, data: bytes) -> Decoded | None:
+    """Decode one CAN frame of the DBC (None for other ids); the CRC is checked, not trusted."""
+    db = database()
+    try:
+        msg = db.get_message_by_frame_id(frame_id)
+    except KeyError:
+        return None
+    sig = msg.decode(bytes(data), decode_choices=False)
+    ok = len(data) == 8 and e2e_crc(bytes(data[:7]), frame_id) == data[7]
+    return Decoded(msg.name, dict(sig), ok, int(sig[_counter_signal(msg)]))
+
+
+def to_alert_text(d: Decoded) -> str:
+    """One line a person can read."""
+    s = d.signals
+    flag = "" if d.crc_ok else "  CRC MISMATCH"
+    if d.name == HAZARD:
+        parts = []
+        for side in ("Left", "Centre", "Right"):
+            lv = ("NONE", "CAUTION", "WARNING")[int(s[f"{side}_Level"])]
+            dist = s[f"{side}_Distance"]
+            where = "" if dist >= NO_DISTANCE else f" {dist:.1f} m"
+            parts.append(f"{side.upper()} {lv} {s[f'{side}_Score']:.2f}{where}")
+        return f"hazard #{d.counter}: " + " | ".join(parts) + flag
+    state = SystemState(int(s["System_State"])).name
+    return (f"status #{d.counter}: {state} {s['Frame_Rate']:.1f} fps, decode errors {int(s['Decode_Errors'])}, "
+            f"dropped {int(s['Dropped_Frames'])}, invalid outputs {int(s['Invalid_Outputs'])}, "
+            f"tx errors {int(s['Tx_Errors'])}" + flag)

@@ -1,0 +1,76 @@
+"""Blind-spot masks -> LEFT / CENTRE / RIGHT hazard readings, by bearing from the intrinsics."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from bsn_edge.camera import Intrinsics
+
+SECTORS = ("LEFT", "CENTRE", "RIGHT")
+
+
+@dataclass(frozen=True)
+class SectorConfig:
+    """Sector boundaries are bearings in degrees (negative = left of the optical axis).
+
+    range_m:   blind spots farther than this are ignored.
+    full_area: share of a sector's pixels that, at zero distance, makes its score 1.
+    """
+
+    left_edge_deg: float = -12.0
+    right_edge_deg: float = 12.0
+    range_m: float = 30.0
+    full_area: float = 0.02
+
+    def __post_init__(self) -> None:
+        if not -89 < self.left_edge_deg < self.right_edge_deg < 89:
+            raise ValueError(f"need -89 < left edge < right edge < 89 degrees, got {self.left_edge_deg}, "
+                             f"{self.right_edge_deg}")
+        if not self.range_m > 0 or not 0 < self.full_area <= 1:
+            raise ValueError("range_m must be positive and full_area in (0, 1]")
+
+
+@dataclass(frozen=True)
+class SectorReading:
+    """One sector of one frame: score in [0, 1] and the distance to the nearest blind spot in range."""
+
+    score: float
+    distance_m: float | None
+
+
+class SectorGeometry:
+    """Column -> sector lookup and per-sector pixel counts for one camera; built once per model."""
+
+    def __init__(self, intrinsics: Intrinsics, cfg: SectorConfig | None = None) -> None:
+        self.cfg = cfg or SectorConfig()
+        bearing = np.degrees(np.arctan2(np.arange(intrinsics.width) - intrinsics.cx, intrinsics.fx))
+        self.column_sector = np.select([bearing < self.cfg.left_edge_deg, bearing > self.cfg.right_edge_deg],
+                                       [0, 2], default=1).astype(np.int8)
+        self.height = intrinsics.height
+        self.sector_pixels = np.bincount(self.column_sector, minlength=3) * intrinsics.height
+
+    def read(self, mask: np.ndarray, depth: np.ndarray) -> tuple[SectorReading, SectorReading, SectorReading]:
+        """Score each sector: blind-spot pixels within range, each weighted by nearness
+        (1 at the camera, 0 at ``range_m``), over ``full_area`` of the sector."""
+        rng = self.cfg.range_m
+        hit = mask & (depth > 0) & (depth < rng)
+        out = []
+        cols = np.nonzero(hit.any(axis=0))[0]
+        weights = np.where(hit, 1.0 - depth / rng, 0.0).sum(axis=0)
+        for s in range(3):
+            sel = cols[self.column_sector[cols] == s]
+            if not len(sel):
+                out.append(SectorReading(0.0, None))
+                continue
+            score = float(weights[sel].sum()) / (self.cfg.full_area * self.sector_pixels[s])
+            d = depth[:, sel][hit[:, sel]]
+            out.append(SectorReading(min(score, 1.0), float(d.min())))
+        return tuple(out)  # type: ignore[return-value]
+
+
+def bearing_deg(u: float, intrinsics: Intrinsics) -> float:
+    """Bearing of image column ``u``, degrees, negative to the left."""
+    return math.degrees(math.atan2(u - intrinsics.cx, intrinsics.fx))

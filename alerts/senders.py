@@ -1,0 +1,145 @@
+"""Senders: where AlertFrames go. A sender that cannot send says so: every failure is counted in
+``stats`` (and reaches the status message through the runtime's fault counters), retried with
+back-off where that helps, and never raised into the caller's loop."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+from bsn_edge.alerts.can_codec import CanEncoder
+from bsn_edge.alerts.frame import AlertFrame
+from bsn_edge.alerts.serial_codec import encode_frame
+
+
+@dataclass
+class SenderStats:
+    sent: int = 0
+    errors: int = 0
+    full: int = 0
+    reconnects: int = 0
+    last_error: str = ""
+    faults: dict[str, int] = field(default_factory=dict)
+
+
+class Sender(ABC):
+    """Base class: ``send`` never raises; ``close`` is idempotent; usable as a context manager."""
+
+    name = "sender"
+
+    def __init__(self) -> None:
+        self.stats = SenderStats()
+        self.encoder = CanEncoder()
+        self._closed = False
+
+    @abstractmethod
+    def _send(self, frames: list[tuple[int, bytes]]) -> None: ...
+
+    def _close(self) -> None:  # noqa: B027 - optional hook
+        pass
+
+    def send(self, frame: AlertFrame) -> bool:
+        """Encode and send one cycle; False (and counted) when it could not go out."""
+        if self._closed:
+            self.stats.errors += 1
+            self.stats.last_error = "sender is closed"
+            return False
+        try:
+            self._send(self.encoder.encode(frame))
+        except Exception as e:  # a transmit failure must never stop the loop
+            self.stats.errors += 1
+            self.stats.last_error = f"{type(e).__name__}: {e}"
+            return False
+        self.stats.sent += 1
+        return True
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            try:
+                self._close()
+            except Exception as e:
+                self.stats.last_error = f"close: {type(e).__name__}: {e}"
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class CanSender(Sender):
+    """python-can on any interface (``socketcan``, ``virtual``, vendor ones), loaded lazily.
+    Optionally logs every sent frame to ``.asc`` / ``.blf`` through python-can's writers."""
+
+    name = "can"
+
+    def __init__(self, interface: str, channel: str, log_path: str | None = None, bus=None,
+                 timeout_s: float = 0.01) -> None:
+        super().__init__()
+        import can
+
+        self._can = can
+        self.bus = bus if bus is not None else can.Bus(interface=interface, channel=channel)
+        self.timeout_s = timeout_s
+        self.logger = can.Logger(log_path) if log_path else None
+
+    def _send(self, frames: list[tuple[int, bytes]]) -> None:
+        for fid, data in frames:
+            msg = self._can.Message(arbitration_id=fid, data=data, is_extended_id=False, timestamp=time.time())
+            try:
+                self.bus.send(msg, timeout=self.timeout_s)
+            except self._can.CanOperationError as e:
+                if "buffer" in str(e).lower() or "full" in str(e).lower():
+                    self.stats.full += 1
+                raise
+            if self.logger is not None:
+                self.logger.on_message_received(msg)
+
+    def _close(self) -> None:
+        if self.logger is not None:
+            self.logger.stop()
+        self.bus.shutdown()
+
+
+class SerialSender(Sender):
+    """pyserial on any URL pyserial understands (``/dev/ttyUSB0``, ``loop://``, ``socket://``...).
+    A port that disappears is reopened with back-off (at most every ``retry_s``)."""
+
+    name = "serial"
+
+    def __init__(self, url: str, baudrate: int = 115200, port=None, retry_s: float = 1.0) -> None:
+        super().__init__()
+        import serial
+
+        self._serial = serial
+        self.url, self.baudrate, self.retry_s = url, baudrate, retry_s
+        self.port = port if port is not None else serial.serial_for_url(url, baudrate=baudrate, timeout=0,
+                                                                       write_timeout=0.05)
+        self._next_retry = 0.0
+
+    def _reopen(self) -> None:
+        now = time.monotonic()
+        if now < self._next_retry:
+            raise OSError(f"serial port {self.url} is down; next retry in {self._next_retry - now:.1f} s")
+        self._next_retry = now + self.retry_s
+        self.port = self._serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0, write_timeout=0.05)
+        self.stats.reconnects += 1
+
+    def _send(self, frames: list[tuple[int, bytes]]) -> None:
+        if self.port is None or not self.port.is_open:
+            self._reopen()
+        payload = b"".join(encode_frame(fid, data) for fid, data in frames)
+        try:
+            self.port.write(payload)
+        except (self._serial.SerialException, OSError):
+            with contextlib.suppress(Exception):  # the port may already be gone
+                self.port.close()
+            self.port = None
+            raise
+
+    def _close(self) -> None:
+        if self.port is not None:
+            self.port.close()
