@@ -88,7 +88,8 @@ class CanSender(Sender):
 
     def _send(self, frames: list[tuple[int, bytes]]) -> None:
         for fid, data in frames:
-            msg = self._can.Message(arbitration_id=fid, data=data, is_extended_id=False, timestamp=time.time())
+            msg = self._can.Message(arbitration_id=fid, data=data, is_extended_id=False, timestamp=time.time(),
+                                    is_rx=False)
             try:
                 self.bus.send(msg, timeout=self.timeout_s)
             except self._can.CanOperationError as e:

@@ -1,0 +1,151 @@
+"""The edge loop end to end on tiny data, with every fault injected and survived."""
+
+import json
+
+import can
+import cv2
+import numpy as np
+import pytest
+import serial
+import torch
+
+from bsn_edge.alerts import SystemState
+from bsn_edge.alerts.can_codec import decode
+from bsn_edge.alerts.senders import CanSender, SerialSender
+from bsn_edge.cli import listen as listen_cli
+from bsn_edge.cli import run as run_cli
+from bsn_edge.export import to_onnx
+from bsn_edge.models import create_model
+from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
+from bsn_edge.runtime.sources import ImageFolderSource
+from bsn_edge.synth import SynthConfig, write_clip
+
+SIZE = (128, 256)
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rt")
+    torch.manual_seed(0)
+    meta = {"bsn.model": "BlindSpotNet", "bsn.variant": "small-light", "bsn.input_size": list(SIZE),
+            "bsn.threshold": 0.5, "bsn.intrinsics": {"fx": 150.0, "fy": 150.0, "cx": 128.0, "cy": 64.0,
+                                                      "width": 256, "height": 128},
+            "bsn.quantization": "none (fp32)"}
+    model = to_onnx(create_model("small-light").eval(), root / "m.onnx", SIZE, meta)
+    clip = root / "clip"
+    write_clip(SynthConfig(frames=15, height=96, width=192, seed=2), clip)
+    return model, clip
+
+
+def test_video_to_can_log_that_both_decoders_read(setup, tmp_path, capsys):
+    model, clip = setup
+    log, asc = tmp_path / "frames.jsonl", tmp_path / "alerts.log"
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--can-log", str(asc),
+                         "--log", str(log), "--overlay", str(tmp_path / "ov.mp4"), "--summary",
+                         str(tmp_path / "s.json")]) == 0
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["frames"] == summary["valid_frames"] == 15 and summary["fps"] > 0
+    assert set(summary["stage_share"]) == {"decode", "preprocess", "inference", "postprocess", "send"}
+    assert summary["p99_ms"] >= summary["p50_ms"] > 0
+    lines = [json.loads(x) for x in log.read_text().splitlines()]
+    assert len(lines) == 15 and all(len(x["levels"]) == 3 for x in lines)
+    cap = cv2.VideoCapture(str(tmp_path / "ov.mp4"))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 15
+    capsys.readouterr()
+    assert listen_cli.main(["--can-log", str(asc)]) == 0
+    out = capsys.readouterr()
+    assert "hazard #0" in out.out and "status #0" in out.out and "0 with a bad CRC, 0 lost" in out.err
+    # 15 frames at 10 fps = 1.4 s on the video's clock: a cycle every 0.1 s
+    assert summary["cycles_sent"] == 15
+
+
+def test_corrupt_and_resized_frames_are_counted(setup, tmp_path):
+    model, clip = setup
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in range(8):
+        img = cv2.imread(str(clip / "rgb" / f"{i:06d}.png"))
+        if i == 5:
+            img = cv2.resize(img, (320, 160))
+        cv2.imwrite(str(folder / f"{i:06d}.png"), img)
+    (folder / "000003.png").write_bytes(b"\x89PNG\r\n\x1a\n this is not an image")
+    summary = run(Engine(model), ImageFolderSource(folder), [])
+    assert summary["frames"] == 8 and summary["valid_frames"] == 7
+    assert summary["faults"]["decode_errors"] == 1 and summary["faults"]["size_changes"] == 2
+
+
+class NanEngine(Engine):
+    """Returns NaN from the 4th frame on: a model gone wrong."""
+
+    calls = 0
+
+    def infer(self, batch):
+        prob, depth = super().infer(batch)
+        NanEngine.calls += 1
+        if NanEngine.calls > 3 + 3:  # after the 3 warm-up runs
+            prob = np.full_like(prob, np.nan)
+        return prob, depth
+
+
+def test_nan_outputs_make_the_system_unavailable_on_the_bus(setup):
+    model, clip = setup
+    with can.Bus(interface="virtual", channel="bsn-rt-nan") as rx, CanSender("virtual", "bsn-rt-nan") as tx:
+        summary = run(NanEngine(model), open_source(str(clip / "video.mp4")), [tx],
+                      RuntimeConfig(cycle_s=0.1))
+        msgs = []
+        while (m := rx.recv(timeout=0.2)) is not None:
+            msgs.append(decode(m.arbitration_id, m.data))
+    assert summary["faults"]["nan_outputs"] == 12
+    states = [d.signals["System_State"] for d in msgs if d.name == "BSN_Status"]
+    assert states[-1] == SystemState.UNAVAILABLE and SystemState.UNAVAILABLE not in states[:3]
+    assert [d.signals["Invalid_Outputs"] for d in msgs if d.name == "BSN_Status"][-1] > 0
+
+
+def test_failing_senders_never_stop_the_loop(setup):
+    model, clip = setup
+
+    class FullBus:
+        def send(self, msg, timeout=None):
+            raise can.CanOperationError("Transmit buffer full")
+
+        def shutdown(self):
+            pass
+
+    class Gone:
+        is_open = True
+
+        def write(self, data):
+            raise serial.SerialException("device disconnected")
+
+        def close(self):
+            pass
+
+    tx = CanSender("virtual", "x", bus=FullBus())
+    sx = SerialSender("socket://127.0.0.1:9", port=Gone(), retry_s=0.0)  # nothing listens: reopen fails
+    summary = run(Engine(model), open_source(str(clip / "video.mp4")), [tx, sx])
+    assert summary["frames"] == 15
+    assert summary["faults"]["tx_errors"] == 15 and summary["faults"]["tx_full"] == 15
+    assert summary["faults"]["serial_errors"] == 15
+    assert summary["senders"]["serial"]["errors"] == 15
+
+
+def test_serial_output_decodes_on_loop(setup, tmp_path):
+    model, clip = setup
+    port = serial.serial_for_url("loop://", timeout=0.1)
+    sx = SerialSender("loop://", port=port)
+    run(Engine(model), open_source(str(clip / "video.mp4")), [sx], max_frames=5)
+    from bsn_edge.alerts.serial_codec import FrameDecoder
+    got = list(FrameDecoder().feed(port.read(10000)))
+    assert len(got) == 10 and all(decode(f, d).crc_ok for f, d in got)
+
+
+def test_bad_inputs_are_explained(setup, tmp_path, capsys):
+    model, clip = setup
+    assert run_cli.main(["--model", str(tmp_path / "nope.onnx"), "--source", str(clip)]) == 2
+    assert "not found" in capsys.readouterr().err
+    assert run_cli.main(["--model", str(model), "--source", str(tmp_path / "missing.mp4")]) == 2
+    assert "not a file, a folder" in capsys.readouterr().err
+    other = tmp_path / "plain.onnx"
+    to_onnx(create_model("small-light").eval(), other, SIZE, {})
+    assert run_cli.main(["--model", str(other), "--source", str(clip)]) == 2
+    assert "not a bsn-export model" in capsys.readouterr().err
