@@ -9,6 +9,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+
+def _read_umask() -> int:
+    old = os.umask(0)
+    os.umask(old)
+    return old
+
+
+# read once, at import: os.umask cannot be queried without setting it, which is not thread-safe
+_FILE_MODE = 0o666 & ~_read_umask()
 DEPTH_SCALE = 256.0  # KITTI convention: uint16 value = metres x 256, 0 = no depth
 MAX_DEPTH_M = 65535 / DEPTH_SCALE
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1]
@@ -22,6 +31,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, _FILE_MODE)  # mkstemp makes files private; outputs are ordinary files
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
