@@ -9,6 +9,7 @@ import sys
 from tqdm import tqdm
 
 from bsn_edge.alerts.senders import CanSender, Sender, SerialSender
+from bsn_edge.calibration.chessboard import Calibration
 from bsn_edge.cli.common import fail
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 
@@ -36,6 +37,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pace", action="store_true", help="play files at their own frame rate")
     p.add_argument("--cycle", type=float, default=0.1, help="send cycle in seconds (default 0.1)")
     p.add_argument("--summary", metavar="OUT.json", help="also write the summary here")
+    p.add_argument("--calib", metavar="CALIB.json",
+                   help="camera calibration from bsn-calibrate: its intrinsics replace the model's, and frames "
+                        "are undistorted first")
     return p
 
 
@@ -61,6 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         engine = Engine(args.model, args.threads, not args.no_spin)
         source = open_source(args.source, pace=args.pace)
+        calibration = Calibration.read(args.calib) if args.calib else None
         senders = make_senders(args)
     except (FileNotFoundError, ValueError, OSError) as e:
         return fail(PROG, str(e))
@@ -71,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
                                                                         else None)
         with tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
             summary = run(engine, source, senders, RuntimeConfig(cycle_s=args.cycle), overlay=args.overlay,
-                          log=args.log, max_frames=args.max_frames, progress=bar.update)
+                          log=args.log, max_frames=args.max_frames, progress=bar.update, calibration=calibration)
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130

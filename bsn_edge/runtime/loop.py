@@ -26,6 +26,7 @@ from bsn_edge.alerts import (
 )
 from bsn_edge.alerts.health import Health
 from bsn_edge.alerts.senders import Sender
+from bsn_edge.calibration.chessboard import Calibration
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.overlay import OverlayWriter, draw
@@ -53,10 +54,15 @@ def _percentiles(xs: list[float]) -> dict[str, float]:
 
 def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig | None = None,
         overlay: str | Path | None = None, log: str | Path | None = None, max_frames: int | None = None,
-        progress=None) -> dict[str, Any]:
-    """Process ``source`` until it ends (or ``max_frames``); returns the summary."""
+        progress=None, calibration: Calibration | None = None) -> dict[str, Any]:
+    """Process ``source`` until it ends (or ``max_frames``); returns the summary.
+
+    ``calibration`` (from bsn-calibrate) replaces the model's intrinsics for the sector bearings,
+    and frames are undistorted first when it carries distortion.
+    """
     cfg = cfg or RuntimeConfig()
-    intr = engine.info.intrinsics
+    intr = calibration.intrinsics if calibration is not None else engine.info.intrinsics
+    undistorters: dict[tuple[int, int], Any] = {}
     h, w = engine.info.size
     if intr is None:
         from bsn_edge.camera import Intrinsics
@@ -96,7 +102,13 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                     health.fault("size_changes")
                     rec["fault"] = "size_change"
                 last_shape = cap.frame.shape
-                batch = engine.preprocess(cap.frame)
+                img = cap.frame
+                if calibration is not None and calibration.has_distortion:
+                    fh, fw = img.shape[:2]
+                    if (fw, fh) not in undistorters:
+                        undistorters[(fw, fh)] = calibration.undistorter(fw, fh)
+                    img = undistorters[(fw, fh)](img)
+                batch = engine.preprocess(img)
                 t1 = time.perf_counter()
                 prob, depth = engine.infer(batch)
                 t2 = time.perf_counter()

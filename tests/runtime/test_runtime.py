@@ -149,3 +149,13 @@ def test_bad_inputs_are_explained(setup, tmp_path, capsys):
     to_onnx(create_model("small-light").eval(), other, SIZE, {})
     assert run_cli.main(["--model", str(other), "--source", str(clip)]) == 2
     assert "not a bsn-export model" in capsys.readouterr().err
+
+
+def test_calibration_file_is_used(setup, tmp_path):
+    from bsn_edge.calibration import Calibration
+    model, clip = setup
+    cal = Calibration(300.0, 300.0, 96.0, 48.0, 192, 96, dist=(-0.2, 0.05, 0.0, 0.0, 0.0))
+    cal.write(tmp_path / "c.json")
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                         str(tmp_path / "c.json"), "--max-frames", "3", "--summary", str(tmp_path / "s.json")]) == 0
+    assert json.loads((tmp_path / "s.json").read_text())["valid_frames"] == 3
