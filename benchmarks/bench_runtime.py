@@ -1,0 +1,77 @@
+"""End-to-end latency profile of the edge loop against the model alone, in one run.
+
+    python -m benchmarks.bench_runtime --model MODEL.onnx --source VIDEO --out benchmarks/results
+
+End to end: ``bsn-run``'s loop on the clip (decode, resize, inference, sectors, smoothing,
+alert state, CAN encoding and sending on a virtual bus), 2 intra-op threads. Model only: the
+same session on the same frames, back to back. Bar: end to end >= 80 % of model-only frames/s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import cv2
+
+from benchmarks.common import write_result
+from bsn_edge.alerts.senders import CanSender
+from bsn_edge.runtime import Engine, open_source, run
+
+BAR_SHARE = 0.8
+
+
+def model_only(engine: Engine, source: str, frames: int) -> float:
+    cap = cv2.VideoCapture(source)
+    batches = []
+    while len(batches) < frames:
+        ok, f = cap.read()
+        if not ok:
+            break
+        batches.append(engine.preprocess(f).copy())
+    engine.warmup(5)
+    times = []
+    for b in batches:
+        t0 = time.perf_counter()
+        engine.infer(b)
+        times.append(time.perf_counter() - t0)
+    return 1.0 / statistics.median(times)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", required=True)
+    p.add_argument("--source", required=True, help="a video file")
+    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--frames", type=int, default=200)
+    args = p.parse_args(argv)
+    engine = Engine(args.model, threads=2)
+    with CanSender("virtual", "bsn-bench") as tx:
+        summary = run(engine, open_source(args.source), [tx], max_frames=args.frames)
+    mo = model_only(engine, args.source, args.frames)
+    share = summary["fps"] / mo
+    res = {"model": summary["model"], "frames": summary["frames"], "e2e_fps": summary["fps"],
+           "p50_ms": summary["p50_ms"], "p95_ms": summary["p95_ms"], "p99_ms": summary["p99_ms"],
+           "stage_ms": summary["stage_ms"], "stage_share": summary["stage_share"], "model_only_fps": mo,
+           "e2e_over_model": share, "bar": BAR_SHARE, "passes": share >= BAR_SHARE, "threads": 2}
+    md = ["# Edge runtime latency profile", "",
+          f"`{summary['model']['variant']}` ({summary['model']['quantization']}) at "
+          f"{summary['model']['size'][0]}x{summary['model']['size'][1]}, {summary['frames']} frames, 2 threads, "
+          "CAN on a virtual bus.", "",
+          "| end to end frames/s | model only frames/s | ratio | p50 ms | p95 ms | p99 ms |",
+          "|---|---|---|---|---|---|",
+          f"| {summary['fps']:.1f} | {mo:.1f} | {100 * share:.0f} % | {summary['p50_ms']:.1f} | "
+          f"{summary['p95_ms']:.1f} | {summary['p99_ms']:.1f} |", "",
+          "| stage | ms per frame | share |", "|---|---|---|"]
+    md += [f"| {k} | {summary['stage_ms'][k]:.2f} | {100 * v:.1f} % |" for k, v in summary["stage_share"].items()]
+    md += ["", f"Bar: end to end >= {100 * BAR_SHARE:.0f} % of model-only frames/s "
+           f"({'passes' if res['passes'] else 'FAILS'})."]
+    path = write_result(args.out, "runtime", res, "\n".join(md))
+    print("\n".join(md))
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

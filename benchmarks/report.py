@@ -1,0 +1,103 @@
+"""The benchmark report: every result's Markdown in one page, with PNG plots.
+
+    python -m benchmarks.report --results benchmarks/results
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+from benchmarks.common import machine
+
+ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "runtime")
+
+
+def _load(results: Path, name: str) -> dict | None:
+    p = results / f"{name}.json"
+    return json.loads(p.read_text()) if p.is_file() else None
+
+
+def plot_stages(res: dict, out: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(6, 2.6))
+    names = list(res["stage_ms"])
+    ax.barh(names, [res["stage_ms"][k] for k in names], color="#4477aa")
+    ax.set_xlabel("ms per frame")
+    ax.set_title(f"bsn-run stages ({res['e2e_fps']:.0f} frames/s end to end)")
+    ax.invert_yaxis()
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def plot_arch(res: dict, out: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    for r in res["rows"]:
+        ax.scatter(r["gmacs"], r["fps"], s=30)
+        ax.annotate(r["model"], (r["gmacs"], r["fps"]), textcoords="offset points", xytext=(4, 4), fontsize=8)
+    ax.set_xlabel("GMACs at 256x512 (D + B)")
+    ax.set_ylabel("frames/s (fp32, 2 threads)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def plot_quant(res: dict, out: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(5, 3))
+    keys = ("iou", "recall", "precision")
+    x = range(len(keys))
+    ax.bar([i - 0.2 for i in x], [res["fp32"][k] for k in keys], 0.4, label="fp32")
+    ax.bar([i + 0.2 for i in x], [res["int8"][k] for k in keys], 0.4, label="int8")
+    ax.set_xticks(list(x), keys)
+    ax.set_ylim(0, 1)
+    ax.legend()
+    ax.set_title(f"int8 vs fp32 (agreement {100 * res['pixel_agreement']:.1f} %)")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def build(results: Path) -> Path:
+    m = machine()
+    parts = ["# bsn-edge benchmark report", "",
+             f"Measured on {m['cpu']}, {m['cores']} cores, Python {m['python']} ({m['platform']}).",
+             "Each section is one benchmark's own report; the JSON beside it has every number.", ""]
+    plots = {"runtime": ("stages.png", plot_stages), "bsn_arch": ("arch.png", plot_arch),
+             "quant": ("quant.png", plot_quant)}
+    for name in ORDER:
+        md = results / f"{name}.md"
+        if not md.is_file():
+            continue
+        parts += [md.read_text().replace("# ", "## ", 1).rstrip(), ""]
+        res = _load(results, name)
+        if name in plots and res is not None:
+            fname, fn = plots[name]
+            fn(res, results / fname)
+            parts += [f"![{name}]({fname})", ""]
+    out = results / "REPORT.md"
+    out.write_text("\n".join(parts))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--results", default="benchmarks/results")
+    args = p.parse_args(argv)
+    print(f"wrote {build(Path(args.results))}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
