@@ -1,0 +1,90 @@
+"""``bsn-bench``: run the project's benchmarks (from a checkout) and write the report."""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from bsn_edge.cli.common import fail
+
+PROG = "bsn-bench"
+ROOT = Path(__file__).resolve().parents[2]
+NAMES = ("synth", "labels", "train_step", "arch", "quant", "runtime", "accuracy")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description="Run bsn-edge's benchmarks on this machine and write benchmarks/results/<name>.json and .md "
+                    "plus REPORT.md with plots. Data and a quick.toml-trained run are made in --work when missing "
+                    "(about 25 minutes on 2 cores the first time); 'accuracy' trains 12 more runs (about an hour).")
+    p.add_argument("--only", nargs="*", choices=NAMES, default=None, help="run only these (default: all)")
+    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--work", default="benchmarks/work", help="clips, runs and models made for the benchmarks")
+    return p
+
+
+def _py(*args: str) -> None:
+    cmd = [sys.executable, *args]
+    print("+", " ".join(cmd), flush=True)
+    subprocess.run(cmd, cwd=ROOT, check=True)
+
+
+def _prepare(work: Path) -> tuple[Path, Path, Path]:
+    """Labelled clips, a trained run and its int8 export, made once and reused."""
+    data, run, model = work / "data", work / "run_quick", work / "bsn_int8.onnx"
+    if not (data / "town_7" / "labels").is_dir():
+        for style in ("town", "suburb"):
+            for s in range(8):
+                _py("-m", "bsn_edge.cli.synth", str(data / f"{style}_{s}"), "--frames", "200", "--style", style,
+                    "--seed", str(s), "--force")
+        _py("-m", "bsn_edge.cli.label", *[str(p) for p in sorted(data.iterdir())])
+    if not (run / "checkpoint.json").is_file():
+        _py("-m", "bsn_edge.cli.train", "--config", "configs/quick.toml", "--data", str(data), "--out", str(run))
+    if not model.is_file():
+        _py("-m", "bsn_edge.export.cli", "--checkpoint", str(run), "--out", str(model), "--int8", "--calib",
+            str(data / "town_0"), "--force")
+    return data, run, model
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if not (ROOT / "benchmarks" / "report.py").is_file():
+        return fail(PROG, f"benchmarks/ not found beside the package ({ROOT}); bsn-bench runs from a checkout")
+    names = args.only or list(NAMES)
+    out, work = str(Path(args.out).resolve()), Path(args.work).resolve()
+    t0 = time.perf_counter()
+    try:
+        if "synth" in names:
+            _py("-m", "benchmarks.bench_synth", "--out", out)
+        if "labels" in names:
+            _py("-m", "benchmarks.bench_labels", "--out", out)
+        if "train_step" in names:
+            _py("-m", "benchmarks.bench_train_step", "--out", out)
+        if {"arch", "quant", "runtime"} & set(names):
+            data, run, model = _prepare(work)
+            if "quant" in names:
+                _py("-m", "benchmarks.bench_quant", "--run", str(run), "--data", str(data), "--calib",
+                    str(data / "town_0"), "--out", out)
+            if "runtime" in names:
+                clip = data / "town_0" / "video.mp4"
+                if not clip.is_file():
+                    _py("-m", "bsn_edge.cli.synth", str(work / "clip"), "--frames", "300", "--seed", "42", "--force")
+                    clip = work / "clip" / "video.mp4"
+                _py("-m", "benchmarks.bench_runtime", "--model", str(model), "--source", str(clip), "--out", out)
+            if "arch" in names:
+                _py("-m", "benchmarks.bench_arch", "--out", out, "--runs", f"small-light={run}", "--data", str(data))
+        if "accuracy" in names:
+            _py("-m", "benchmarks.bench_bsn_accuracy", "--out", out, "--work", str(work / "accuracy"))
+        _py("-m", "benchmarks.report", "--results", out)
+    except subprocess.CalledProcessError as e:
+        return fail(PROG, f"a benchmark failed: {' '.join(map(str, e.cmd))}", 1)
+    print(f"{PROG}: done in {time.perf_counter() - t0:.0f} s; report {Path(out) / 'REPORT.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
