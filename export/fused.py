@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import onnx
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
@@ -39,9 +40,15 @@ class FusedModel(nn.Module):
         self.register_buffer("b", -mean / std)
 
     def forward(self, frame: Tensor) -> tuple[Tensor, Tensor]:
-        x = frame.permute(0, 3, 1, 2).to(torch.float32) * self.a + self.b
-        x = x.flip(1)  # BGR -> RGB, as the networks were trained
-        logits, depth, _ = self.model(x)
+        x = frame.permute(0, 3, 1, 2).to(torch.float32)
+        size = x.shape[2:]
+        scale = getattr(self.model, "input_scale", 1.0)
+        if scale != 1.0:
+            # bilinear resizing commutes with the per-channel affine normalisation and the channel
+            # flip, so shrink first and normalise a quarter of the pixels
+            x = F.interpolate(x, scale_factor=scale, mode="bilinear", align_corners=False, antialias=False)
+        x = (x * self.a + self.b).flip(1)  # BGR -> RGB, as the networks were trained
+        logits, depth, _ = self.model.forward_scaled(x, size)
         return torch.sigmoid(logits), depth
 
 

@@ -3,36 +3,59 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
+from bsn_edge.cli import run as run_cli
 from bsn_edge.cli import sheet, synth
+from bsn_edge.cli.common import fail
 
 PROG = "bsn-demo"
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_MODEL = ROOT / "models" / "bsn_small_light_int8.onnx"
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=PROG,
-        description="Run the main job on the built-in synthetic world: render a town and a suburb "
-                    "clip and write their contact sheet.")
+        description="The main job on the built-in default: render a synthetic town clip, run the shipped int8 "
+                    "model on its video with bsn-run, and write the overlay video, the per-frame alert log, a "
+                    "CAN log, the summary and a contact sheet of the clip's ground truth.")
     p.add_argument("--out", default="demo", help="output folder (default ./demo)")
-    p.add_argument("--frames", type=int, default=100, help="frames per clip (default 100)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--frames", type=int, default=150, help="frames of the clip (default 150, 15 s)")
+    p.add_argument("--seed", type=int, default=7, help="random seed of the clip (default 7)")
+    p.add_argument("--style", default="town", choices=("town", "suburb"))
+    p.add_argument("--model", default=str(DEFAULT_MODEL), help="fused ONNX model (default: the shipped one)")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out = Path(args.out)
-    seqs = []
-    for style in ("town", "suburb"):
-        seq = out / f"{style}_{args.seed}"
-        rc = synth.main([str(seq), "--frames", str(args.frames), "--style", style,
-                         "--seed", str(args.seed), "--force"])
-        if rc:
-            return rc
-        seqs.append(str(seq))
-    return sheet.main([*seqs, "--out", str(out / "contact_sheet.png")])
+    model = Path(args.model)
+    if not model.is_file():
+        return fail(PROG, f"model {model} not found; make one with bsn-train and bsn-export (see models/README.md)")
+    clip = out / f"{args.style}_{args.seed}"
+    rc = synth.main([str(clip), "--frames", str(args.frames), "--style", args.style, "--seed", str(args.seed),
+                     "--force"])
+    if rc:
+        return rc
+    rc = sheet.main([str(clip), "--out", str(out / "contact_sheet.png")])
+    if rc:
+        return rc
+    summary = out / "summary.json"
+    rc = run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--overlay",
+                       str(out / "overlay.mp4"), "--log", str(out / "alerts.jsonl"), "--can-log",
+                       str(out / "alerts.log"), "--summary", str(summary)])
+    if rc:
+        return rc
+    s = json.loads(summary.read_text())
+    print(f"\n{PROG}: {s['frames']} frames at {s['fps']:.1f} frames/s (p99 {s['p99_ms']:.1f} ms) with "
+          f"{s['model']['variant']} ({s['model']['quantization']})")
+    for name in ("overlay.mp4", "alerts.jsonl", "alerts.log", "summary.json", "contact_sheet.png"):
+        print(f"  {out / name}")
+    print(f"  decode the CAN log: bsn-listen --can-log {out / 'alerts.log'}")
+    return 0
 
 
 if __name__ == "__main__":

@@ -55,7 +55,7 @@ def traversable_hidden(sem: np.ndarray, depth: np.ndarray, intr: Intrinsics) -> 
     denom = rays @ n
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(denom > 1e-6, h / denom, np.inf)
-    gx = rays[..., 0] * t
+        gx = rays[..., 0] * t
     gz = t
     hidden = obj & np.isfinite(t) & (t > depth + 0.5) & (np.hypot(gx, gz) <= RANGE_M)
     vis = trav & (depth > 0)

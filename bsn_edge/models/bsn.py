@@ -59,6 +59,10 @@ class BlindSpotNet(nn.Module):
         if self.input_scale != 1.0:
             x = F.interpolate(rgb, scale_factor=self.input_scale, mode="bilinear", align_corners=False,
                               antialias=False)
+        return self.forward_scaled(x, size)
+
+    def forward_scaled(self, x: Tensor, size) -> tuple[Tensor, Tensor, Tensor]:
+        """``forward`` for an input already resized by ``input_scale``; outputs at ``size``."""
         depth = self.depth_net(x)
         inp = torch.cat([x, depth_feature(depth.detach())], 1) if self.use_depth else x
         logits, feats = self.blindspot(inp)
@@ -68,7 +72,7 @@ class BlindSpotNet(nn.Module):
             up = 1.0 / self.input_scale
             logits = F.interpolate(logits, scale_factor=up, mode="bilinear", align_corners=False)
             depth = F.interpolate(depth, scale_factor=up, mode="bilinear", align_corners=False)
-            if logits.shape[2:] != size:   # sizes not divisible by 1 / input_scale
+            if tuple(logits.shape[2:]) != tuple(size):   # sizes not divisible by 1 / input_scale
                 logits = F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
                 depth = F.interpolate(depth, size=size, mode="bilinear", align_corners=False)
         return logits, depth, feats
