@@ -85,14 +85,14 @@ def main(argv: list[str] | None = None) -> int:
         frame = frames[:1]
         t_fp32 = latency(fp32, frame, args.runs)
         variants = {}
-        for acts, wts in (("uint8", "int8"), ("int8", "int8")):
-            q = Path(tmp) / f"int8_{acts}_{wts}.onnx"
-            quantize(fp32, q, frames, QuantConfig(activations=acts, weights=wts))
-            variants[(acts, wts)] = q
+        for acts, wts, per_channel in (("uint8", "int8", True), ("uint8", "int8", False), ("int8", "int8", True)):
+            q = Path(tmp) / f"int8_{acts}_{wts}_{per_channel}.onnx"
+            quantize(fp32, q, frames, QuantConfig(activations=acts, weights=wts, per_channel=per_channel))
+            variants[(acts, wts, per_channel)] = q
             t = latency(q, frame, args.runs)
-            rows.append({"activations": acts, "weights": wts, "median_ms": 1e3 * t, "fps": 1 / t,
-                         "speedup": t_fp32 / t})
-        default = variants[("uint8", "int8")]
+            rows.append({"activations": acts, "weights": wts, "per_channel": per_channel, "median_ms": 1e3 * t,
+                         "fps": 1 / t, "speedup": t_fp32 / t})
+        default = variants[("uint8", "int8", True)]
         acc = accuracy({"fp32": fp32, "int8": default}, clips, size, threshold, label)
     m = acc["metrics"]
     drop = m["fp32"]["iou"] - m["int8"]["iou"]
@@ -114,8 +114,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{m['int8']['precision']:.4f} | {best['median_ms']:.1f} | {best['fps']:.1f} |", "",
           f"Pixel agreement {100 * acc['pixel_agreement']:.2f} %, IoU drop {drop:+.4f} (bar <= {BAR_IOU_DROP}).", "",
           "| activations | weights | ms | frames/s | speed-up over fp32 |", "|---|---|---|---|---|"]
-    md += [f"| {r['activations']} | {r['weights']} | {r['median_ms']:.1f} | {r['fps']:.1f} | {r['speedup']:.2f}x |"
-           for r in rows]
+    md += [f"| {r['activations']} | {r['weights']} {'per-channel' if r['per_channel'] else 'per-tensor'} | "
+           f"{r['median_ms']:.2f} | {r['fps']:.1f} | {r['speedup']:.2f}x |" for r in rows]
     md += ["", f"Bars: int8 >= {BAR_SPEEDUP}x fp32 ({'passes' if res['passes']['speedup'] else 'FAILS'}), "
            f">= {BAR_FPS:g} frames/s ({'passes' if res['passes']['fps'] else 'FAILS'}), IoU drop <= {BAR_IOU_DROP} "
            f"({'passes' if res['passes']['iou_drop'] else 'FAILS'})."]
