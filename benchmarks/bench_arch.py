@@ -66,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
             if name in runs and args.data:
                 from bsn_edge.cli import eval as eval_cli
                 rep_path = Path(tmp) / f"{name}.json"
-                eval_cli.main(["--run", runs[name], "--data", args.data, "--out", str(rep_path), "--clips", "all",
+                eval_cli.main(["--run", runs[name], "--data", args.data, "--out", str(rep_path),
                                "--no-baselines"])
                 row["iou"] = round(json.loads(rep_path.read_text())["overall"]["BSN"]["iou"], 4)
             rows.append(row)
