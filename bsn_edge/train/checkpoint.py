@@ -65,8 +65,11 @@ def load_model(run: str | Path) -> tuple[BlindSpotNet, dict[str, Any]]:
     return model.eval(), meta
 
 
-def save_state(run: Path, optimizer: torch.optim.Optimizer, step: int) -> None:
-    atomic_write_bytes(run / STATE_FILE, _tensor_bytes({"optimizer": optimizer.state_dict(), "step": step}))
+def save_state(run: Path, optimizer: torch.optim.Optimizer, step: int, scheduler=None) -> None:
+    state = {"optimizer": optimizer.state_dict(), "step": step}
+    if scheduler is not None:
+        state["scheduler"] = scheduler.state_dict()
+    atomic_write_bytes(run / STATE_FILE, _tensor_bytes(state))
 
 
 def load_state(run: Path) -> dict[str, Any] | None:

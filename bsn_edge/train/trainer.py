@@ -166,16 +166,16 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         model.load_state_dict(init.state_dict())
     start = 0
     opt = _adam(model.parameters(), cfg.train.lr, cfg)
+    sched = _poly(opt, cfg.train.steps, cfg.train.poly_power)
     if resume and (out / "model.pt").is_file():
         model.load_state_dict(torch.load(out / "model.pt", map_location="cpu", weights_only=True))
         state = load_state(out)
         if state:
             opt.load_state_dict(state["optimizer"])
             start = int(state["step"])
+            if "scheduler" in state:
+                sched.load_state_dict(state["scheduler"])
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
-    sched = _poly(opt, cfg.train.steps, cfg.train.poly_power)
-    for _ in range(start):
-        sched.step()
     batches = _loader(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers)
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
                disable=True if (not progress or rank) else None)
@@ -204,7 +204,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         done = step + 1
         if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps):
             _save(out, model, cfg, data, done, threshold=None)
-            save_state(out, opt, done)
+            save_state(out, opt, done, sched)
     elapsed = time.perf_counter() - t0
     summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "seconds": round(elapsed, 1),
                                "final_loss": history[-1] if history else None}

@@ -1,6 +1,7 @@
 """The edge loop end to end on tiny data, with every fault injected and survived."""
 
 import json
+from pathlib import Path
 
 import can
 import cv2
@@ -159,3 +160,18 @@ def test_calibration_file_is_used(setup, tmp_path):
     assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
                          str(tmp_path / "c.json"), "--max-frames", "3", "--summary", str(tmp_path / "s.json")]) == 0
     assert json.loads((tmp_path / "s.json").read_text())["valid_frames"] == 3
+
+
+REAL_CLIP = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "dashcam_highway.mp4"
+
+
+@pytest.mark.skipif(not REAL_CLIP.is_file(), reason="the real dashcam clip (../shared/data/real) is not present")
+def test_real_dashcam_clip(setup, tmp_path):
+    """A real 960x540 clip through the loop: resized once, every frame valid, CAN decodable."""
+    model, _ = setup
+    argv = ["--model", str(model), "--source", str(REAL_CLIP), "--max-frames", "40", "--can-log",
+            str(tmp_path / "a.log"), "--summary", str(tmp_path / "s.json")]
+    assert run_cli.main(argv) == 0
+    s = json.loads((tmp_path / "s.json").read_text())
+    assert s["frames"] == s["valid_frames"] == 40 and s["faults"]["decode_errors"] == 0
+    assert listen_cli.main(["--can-log", str(tmp_path / "a.log")]) == 0
