@@ -40,6 +40,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "100 px at 375x1242 with the image area")
     p.add_argument("--min-corr", type=float, default=0.7,
                    help="reject clips whose depth/landmark alignment correlation is below this (default 0.7)")
+    p.add_argument("--calib", default="", metavar="CALIB.json",
+                   help="camera calibration from bsn-calibrate; its intrinsics (rescaled to the clip) replace "
+                        "meta.json's (frames are expected undistorted)")
     p.add_argument("--camera-height", type=float, default=None,
                    help="camera height above the road, metres, for monocular VO's scale (default: "
                         "meta.json's camera_height, else 1.5)")
@@ -58,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
                           camera_height=args.camera_height)
     except ValueError as e:
         return fail(PROG, str(e))
-    sources = Sources(depth=args.depth, seg=args.seg, poses=args.poses)
+    sources = Sources(depth=args.depth, seg=args.seg, poses=args.poses, calib=args.calib)
     jobs = args.jobs or min(len(args.seqs), os.cpu_count() or 1)
     if jobs < 1:
         return fail(PROG, f"--jobs must be >= 1, got {jobs}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Callable
@@ -12,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from bsn_edge import semantics as sm
+from bsn_edge.calibration.chessboard import Calibration
 from bsn_edge.labels.config import LabelConfig
 from bsn_edge.labels.monocular import metric_depth_and_poses, seed_poses
 from bsn_edge.labels.sources import ClipData, FilesDepth, frame_count
@@ -32,6 +34,7 @@ class Sources:
     depth: str = "files"
     seg: str = "files"
     poses: str = "files"
+    calib: str = ""      # a bsn-calibrate file whose intrinsics replace meta.json's
 
 
 def resample(frames: int, fps: float, rate: float) -> np.ndarray:
@@ -58,6 +61,10 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     seq = Path(seq)
     t_start = time.perf_counter()
     meta = SequenceMeta.read(seq)
+    if sources.calib:
+        # a camera calibration replaces the clip's intrinsics, rescaled to the clip's frame size
+        k = Calibration.read(sources.calib).intrinsics.scaled(meta.width, meta.height)
+        meta = dataclasses.replace(meta, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy)
     clip = ClipData(seq, meta, frame_count(seq))
     out = labels_dir(seq, cfg)
     for sub in ("blindspot", "visibility"):

@@ -128,3 +128,16 @@ def test_labels_are_deterministic(seq, tmp_path):
     label_sequence(other, CFG)
     for p in sorted((labels_dir(seq, CFG) / "blindspot").iterdir()):
         assert np.array_equal(read_mask(p), read_mask(labels_dir(other, CFG) / "blindspot" / p.name))
+
+
+def test_calibration_file_replaces_the_intrinsics(seq, tmp_path):
+    from bsn_edge.calibration import Calibration
+    from bsn_edge.sequence import SequenceMeta
+    m = SequenceMeta.read(seq)
+    # the same camera described at twice the size: rescaled, it is identical, so are the labels
+    Calibration(m.fx * 2, m.fy * 2, (m.cx + 0.5) * 2 - 0.5, (m.cy + 0.5) * 2 - 0.5, m.width * 2,
+                m.height * 2).write(tmp_path / "c.json")
+    ref = label_sequence(seq, CFG)
+    shutil.rmtree(labels_dir(seq, CFG))
+    rep = label_sequence(seq, CFG, Sources(calib=str(tmp_path / "c.json")))
+    assert [f["blindspot_px"] for f in rep["per_frame"]] == [f["blindspot_px"] for f in ref["per_frame"]]
