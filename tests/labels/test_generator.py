@@ -47,7 +47,7 @@ def test_labels_report_and_tail(seq):
     assert sorted(p.name for p in (out / "visibility").iterdir()) == names
     saved = json.loads((out / "report.json").read_text())
     assert saved["config"]["depth_tol"] == 1.0 and saved["config"]["horizon_frames"] == 5
-    assert saved["sources"] == {"depth": "files", "seg": "files", "poses": "files"}
+    assert saved["sources"] == {"depth": "files", "seg": "files", "poses": "files", "calib": ""}
     assert len(saved["per_frame"]) == 10 and saved["status"] == "ok"
     assert read_mask(out / "visibility" / "000000.png").any()
     assert not list(seq.rglob("*.tmp"))
