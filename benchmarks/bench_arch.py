@@ -11,16 +11,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from benchmarks.common import write_result
+from benchmarks.common import summary, time_calls, write_result
 from bsn_edge.export import session, to_onnx
 from bsn_edge.models import create_model
 
@@ -37,14 +35,7 @@ def measure(name: str, size: tuple[int, int], repeats: int, workdir: Path) -> di
     path = to_onnx(m, workdir / f"{name}.onnx", size, {"bsn.model": name})
     sess = session(path, threads=2)
     frame = np.random.default_rng(0).integers(0, 256, (1, *size, 3), dtype=np.uint8)
-    for _ in range(5):
-        sess.run(None, {"frame": frame})
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        sess.run(None, {"frame": frame})
-        times.append(time.perf_counter() - t0)
-    med = statistics.median(times)
+    med = summary(time_calls(lambda _: sess.run(None, {"frame": frame}), repeats, warmup=5))["median_ms"] / 1e3
     return {"model": name, "params_m": round(params / 1e6, 2), "gmacs": round(gmacs, 2),
             "median_ms": round(1e3 * med, 2), "fps": round(1 / med, 2), "repeats": repeats}
 

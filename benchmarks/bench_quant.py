@@ -11,15 +11,13 @@ all in one run of this script, for each activation/weight type pair.
 from __future__ import annotations
 
 import argparse
-import statistics
 import tempfile
-import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from benchmarks.common import write_result
+from benchmarks.common import summary, time_calls, write_result
 from bsn_edge.calibration import load_frames
 from bsn_edge.data import find_clips
 from bsn_edge.evaluate.metrics import Counts
@@ -33,15 +31,9 @@ BAR_SPEEDUP, BAR_FPS, GOAL_FPS = 2.5, 60.0, 100.0
 
 
 def latency(path: Path, frame: np.ndarray, runs: int) -> float:
+    """Median seconds per run of the model at ``path`` on ``frame``, after warm-up."""
     s = session(path, threads=2)
-    for _ in range(10):
-        s.run(None, {"frame": frame})
-    t = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        s.run(None, {"frame": frame})
-        t.append(time.perf_counter() - t0)
-    return statistics.median(t)
+    return summary(time_calls(lambda _: s.run(None, {"frame": frame}), runs, warmup=10))["median_ms"] / 1e3
 
 
 def accuracy(paths: dict[str, Path], clips, size, threshold: float, label: str) -> dict:

@@ -10,12 +10,10 @@ same session on the same frames, back to back. Bar: end to end >= 80 % of model-
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 
 import cv2
 
-from benchmarks.common import write_result
+from benchmarks.common import summary, time_calls, write_result
 from bsn_edge.alerts.senders import CanSender
 from bsn_edge.runtime import Engine, open_source, run
 
@@ -30,13 +28,7 @@ def model_only(engine: Engine, source: str, frames: int) -> float:
         if not ok:
             break
         batches.append(engine.preprocess(f).copy())
-    engine.warmup(5)
-    times = []
-    for b in batches:
-        t0 = time.perf_counter()
-        engine.infer(b)
-        times.append(time.perf_counter() - t0)
-    return 1.0 / statistics.median(times)
+    return summary(time_calls(lambda i: engine.infer(batches[i]), len(batches), warmup=5))["per_second"]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,6 +24,10 @@ def _load(results: Path, name: str) -> dict | None:
     return json.loads(p.read_text()) if p.is_file() else None
 
 
+def _save(fig, out: Path) -> Path:
+    return _save(fig, out)
+
+
 def plot_stages(res: dict, out: Path) -> Path:
     fig, ax = plt.subplots(figsize=(6, 2.6))
     names = list(res["stage_ms"])
@@ -31,10 +35,7 @@ def plot_stages(res: dict, out: Path) -> Path:
     ax.set_xlabel("ms per frame")
     ax.set_title(f"bsn-run stages ({res['e2e_fps']:.0f} frames/s end to end)")
     ax.invert_yaxis()
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _save(fig, out)
 
 
 def plot_arch(res: dict, out: Path) -> Path:
@@ -47,10 +48,7 @@ def plot_arch(res: dict, out: Path) -> Path:
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _save(fig, out)
 
 
 def plot_quant(res: dict, out: Path) -> Path:
@@ -63,10 +61,7 @@ def plot_quant(res: dict, out: Path) -> Path:
     ax.set_ylim(0, 1)
     ax.legend()
     ax.set_title(f"int8 vs fp32 (agreement {100 * res['pixel_agreement']:.1f} %)")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _save(fig, out)
 
 
 def build(results: Path) -> Path:

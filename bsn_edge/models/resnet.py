@@ -9,6 +9,13 @@ from __future__ import annotations
 from torch import Tensor, nn
 
 
+def shortcut(cin: int, cout: int, stride: int) -> nn.Module | None:
+    """The residual branch's projection when the block changes size or width (else identity)."""
+    if stride == 1 and cin == cout:
+        return None
+    return nn.Sequential(nn.Conv2d(cin, cout, 1, stride, bias=False), nn.BatchNorm2d(cout))
+
+
 class BasicBlock(nn.Module):
     expansion = 1
 
@@ -20,9 +27,7 @@ class BasicBlock(nn.Module):
         self.conv2 = nn.Conv2d(width, cout, 3, 1, dilation, dilation, bias=False)
         self.bn2 = nn.BatchNorm2d(cout)
         self.relu = nn.ReLU(inplace=True)
-        self.down = None
-        if stride != 1 or cin != cout:
-            self.down = nn.Sequential(nn.Conv2d(cin, cout, 1, stride, bias=False), nn.BatchNorm2d(cout))
+        self.down = shortcut(cin, cout, stride)
 
     def forward(self, x: Tensor) -> Tensor:
         idt = x if self.down is None else self.down(x)
@@ -43,9 +48,7 @@ class Bottleneck(nn.Module):
         self.conv3 = nn.Conv2d(width, cout, 1, bias=False)
         self.bn3 = nn.BatchNorm2d(cout)
         self.relu = nn.ReLU(inplace=True)
-        self.down = None
-        if stride != 1 or cin != cout:
-            self.down = nn.Sequential(nn.Conv2d(cin, cout, 1, stride, bias=False), nn.BatchNorm2d(cout))
+        self.down = shortcut(cin, cout, stride)
 
     def forward(self, x: Tensor) -> Tensor:
         idt = x if self.down is None else self.down(x)

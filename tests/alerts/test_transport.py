@@ -14,6 +14,7 @@ from bsn_edge.alerts.can_codec import HAZARD, STATUS, decode
 from bsn_edge.alerts.e2e import counter_gap
 from bsn_edge.alerts.senders import CanSender, SerialSender
 from bsn_edge.alerts.serial_codec import FrameDecoder, cobs_decode, cobs_encode
+from tests.fakes import FullBus, GonePort
 
 
 def frame(t=0.0, state=SystemState.OK):
@@ -55,13 +56,7 @@ def test_corrupted_crc_is_rejected():
 
 
 def test_a_failing_bus_is_counted_never_raised():
-    class Broken:
-        def send(self, msg, timeout=None):
-            raise can.CanOperationError("Transmit buffer full")
-
-        def shutdown(self):
-            pass
-    tx = CanSender("virtual", "unused", bus=Broken())
+    tx = CanSender("virtual", "unused", bus=FullBus())
     assert tx.send(frame()) is False and tx.send(frame()) is False
     assert tx.stats.errors == 2 and tx.stats.full == 2 and "buffer full" in tx.stats.last_error
     tx.close()
@@ -96,15 +91,7 @@ def test_serial_decoder_resyncs_after_garbage():
 
 
 def test_a_vanished_serial_port_is_counted_and_reopened():
-    class Gone:
-        is_open = True
-
-        def write(self, data):
-            raise serial.SerialException("device disconnected")
-
-        def close(self):
-            pass
-    tx = SerialSender("loop://", port=Gone(), retry_s=0.0)
+    tx = SerialSender("loop://", port=GonePort(), retry_s=0.0)
     assert tx.send(frame()) is False and "disconnected" in tx.stats.last_error
     assert tx.send(frame()) is True and tx.stats.reconnects == 1   # loop:// opens again
 

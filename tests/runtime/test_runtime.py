@@ -20,6 +20,7 @@ from bsn_edge.models import create_model
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.sources import ImageFolderSource
 from bsn_edge.synth import SynthConfig, write_clip
+from tests.fakes import FullBus, GonePort
 
 SIZE = (128, 256)
 
@@ -105,24 +106,8 @@ def test_nan_outputs_make_the_system_unavailable_on_the_bus(setup):
 def test_failing_senders_never_stop_the_loop(setup):
     model, clip = setup
 
-    class FullBus:
-        def send(self, msg, timeout=None):
-            raise can.CanOperationError("Transmit buffer full")
-
-        def shutdown(self):
-            pass
-
-    class Gone:
-        is_open = True
-
-        def write(self, data):
-            raise serial.SerialException("device disconnected")
-
-        def close(self):
-            pass
-
     tx = CanSender("virtual", "x", bus=FullBus())
-    sx = SerialSender("socket://127.0.0.1:9", port=Gone(), retry_s=0.0)  # nothing listens: reopen fails
+    sx = SerialSender("socket://127.0.0.1:9", port=GonePort(), retry_s=0.0)  # nothing listens: reopen fails
     summary = run(Engine(model), open_source(str(clip / "video.mp4")), [tx, sx])
     assert summary["frames"] == 15
     assert summary["faults"]["tx_errors"] == 15 and summary["faults"]["tx_full"] == 15
