@@ -25,7 +25,10 @@ def _load(results: Path, name: str) -> dict | None:
 
 
 def _save(fig, out: Path) -> Path:
-    return _save(fig, out)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
 
 
 def plot_stages(res: dict, out: Path) -> Path:
