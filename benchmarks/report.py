@@ -11,8 +11,9 @@ from pathlib import Path
 
 import matplotlib
 
-matplotlib.use("Agg")
+matplotlib.use("Agg")  # headless: before pyplot is imported
 import matplotlib.pyplot as plt
+from matplotlib.ticker import NullFormatter, ScalarFormatter
 
 from benchmarks.common import machine
 
@@ -50,6 +51,11 @@ def plot_arch(res: dict, out: Path) -> Path:
     ax.set_ylabel("frames/s (fp32, 2 threads)")
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.set_xticks([1, 2, 5, 10, 20, 50, 100])
+    ax.set_yticks([2, 5, 10, 20, 50, 100, 200])
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(ScalarFormatter())
+        axis.set_minor_formatter(NullFormatter())
     ax.grid(alpha=0.3)
     return _save(fig, out)
 
