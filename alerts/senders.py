@@ -7,7 +7,7 @@ from __future__ import annotations
 import contextlib
 import time
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from bsn_edge.alerts.can_codec import CanEncoder
 from bsn_edge.alerts.frame import AlertFrame
@@ -21,7 +21,6 @@ class SenderStats:
     full: int = 0
     reconnects: int = 0
     last_error: str = ""
-    faults: dict[str, int] = field(default_factory=dict)
 
 
 class Sender(ABC):

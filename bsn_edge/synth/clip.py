@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import shutil
 from collections.abc import Callable, Iterator
@@ -138,7 +139,6 @@ def _near_boxes(fr: Frame, T_wc: np.ndarray, radius: float = 120.0) -> np.ndarra
 
 
 def _write_npy(path: Path, arr: np.ndarray) -> None:
-    import io
     buf = io.BytesIO()
     np.save(buf, arr)
     atomic_write_bytes(path, buf.getvalue())
