@@ -92,6 +92,7 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
         for cap in source:
             t0 = time.perf_counter()
             frames += 1
+            health.faults["dropped_frames"] = source.dropped  # live sources drop while we work
             stage_s["decode"] += cap.decode_s
             rec: dict[str, Any] = {"frame": cap.index, "t": round(cap.t, 4)}
             if cap.frame is None:
@@ -149,7 +150,6 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
             if max_frames is not None and frames >= max_frames:
                 break
     wall = time.perf_counter() - t_start
-    health.faults["dropped_frames"] = source.dropped
     total = sum(stage_s.values()) or 1.0
     sender_stats = {s.name: vars(s.stats) for s in senders}
     return {"frames": frames, "valid_frames": valid, "dropped": source.dropped, "seconds": round(wall, 3),
