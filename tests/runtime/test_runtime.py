@@ -160,3 +160,19 @@ def test_real_dashcam_clip(setup, tmp_path):
     s = json.loads((tmp_path / "s.json").read_text())
     assert s["frames"] == s["valid_frames"] == 40 and s["faults"]["decode_errors"] == 0
     assert listen_cli.main(["--can-log", str(tmp_path / "a.log")]) == 0
+
+
+def test_live_source_keeps_the_newest_frame_and_counts_drops(setup):
+    """A reader thread that outruns a slow consumer: stale frames are dropped and counted."""
+    import time as _time
+
+    from bsn_edge.runtime.sources import LiveSource
+    _, clip = setup
+    src = LiveSource(str(clip / "video.mp4"))   # a file read as if it were a camera
+    seen = []
+    for cap in src:
+        seen.append(cap.index)
+        _time.sleep(0.05)
+    src.close()
+    assert seen == sorted(seen) and len(set(seen)) == len(seen), "never a stale frame twice"
+    assert src.dropped + len(seen) == 15 and src.dropped > 0
