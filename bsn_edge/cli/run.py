@@ -27,11 +27,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", required=True, help="fused ONNX model from bsn-export")
     p.add_argument("--source", required=True, help="VIDEO file, image DIR, CAMERA_INDEX or stream URL")
     p.add_argument("--can", metavar="IFACE:CHANNEL", help="send on this python-can bus, e.g. socketcan:can0")
-    p.add_argument("--can-log", metavar="FILE.asc", help="log every CAN frame sent (.asc or .blf)")
+    p.add_argument("--can-log", metavar="FILE.log",
+                   help="log every CAN frame sent: .log (candump format, readable by python -m cantools decode), "
+                        ".asc or .blf; without --can, frames go to a virtual bus")
     p.add_argument("--serial", metavar="URL", help="send on this serial port (pyserial URL, e.g. /dev/ttyUSB0)")
     p.add_argument("--overlay", metavar="OUT.mp4", help="write a video with blind spots and sector levels")
     p.add_argument("--log", metavar="OUT.jsonl", help="one JSON line per frame")
-    p.add_argument("--max-frames", type=int, default=None, help="stop after this many frames")
+    p.add_argument("--max-frames", type=int, default=None, metavar="N", help="stop after this many frames")
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
     p.add_argument("--no-spin", action="store_true", help="do not let idle onnxruntime threads spin")
     p.add_argument("--pace", action="store_true", help="play files at their own frame rate")
