@@ -50,15 +50,28 @@ def find_clips(root: str | Path, label_name: str = "T5s") -> list[Clip]:
 
 def split_clips(clips: list[Clip], val_fraction: float, test_fraction: float,
                 seed: int = 0) -> dict[str, list[Clip]]:
-    """Split by clip, never by frame: a clip's frames are near-duplicates of each other. The split
-    of a clip depends only on its folder name and the seed, so adding clips never moves others."""
+    """Split by clip, never by frame: a clip's frames are near-duplicates of each other. A clip's
+    split depends on its folder name and the seed, so adding clips rarely moves others; and when
+    validation is asked for, every style with two or more training clips gets at least one
+    validation clip (else its decision threshold would be chosen on nothing)."""
     if not 0 <= val_fraction < 1 or not 0 <= test_fraction < 1 or val_fraction + test_fraction >= 1:
         raise ValueError(f"bad split fractions val={val_fraction} test={test_fraction}")
+
+    def key(c: Clip) -> float:
+        return int(hashlib.sha256(f"{seed}:{c.path.name}".encode()).hexdigest()[:8], 16) / 0xFFFFFFFF
+
     out: dict[str, list[Clip]] = {"train": [], "val": [], "test": []}
     for c in clips:
-        h = int(hashlib.sha256(f"{seed}:{c.path.name}".encode()).hexdigest()[:8], 16) / 0xFFFFFFFF
-        key = "test" if h < test_fraction else "val" if h < test_fraction + val_fraction else "train"
-        out[key].append(c)
+        h = key(c)
+        part = "test" if h < test_fraction else "val" if h < test_fraction + val_fraction else "train"
+        out[part].append(c)
+    if val_fraction > 0:
+        for style in sorted({c.style for c in out["train"]}):
+            own = [c for c in out["train"] if c.style == style]
+            if len(own) >= 2 and not any(c.style == style for c in out["val"]):
+                moved = min(own, key=key)
+                out["train"].remove(moved)
+                out["val"].append(moved)
     return out
 
 

@@ -54,6 +54,14 @@ def test_split_is_by_clip_and_stable(data):
     assert sorted(names) == sorted(c.path.name for c in clips), "every clip in exactly one split"
 
 
+def test_every_style_gets_a_validation_clip(tmp_path):
+    from bsn_edge.data import Clip
+    clips = [Clip(tmp_path / f"{style}_{i}", style, (0,)) for style in ("town", "suburb") for i in range(5)]
+    split = split_clips(clips, 0.2, 0.0, seed=0)
+    assert {c.style for c in split["val"]} == {"town", "suburb"}
+    assert len(split["train"]) + len(split["val"]) == 10
+
+
 def test_flip_keeps_geometry_honest(data):
     clips = find_clips(data, "T2s")
     plain = BlindSpotDataset(clips, (64, 128), augment=False, label_name="T2s")
