@@ -126,7 +126,7 @@ def markdown(res: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
-    p.add_argument("--work", default="benchmarks/work/accuracy", help="clips and runs are kept here")
+    p.add_argument("--work", default="benchmarks/scratch/accuracy", help="clips and runs are kept here")
     p.add_argument("--steps", type=int, default=250)
     p.add_argument("--finetune-steps", type=int, default=80)
     p.add_argument("--teacher-steps", type=int, default=300)

@@ -23,7 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "(about 25 minutes on 2 cores the first time); 'accuracy' trains 12 more runs (about an hour).")
     p.add_argument("--only", nargs="*", choices=NAMES, default=None, help="run only these (default: all)")
     p.add_argument("--out", default="benchmarks/results")
-    p.add_argument("--work", default="benchmarks/work", help="clips, runs and models made for the benchmarks")
+    p.add_argument("--work", default="benchmarks/scratch", help="clips, runs and models made for the benchmarks")
     return p
 
 
