@@ -8,10 +8,9 @@ import sys
 import time
 from pathlib import Path
 
-from bsn_edge.cli.common import fail
+from bsn_edge.cli.common import CHECKOUT, fail
 
 PROG = "bsn-bench"
-ROOT = Path(__file__).resolve().parents[2]
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "runtime", "accuracy")
 
 
@@ -30,7 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _py(*args: str) -> None:
     cmd = [sys.executable, *args]
     print("+", " ".join(cmd), flush=True)
-    subprocess.run(cmd, cwd=ROOT, check=True)
+    subprocess.run(cmd, cwd=CHECKOUT, check=True)
 
 
 def _prepare(work: Path) -> tuple[Path, Path, Path]:
@@ -52,8 +51,8 @@ def _prepare(work: Path) -> tuple[Path, Path, Path]:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if not (ROOT / "benchmarks" / "report.py").is_file():
-        return fail(PROG, f"benchmarks/ not found beside the package ({ROOT}); bsn-bench runs from a checkout")
+    if not (CHECKOUT / "benchmarks" / "report.py").is_file():
+        return fail(PROG, f"benchmarks/ not found beside the package ({CHECKOUT}); bsn-bench runs from a checkout")
     names = args.only or list(NAMES)
     out, work = str(Path(args.out).resolve()), Path(args.work).resolve()
     t0 = time.perf_counter()

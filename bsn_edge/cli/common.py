@@ -5,6 +5,10 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from pathlib import Path
+
+# the source checkout this package runs from (editable install): benchmarks/ and models/ live here
+CHECKOUT = Path(__file__).resolve().parents[2]
 
 
 def parse_size(text: str) -> tuple[int, int]:

@@ -8,11 +8,10 @@ from pathlib import Path
 
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli import sheet, synth
-from bsn_edge.cli.common import fail
+from bsn_edge.cli.common import CHECKOUT, fail
 
 PROG = "bsn-demo"
-ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_MODEL = ROOT / "models" / "bsn_small_light_int8.onnx"
+DEFAULT_MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
 
 
 def build_parser() -> argparse.ArgumentParser:

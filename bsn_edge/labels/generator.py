@@ -100,11 +100,20 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     min_area = cfg.min_area_px(meta.height, meta.width)
     warper = Warper(meta.intrinsics, origin=poses[0, :3, 3])
     clouds: dict[int, Cloud] = {}
+    # each label-rate frame is read (or inferred, for model sources) once: first as a later frame
+    # of an earlier label, then again as a label frame itself
+    sources_at: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def frame(k: int) -> tuple[np.ndarray, np.ndarray]:
+        if k not in sources_at:
+            i = int(idx[k])
+            sources_at[k] = (depth(i), seg(i))
+        return sources_at[k]
 
     def cloud(k: int) -> Cloud:
         if k not in clouds:
-            i = int(idx[k])
-            clouds[k] = warper.cloud(depth(i), sm.is_traversable(seg(i)), poses[i])
+            d, sem = frame(k)
+            clouds[k] = warper.cloud(d, sm.is_traversable(sem), poses[int(idx[k])])
         return clouds[k]
 
     per_frame = []
@@ -121,7 +130,9 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         else:
             for old in [c for c in clouds if c <= k]:
                 del clouds[old]
-            d_t, sem_t = depth(i), seg(i)
+            d_t, sem_t = frame(k)
+            for old in [c for c in sources_at if c <= k]:
+                del sources_at[old]
             lab = label_frame(warper, [cloud(k + j) for j in range(1, T + 1)], d_t,
                               sm.is_traversable(sem_t), sem_t == sm.SKY, poses[i],
                               cfg.depth_tol, cfg.vis_range, min_area, cfg.shrink_margin)
