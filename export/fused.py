@@ -19,6 +19,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
+from bsn_edge.export.upsample import with_shuffle_upsampling
 
 OPSET = 17
 PARITY_ATOL = 1e-3      # fp32 onnxruntime vs torch, on probabilities
@@ -27,17 +28,34 @@ METADATA_KEYS = ("bsn.model", "bsn.variant", "bsn.input_size", "bsn.threshold", 
                  "bsn.quantization", "bsn.config_digest", "bsn.weights_sha256", "bsn.spec")
 
 
+NORMALISE = "normalise"   # the module (and ONNX node scope) turning the frame into network input
+
+
+def normalisation(mean: np.ndarray, std: np.ndarray) -> nn.Conv2d:
+    """A fixed 1x1 convolution: BGR 0..255 in, RGB ``(x / 255 - mean) / std`` out. One op for
+    the channel flip, scale and shift, which onnxruntime runs in its blocked layout."""
+    conv = nn.Conv2d(3, 3, 1)
+    w = torch.zeros(3, 3, 1, 1)
+    for rgb in range(3):
+        w[rgb, 2 - rgb] = 1.0 / (255.0 * float(std[rgb]))
+    conv.weight.data.copy_(w)
+    conv.bias.data.copy_(torch.from_numpy(-mean / std))
+    conv.requires_grad_(False)
+    return conv
+
+
 class FusedModel(nn.Module):
-    """uint8 BGR NHWC frame -> (blind-spot probabilities, depth in metres)."""
+    """uint8 BGR NHWC frame -> (blind-spot probabilities, depth in metres).
+
+    The same numbers as the torch model (to float rounding), in the ops a CPU runs fastest:
+    bilinear upsampling as convolution + depth-to-space (``export.upsample``), and the
+    normalisation as one fixed 1x1 convolution.
+    """
 
     def __init__(self, model: nn.Module) -> None:
         super().__init__()
-        self.model = model
-        # BGR order, scaled for 0..255 input: (x / 255 - mean) / std == x * a + b
-        mean = torch.tensor(IMAGENET_MEAN[::-1].copy()).view(1, 3, 1, 1)
-        std = torch.tensor(IMAGENET_STD[::-1].copy()).view(1, 3, 1, 1)
-        self.register_buffer("a", 1.0 / (255.0 * std))
-        self.register_buffer("b", -mean / std)
+        self.model = with_shuffle_upsampling(model.eval())
+        setattr(self, NORMALISE, normalisation(IMAGENET_MEAN, IMAGENET_STD))
 
     def forward(self, frame: Tensor) -> tuple[Tensor, Tensor]:
         x = frame.permute(0, 3, 1, 2).to(torch.float32)
@@ -47,8 +65,7 @@ class FusedModel(nn.Module):
             # bilinear resizing commutes with the per-channel affine normalisation and the channel
             # flip, so shrink first and normalise a quarter of the pixels
             x = F.interpolate(x, scale_factor=scale, mode="bilinear", align_corners=False, antialias=False)
-        x = (x * self.a + self.b).flip(1)  # BGR -> RGB, as the networks were trained
-        logits, depth, _ = self.model.forward_scaled(x, size)
+        logits, depth, _ = self.model.forward_scaled(getattr(self, NORMALISE)(x), size)
         return torch.sigmoid(logits), depth
 
 

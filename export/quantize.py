@@ -1,7 +1,7 @@
 """Static int8 quantization of the fused model with onnxruntime (QDQ, per-channel weights).
 
-The output heads stay in float by default: the last convolution of each head and everything
-after it (upsampling, sigmoid, the depth's clamp and exp). Probabilities near the threshold
+The output heads stay in float by default: the last learnt convolution of each head and
+everything after it (upsampling, sigmoid, the depth's clamp and exp). Probabilities near the threshold
 and metres at range are where 8 bits would cost the most. The input's preparation (cast,
 layout, resize, normalisation) stays float too: as quantized element-wise ops on whole frames
 they cost more than they save (measured: 2.8 ms of a 14 ms int8 run on 2 cores).
@@ -18,6 +18,8 @@ import numpy as np
 import onnx
 from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
+
+from bsn_edge.export.fused import NORMALISE
 
 METHODS = {"minmax": CalibrationMethod.MinMax, "entropy": CalibrationMethod.Entropy,
            "percentile": CalibrationMethod.Percentile}
@@ -65,8 +67,13 @@ class FrameReader(CalibrationDataReader):
 
 
 def head_nodes(model: onnx.ModelProto) -> dict[str, str]:
-    """Nodes from each output back to and including the first convolution: ``{name: reason}``."""
+    """Nodes from each output back to and including the first learnt convolution: ``{name: reason}``.
+
+    A convolution feeding ``DepthToSpace`` is bilinear upsampling (``export.upsample``), part of
+    the head, so the walk goes on through it.
+    """
     producer = {o: n for n in model.graph.node for o in n.output}
+    shuffled = {i for n in model.graph.node if n.op_type == "DepthToSpace" for i in n.input}
     keep: dict[str, str] = {}
     for out in model.graph.output:
         frontier = [out.name]
@@ -75,16 +82,17 @@ def head_nodes(model: onnx.ModelProto) -> dict[str, str]:
             n = producer.get(t)
             if n is None or n.name in keep:
                 continue
-            keep[n.name] = f"{n.op_type} in the '{out.name}' head"
-            if n.op_type != "Conv":
+            upsampling = n.op_type == "Conv" and n.output[0] in shuffled
+            keep[n.name] = f"{'upsampling ' if upsampling else ''}{n.op_type} in the '{out.name}' head"
+            if n.op_type != "Conv" or upsampling:
                 frontier.extend(i for i in n.input if i in producer)
     return keep
 
 
 def input_nodes(model: onnx.ModelProto) -> dict[str, str]:
-    """Nodes from the graph input forward up to (not including) the first convolutions: the
-    cast, layout change, resize and normalisation of the uint8 frame, cheap in float and slow
-    as quantized element-wise ops."""
+    """Nodes from the graph input forward up to (not including) the first learnt convolutions:
+    the cast, layout change, resize and normalisation (a fixed 1x1 convolution) of the uint8
+    frame, cheap in float and slow as quantized ops."""
     consumers: dict[str, list] = {}
     for n in model.graph.node:
         for i in n.input:
@@ -93,7 +101,7 @@ def input_nodes(model: onnx.ModelProto) -> dict[str, str]:
     frontier = [i.name for i in model.graph.input]
     while frontier:
         for n in consumers.get(frontier.pop(), []):
-            if n.name in keep or n.op_type == "Conv":
+            if n.name in keep or (n.op_type == "Conv" and f"/{NORMALISE}/" not in n.name):
                 continue
             keep[n.name] = f"{n.op_type} preparing the input"
             frontier.extend(n.output)

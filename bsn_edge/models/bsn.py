@@ -10,6 +10,7 @@ from torch import Tensor, nn
 
 from bsn_edge.models.deeplab import EncoderDecoder
 from bsn_edge.models.resnet import ResNetEncoder
+from bsn_edge.models.upsample import Upsample
 
 MIN_DEPTH_M, MAX_DEPTH_M = 0.5, 120.0   # D's output range; sky is taught as the far end
 LOG_MIN_DEPTH, LOG_MAX_DEPTH = math.log(MIN_DEPTH_M), math.log(MAX_DEPTH_M)
@@ -52,6 +53,9 @@ class BlindSpotNet(nn.Module):
         self.blindspot = blindspot
         self.use_depth = use_depth
         self.input_scale = input_scale
+        factor = 1.0 / input_scale
+        # integer factors (0.5 -> 2) upsample through a module an exporter can swap; others resize
+        self.upsample = Upsample(round(factor)) if abs(factor - round(factor)) < 1e-6 else None
 
     def forward(self, rgb: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         size = rgb.shape[2:]
@@ -69,9 +73,12 @@ class BlindSpotNet(nn.Module):
         if self.input_scale != 1.0:
             # a constant scale factor, not the input's traced shape: exported graphs stay static,
             # which OpenCV's DNN module needs
-            up = 1.0 / self.input_scale
-            logits = F.interpolate(logits, scale_factor=up, mode="bilinear", align_corners=False)
-            depth = F.interpolate(depth, scale_factor=up, mode="bilinear", align_corners=False)
+            if self.upsample is not None:
+                logits, depth = self.upsample(logits), self.upsample(depth)
+            else:
+                up = 1.0 / self.input_scale
+                logits = F.interpolate(logits, scale_factor=up, mode="bilinear", align_corners=False)
+                depth = F.interpolate(depth, scale_factor=up, mode="bilinear", align_corners=False)
             if tuple(logits.shape[2:]) != tuple(size):   # sizes not divisible by 1 / input_scale
                 logits = F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
                 depth = F.interpolate(depth, size=size, mode="bilinear", align_corners=False)

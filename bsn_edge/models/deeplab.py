@@ -6,6 +6,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from bsn_edge.models.upsample import Upsample
+
 
 def conv_bn_relu(cin: int, cout: int, k: int = 3, dilation: int = 1,
                  separable: bool = False) -> nn.Sequential:
@@ -68,10 +70,10 @@ class SegmentationHead(nn.Module):
     def __init__(self, cin: int, classes: int, scale: int = 4) -> None:
         super().__init__()
         self.conv = nn.Conv2d(cin, classes, 1)
-        self.scale = scale
+        self.up = Upsample(scale)
 
     def forward(self, x: Tensor) -> Tensor:
-        return F.interpolate(self.conv(x), scale_factor=self.scale, mode="bilinear", align_corners=False)
+        return self.up(self.conv(x))
 
 
 class EncoderDecoder(nn.Module):

@@ -98,6 +98,7 @@ def test_head_nodes_walk_back_to_the_first_convolution(run, tmp_path):
     kinds = sorted({why.split()[0] for why in heads.values()})
     assert "Conv" in kinds and "Sigmoid" in kinds and "Exp" in kinds
     assert sum(why.startswith("Conv") for why in heads.values()) == 2, "one head conv per output"
+    assert sum(why.startswith("upsampling Conv") for why in heads.values()) == 4, "its upsampling stays float"
 
 
 @pytest.mark.parametrize("argv, message", [
