@@ -11,6 +11,7 @@ all in one run of this script, for each activation/weight type pair.
 from __future__ import annotations
 
 import argparse
+import json
 import tempfile
 from pathlib import Path
 
@@ -34,6 +35,39 @@ def latency(path: Path, frame: np.ndarray, runs: int) -> float:
     """Median seconds per run of the model at ``path`` on ``frame``, after warm-up."""
     s = session(path, threads=2)
     return summary(time_calls(lambda _: s.run(None, {"frame": frame}), runs, warmup=10))["median_ms"] / 1e3
+
+
+BLOCKS = (("stem", "/stem/"), ("encoder", "/encoder/"), ("decoder", "/decoder/"),
+          ("heads and upsampling", ("/head/", "/upsample", "/Sigmoid", "/depth_net/")))
+
+
+def block_of(node: str) -> str:
+    """Which part of the fused model an onnxruntime profile entry belongs to (by its name)."""
+    for block, keys in BLOCKS:
+        if any(k in node for k in ((keys,) if isinstance(keys, str) else keys)):
+            return block
+    return "input and layout"
+
+
+def profile_blocks(path: Path, frame: np.ndarray, runs: int) -> dict[str, float]:
+    """Milliseconds per run spent in each block, from onnxruntime's profiler (which adds its own
+    overhead, so only the shares and the fp32/int8 ratios per block are meaningful)."""
+    import onnxruntime as ort
+
+    with tempfile.TemporaryDirectory() as tmp:
+        so = ort.SessionOptions()
+        so.intra_op_num_threads, so.inter_op_num_threads = 2, 1
+        so.enable_profiling, so.profile_file_prefix = True, str(Path(tmp) / "prof")
+        s = ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+        for _ in range(runs):
+            s.run(None, {"frame": frame})
+        events = json.loads(Path(s.end_profiling()).read_text())
+    ms: dict[str, float] = {}
+    for e in events:
+        if e.get("cat") == "Node" and e["name"].endswith("_kernel_time"):
+            b = block_of(e["name"])
+            ms[b] = ms.get(b, 0.0) + e["dur"] / 1e3 / runs
+    return ms
 
 
 def accuracy(paths: dict[str, Path], clips, size, threshold: float, label: str) -> dict:
@@ -85,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.append({"activations": acts, "weights": wts, "per_channel": per_channel, "median_ms": 1e3 * t,
                          "fps": 1 / t, "speedup": t_fp32 / t})
         default = variants[("uint8", "int8", True)]
+        prof = {k: profile_blocks(p, frame, args.runs) for k, p in (("fp32", fp32), ("int8", default))}
         acc = accuracy({"fp32": fp32, "int8": default}, clips, size, threshold, label)
     m = acc["metrics"]
     drop = m["fp32"]["iou"] - m["int8"]["iou"]
@@ -93,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
            "test_clips": [c.path.name for c in clips],
            "fp32": {**m["fp32"], "median_ms": 1e3 * t_fp32, "fps": 1 / t_fp32}, "int8": {**m["int8"], **best},
            "pixel_agreement": acc["pixel_agreement"], "iou_drop": drop, "speed": rows,
+           "blocks_ms_profiled": [{"block": b, "fp32": prof["fp32"].get(b, 0.0), "int8": prof["int8"].get(b, 0.0)}
+                                  for b in [*(b for b, _ in BLOCKS), "input and layout"]],
            "bars": {"iou_drop_max": BAR_IOU_DROP, "speedup_min": BAR_SPEEDUP, "fps_min": BAR_FPS, "fps_goal": GOAL_FPS},
            "passes": {"iou_drop": drop <= BAR_IOU_DROP, "speedup": best["speedup"] >= BAR_SPEEDUP,
                       "fps": best["fps"] >= BAR_FPS}}
@@ -108,6 +145,10 @@ def main(argv: list[str] | None = None) -> int:
           "| activations | weights | ms | frames/s | speed-up over fp32 |", "|---|---|---|---|---|"]
     md += [f"| {r['activations']} | {r['weights']} {'per-channel' if r['per_channel'] else 'per-tensor'} | "
            f"{r['median_ms']:.2f} | {r['fps']:.1f} | {r['speedup']:.2f}x |" for r in rows]
+    md += ["", "Where the time goes (onnxruntime's profiler, which adds overhead: compare shares and ratios):", "",
+           "| block | fp32 ms | int8 ms | int8 speed-up |", "|---|---|---|---|"]
+    md += [f"| {r['block']} | {r['fp32']:.2f} | {r['int8']:.2f} | {r['fp32'] / max(r['int8'], 1e-9):.2f}x |"
+           for r in res["blocks_ms_profiled"]]
     md += ["", f"Bars: int8 >= {BAR_SPEEDUP}x fp32 ({'passes' if res['passes']['speedup'] else 'FAILS'}), "
            f">= {BAR_FPS:g} frames/s ({'passes' if res['passes']['fps'] else 'FAILS'}), IoU drop <= {BAR_IOU_DROP} "
            f"({'passes' if res['passes']['iou_drop'] else 'FAILS'})."]

@@ -43,7 +43,19 @@ def plot_stages(res: dict, out: Path) -> Path:
 
 
 def plot_arch(res: dict, out: Path) -> Path:
-    fig, ax = plt.subplots(figsize=(5, 3.4))
+    with_iou = [r for r in res["rows"] if "iou" in r]
+    fig, axes = plt.subplots(1, 2 if with_iou else 1, figsize=(10 if with_iou else 5, 3.4), squeeze=False)
+    ax = axes[0, 0]
+    if with_iou:
+        a2 = axes[0, 1]
+        for r in with_iou:
+            a2.scatter(r["fps"], r["iou"], s=30)
+            a2.annotate(r["model"], (r["fps"], r["iou"]), textcoords="offset points", xytext=(4, 4), fontsize=8)
+        a2.set_xscale("log")
+        a2.set_xlabel("frames/s (fp32, 2 threads)")
+        a2.set_ylabel("IoU inside V (same training budget)")
+        a2.xaxis.set_major_formatter(ScalarFormatter())
+        a2.grid(alpha=0.3)
     for r in res["rows"]:
         ax.scatter(r["gmacs"], r["fps"], s=30)
         ax.annotate(r["model"], (r["gmacs"], r["fps"]), textcoords="offset points", xytext=(4, 4), fontsize=8)

@@ -19,7 +19,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Run bsn-edge's benchmarks on this machine and write benchmarks/results/<name>.json and .md "
                     "plus REPORT.md with plots. Data and a quick.toml-trained run are made in --work when missing "
-                    "(about 25 minutes on 2 cores the first time); 'accuracy' trains 12 more runs (about an hour).")
+                    "(about 25 minutes on 2 cores the first time); 'arch' trains each architecture 300 steps "
+                    "at 128x256 (about 45 minutes) and 'accuracy' trains 12 more runs (about an hour).")
     p.add_argument("--only", nargs="*", choices=NAMES, default=None, help="run only these (default: all)")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--work", default="benchmarks/scratch", help="clips, runs and models made for the benchmarks")
@@ -75,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
                     clip = work / "clip" / "video.mp4"
                 _py("-m", "benchmarks.bench_runtime", "--model", str(model), "--source", str(clip), "--out", out)
             if "arch" in names:
-                _py("-m", "benchmarks.bench_arch", "--out", out, "--runs", f"small-light={run}", "--data", str(data))
+                _py("-m", "benchmarks.bench_arch", "--out", out, "--runs", f"small-light={run}", "--data", str(data),
+                    "--train-steps", "300", "--work", str(work / "arch"))
         if "accuracy" in names:
             _py("-m", "benchmarks.bench_bsn_accuracy", "--out", out, "--work", str(work / "accuracy"))
         _py("-m", "benchmarks.report", "--results", out)
