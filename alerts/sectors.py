@@ -51,23 +51,24 @@ class SectorGeometry:
                                        [0, 2], default=1).astype(np.int8)
         self.height = intrinsics.height
         self.sector_pixels = np.bincount(self.column_sector, minlength=3) * intrinsics.height
+        self.sector_columns = [np.nonzero(self.column_sector == s)[0] for s in range(3)]
 
     def read(self, mask: np.ndarray, depth: np.ndarray) -> tuple[SectorReading, SectorReading, SectorReading]:
         """Score each sector: blind-spot pixels within range, each weighted by nearness
         (1 at the camera, 0 at ``range_m``), over ``full_area`` of the sector."""
         rng = self.cfg.range_m
-        hit = mask & (depth > 0) & (depth < rng)
+        # one pass over the frame: per column, the nearest blind spot in range and the summed nearness
+        dist = np.where(mask & (depth > 0) & (depth < rng), depth, np.float32(np.inf))
+        nearest = dist.min(axis=0)
+        weights = np.maximum(1.0 - dist / np.float32(rng), 0.0).sum(axis=0, dtype=np.float64)
         out = []
-        cols = np.nonzero(hit.any(axis=0))[0]
-        weights = np.where(hit, 1.0 - depth / rng, 0.0).sum(axis=0)
-        for s in range(3):
-            sel = cols[self.column_sector[cols] == s]
-            if not len(sel):
+        for s, cols in enumerate(self.sector_columns):
+            d = float(nearest[cols].min()) if len(cols) else math.inf
+            if not math.isfinite(d):
                 out.append(SectorReading(0.0, None))
                 continue
-            score = float(weights[sel].sum()) / (self.cfg.full_area * self.sector_pixels[s])
-            d = depth[:, sel][hit[:, sel]]
-            out.append(SectorReading(min(score, 1.0), float(d.min())))
+            score = float(weights[cols].sum()) / (self.cfg.full_area * self.sector_pixels[s])
+            out.append(SectorReading(min(score, 1.0), d))
         return tuple(out)  # type: ignore[return-value]
 
 

@@ -67,6 +67,13 @@ def train_uniform(name: str, data: Path, work: Path, steps: int, size: tuple[int
     return run
 
 
+def run_budget(run: Path) -> str:
+    """How a run was trained, from its resolved config."""
+    cfg = json.loads((run / "config.json").read_text())
+    h, w = cfg["data"]["size"]
+    return f"trained {cfg['train']['steps']} steps of batch {cfg['train']['batch_size']} at {h}x{w}"
+
+
 def held_out_iou(run: Path, data: Path, report: Path) -> float:
     """IoU inside V of ``run`` on its held-out clips of ``data``, at its training size."""
     from bsn_edge.cli import eval as eval_cli
@@ -110,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size),
                "teacher": str(teacher)} if args.train_steps else None)
     res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget,
-           "iou_run": {k: str(v) for k, v in runs.items()}}
+           "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()}}
     lines = ["# Architectures (the paper's Table 3)", "",
              f"Fused D + B at {size[0]}x{size[1]}; frames/s of the fp32 ONNX model in onnxruntime with 2 threads.",
              "", "| model | params (M) | GMACs | ms | frames/s | IoU | IoU (own run) |",
@@ -122,8 +129,8 @@ def main(argv: list[str] | None = None) -> int:
         lines += ["", f"IoU: inside V on the held-out clips, every model trained {budget['steps']} steps of batch 8 at "
                       f"{budget['size'][0]}x{budget['size'][1]} with one shared teacher and evaluated at that size."]
     if runs:
-        lines += ["", "IoU (own run): " + ", ".join(f"`{k}` trained by {v}" for k, v in runs.items())
-                  + ", evaluated at its own training size."]
+        lines += ["", "IoU (own run): " + "; ".join(f"`{k}` {run_budget(Path(v))}" for k, v in runs.items())
+                  + "; evaluated at its own training size."]
     path = write_result(args.out, "bsn_arch", res, "\n".join(lines))
     print(f"wrote {path}")
     return 0

@@ -52,9 +52,11 @@ def plot_arch(res: dict, out: Path) -> Path:
             a2.scatter(r["fps"], r["iou"], s=30)
             a2.annotate(r["model"], (r["fps"], r["iou"]), textcoords="offset points", xytext=(4, 4), fontsize=8)
         a2.set_xscale("log")
+        a2.set_xticks([2, 5, 10, 20, 50, 100, 200])
         a2.set_xlabel("frames/s (fp32, 2 threads)")
         a2.set_ylabel("IoU inside V (same training budget)")
         a2.xaxis.set_major_formatter(ScalarFormatter())
+        a2.xaxis.set_minor_formatter(NullFormatter())
         a2.grid(alpha=0.3)
     for r in res["rows"]:
         ax.scatter(r["gmacs"], r["fps"], s=30)

@@ -96,7 +96,8 @@ def main(argv: list[str] | None = None) -> int:
         c = summary["int8_vs_fp32"]
         print(f"int8 vs fp32 on {c['frames']} frames: max |dp| {c['max_abs_prob']:.3f}, mask agreement "
               f"{100 * c['mask_agreement']:.2f} %, depth median rel. diff {100 * c['depth_median_rel']:.2f} %; "
-              f"{len(summary['quantization']['float_nodes'])} nodes kept float (the output heads)")
+              f"{len(summary['quantization']['float_nodes'])} nodes kept float (the frame's preparation and the "
+              "output heads; reasons in the summary)")
     return 0
 
 
