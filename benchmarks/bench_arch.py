@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from benchmarks.common import summary, time_calls, write_result
+from benchmarks.common import eval_run, summary, time_calls, train_run, write_result
 from bsn_edge.cli.common import parse_size
 from bsn_edge.export import session, to_onnx
 from bsn_edge.models import create_model
@@ -50,21 +50,11 @@ def measure(name: str, size: tuple[int, int], repeats: int, workdir: Path) -> di
 def train_uniform(name: str, data: Path, work: Path, steps: int, size: tuple[int, int], teacher: Path | None
                   ) -> Path:
     """Train ``name`` on ``data`` with the benchmark's budget into ``work/name`` (reused if done)."""
-    from bsn_edge.cli import train as train_cli
-
-    run = work / name
-    if (run / "checkpoint.json").is_file():
-        return run
     sets = [f"model.name={name}", f"data.size=[{size[0]}, {size[1]}]", "data.val_fraction=0.2",
             "data.test_fraction=0.2", f"train.steps={steps}", "train.batch_size=8", f"train.checkpoint_every={steps}"]
     if teacher is not None:
         sets.append(f"teacher.checkpoint={teacher}")
-    argv = ["--data", str(data), "--out", str(run), "--quiet"]
-    for s in sets:
-        argv += ["--set", s]
-    if train_cli.main(argv):
-        raise RuntimeError(f"training {name} into {run} failed")
-    return run
+    return train_run(data, work / name, sets)
 
 
 def run_budget(run: Path) -> str:
@@ -76,11 +66,7 @@ def run_budget(run: Path) -> str:
 
 def held_out_iou(run: Path, data: Path, report: Path) -> float:
     """IoU inside V of ``run`` on its held-out clips of ``data``, at its training size."""
-    from bsn_edge.cli import eval as eval_cli
-
-    if eval_cli.main(["--run", str(run), "--data", str(data), "--out", str(report), "--no-baselines"]):
-        raise RuntimeError(f"evaluating {run} failed")
-    return round(json.loads(report.read_text())["overall"]["BSN"]["iou"], 4)
+    return round(eval_run(run, data, report, "--no-baselines")["overall"]["BSN"]["iou"], 4)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -12,15 +12,12 @@ training clips. Every run has the same step budget; results are what that budget
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import time
 from pathlib import Path
 
-from benchmarks.common import write_result
-from bsn_edge.cli import eval as eval_cli
+from benchmarks.common import eval_run, train_run, write_result
 from bsn_edge.cli import label as label_cli
-from bsn_edge.cli import train as train_cli
 from bsn_edge.synth import SynthConfig, write_clip
 
 MODELS = {"BSN": "small-light", "BSN-D": "small-light-d", "BSN-KD": "small-light-kd"}
@@ -42,24 +39,8 @@ def make_data(work: Path, train_clips: int, test_clips: int, frames: int) -> tup
     return train, test
 
 
-def _train(data: Path, out: Path, sets: list[str]) -> None:
-    if (out / "checkpoint.json").exists():
-        return
-    argv = ["--data", str(data), "--out", str(out), "--quiet"]
-    for s in sets:
-        argv += ["--set", s]
-    rc = train_cli.main(argv)
-    if rc:
-        raise RuntimeError(f"training {out} failed")
-
-
 def _eval(run: Path, test: Path, style: str, out: Path, baselines: bool) -> dict:
-    argv = ["--run", str(run), "--data", str(test), "--out", str(out), "--clips", "all", "--styles", style]
-    if not baselines:
-        argv.append("--no-baselines")
-    if eval_cli.main(argv):
-        raise RuntimeError(f"evaluating {run} on {style} failed")
-    return json.loads(out.read_text())
+    return eval_run(run, test, out, "--clips", "all", "--styles", style, *(() if baselines else ("--no-baselines",)))
 
 
 def run(work: Path, steps: int, ft_steps: int, teacher_steps: int, train_clips: int, test_clips: int,
@@ -69,7 +50,7 @@ def run(work: Path, steps: int, ft_steps: int, teacher_steps: int, train_clips: 
     common = ["data.size=[256, 512]", "data.val_fraction=0.25", "train.batch_size=8",
               f"train.checkpoint_every={steps}"]
     teacher = work / "runs" / "teacher"
-    _train(train, teacher, [*common, "model.name=\"small-light\"", f"teacher.steps={teacher_steps}",
+    train_run(train, teacher, [*common, "model.name=\"small-light\"", f"teacher.steps={teacher_steps}",
                             "train.steps=1"])
     tsets = [f"teacher.checkpoint=\"{teacher / 'teacher'}\""]
     rows = []
@@ -77,13 +58,13 @@ def run(work: Path, steps: int, ft_steps: int, teacher_steps: int, train_clips: 
     for label, name in MODELS.items():
         for src in STYLES:
             base = work / "runs" / f"{name}_{src}"
-            _train(train, base, [*common, *tsets, f"model.name=\"{name}\"", f"train.steps={steps}",
+            train_run(train, base, [*common, *tsets, f"model.name=\"{name}\"", f"train.steps={steps}",
                                  f"data.train_styles=[\"{src}\"]"])
             for tgt in STYLES:
                 runs = [(False, base)]
                 if tgt != src:
                     ft = work / "runs" / f"{name}_{src}_ft_{tgt}"
-                    _train(train, ft, [*common, *tsets, f"model.name=\"{name}\"", f"train.steps={ft_steps}",
+                    train_run(train, ft, [*common, *tsets, f"model.name=\"{name}\"", f"train.steps={ft_steps}",
                                        f"data.train_styles=[\"{tgt}\"]", "data.fraction=0.2",
                                        f"train.init=\"{base}\"", f"train.lr={FINETUNE_LR}"])
                     runs.append((True, ft))

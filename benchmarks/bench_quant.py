@@ -52,13 +52,8 @@ def block_of(node: str) -> str:
 def profile_blocks(path: Path, frame: np.ndarray, runs: int) -> dict[str, float]:
     """Milliseconds per run spent in each block, from onnxruntime's profiler (which adds its own
     overhead, so only the shares and the fp32/int8 ratios per block are meaningful)."""
-    import onnxruntime as ort
-
     with tempfile.TemporaryDirectory() as tmp:
-        so = ort.SessionOptions()
-        so.intra_op_num_threads, so.inter_op_num_threads = 2, 1
-        so.enable_profiling, so.profile_file_prefix = True, str(Path(tmp) / "prof")
-        s = ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+        s = session(path, threads=2, profile_prefix=str(Path(tmp) / "prof"))
         for _ in range(runs):
             s.run(None, {"frame": frame})
         events = json.loads(Path(s.end_profiling()).read_text())

@@ -57,3 +57,26 @@ def write_result(out_dir: str | Path, name: str, result: dict[str, Any], markdow
     (out / f"{name}.md").write_text(markdown.rstrip() + f"\n\nMeasured on {m['cpu']}, "
                                     f"{m['cores']} cores, Python {m['python']}.\n")
     return out / f"{name}.json"
+
+
+def train_run(data: Path, out: Path, sets: list[str]) -> Path:
+    """``bsn-train --data data --out out --set ...`` in this process; a finished run is reused."""
+    from bsn_edge.cli import train as train_cli
+
+    if (out / "checkpoint.json").is_file():
+        return out
+    argv = ["--data", str(data), "--out", str(out), "--quiet"]
+    for s in sets:
+        argv += ["--set", s]
+    if train_cli.main(argv):
+        raise RuntimeError(f"training {out} failed")
+    return out
+
+
+def eval_run(run: Path, data: Path, out: Path, *extra: str) -> dict[str, Any]:
+    """``bsn-eval --run run --data data --out out ...`` in this process; returns the report."""
+    from bsn_edge.cli import eval as eval_cli
+
+    if eval_cli.main(["--run", str(run), "--data", str(data), "--out", str(out), *extra]):
+        raise RuntimeError(f"evaluating {run} failed")
+    return json.loads(out.read_text())

@@ -92,8 +92,9 @@ def to_onnx(model: nn.Module, out: str | Path, size: tuple[int, int], metadata: 
     return out
 
 
-def session(path: str | Path, threads: int = 2, spinning: bool = True):
-    """An onnxruntime CPU session with ``threads`` intra-op threads."""
+def session(path: str | Path, threads: int = 2, spinning: bool = True, profile_prefix: str | None = None):
+    """An onnxruntime CPU session with ``threads`` intra-op threads (profiling into files starting
+    with ``profile_prefix`` when given)."""
     import onnxruntime as ort
 
     so = ort.SessionOptions()
@@ -102,6 +103,8 @@ def session(path: str | Path, threads: int = 2, spinning: bool = True):
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
     if not spinning:
         so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    if profile_prefix:
+        so.enable_profiling, so.profile_file_prefix = True, profile_prefix
     return ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
 
 
