@@ -1,9 +1,14 @@
-"""System state: OK, DEGRADED (too slow), UNAVAILABLE (no valid inference lately), and fault counters."""
+"""System state: OK, DEGRADED (too slow), UNAVAILABLE (no valid inference lately), and fault counters.
+
+Shared between the frame loop (which reports valid inferences and faults) and the heartbeat
+thread (which asks for the state and the counters every cycle): every method takes the lock.
+"""
 
 from __future__ import annotations
 
+import threading
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import IntEnum
 
 
@@ -14,7 +19,7 @@ class SystemState(IntEnum):
 
 
 FAULTS = ("decode_errors", "size_changes", "nan_outputs", "dropped_frames", "tx_errors", "tx_full",
-          "serial_errors")
+          "serial_errors", "source_reconnects", "heartbeat_errors")
 
 
 @dataclass(frozen=True)
@@ -28,25 +33,54 @@ class HealthConfig:
             raise ValueError("deadline_s and window_s must be positive, fps_floor >= 0")
 
 
-@dataclass
 class Health:
-    """Pure: the caller reports valid inferences and faults with timestamps and asks for the state."""
+    """Pure (time comes from the caller) and thread-safe: report valid inferences and faults with
+    timestamps, ask for the state. ``unavailable()`` forces UNAVAILABLE from then on (the source
+    ended or failed: no valid inference is coming)."""
 
-    cfg: HealthConfig = field(default_factory=HealthConfig)
-    faults: dict[str, int] = field(default_factory=lambda: dict.fromkeys(FAULTS, 0))
-    _valid: deque = field(default_factory=deque)
+    def __init__(self, cfg: HealthConfig | None = None) -> None:
+        self.cfg = cfg or HealthConfig()
+        self._faults = dict.fromkeys(FAULTS, 0)
+        self._valid: deque[float] = deque()
+        self._down = False
+        self._lock = threading.Lock()
 
     def valid(self, t: float) -> None:
-        self._valid.append(t)
-        while self._valid and self._valid[0] < t - self.cfg.window_s:
-            self._valid.popleft()
+        with self._lock:
+            self._valid.append(t)
+            while self._valid and self._valid[0] < t - self.cfg.window_s:
+                self._valid.popleft()
 
     def fault(self, name: str, n: int = 1) -> None:
-        if name not in self.faults:
-            raise KeyError(f"unknown fault {name!r}; known: {', '.join(self.faults)}")
-        self.faults[name] += n
+        with self._lock:
+            self._check(name)
+            self._faults[name] += n
+
+    def set_fault(self, name: str, n: int) -> None:
+        """Set a counter that another part keeps (e.g. the source's dropped frames)."""
+        with self._lock:
+            self._check(name)
+            self._faults[name] = n
+
+    def _check(self, name: str) -> None:
+        if name not in self._faults:
+            raise KeyError(f"unknown fault {name!r}; known: {', '.join(self._faults)}")
+
+    @property
+    def faults(self) -> dict[str, int]:
+        """A copy of the fault counters."""
+        with self._lock:
+            return dict(self._faults)
+
+    def unavailable(self) -> None:
+        with self._lock:
+            self._down = True
 
     def fps(self, t: float) -> float:
+        with self._lock:
+            return self._fps(t)
+
+    def _fps(self, t: float) -> float:
         recent = [v for v in self._valid if v >= t - self.cfg.window_s]
         if len(recent) < 2:
             return 0.0
@@ -54,8 +88,18 @@ class Health:
         return (len(recent) - 1) / span if span < self.cfg.window_s else len(recent) / self.cfg.window_s
 
     def state(self, t: float) -> SystemState:
-        if not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
-            return SystemState.UNAVAILABLE
-        if self.fps(t) < self.cfg.fps_floor:
-            return SystemState.DEGRADED
-        return SystemState.OK
+        with self._lock:
+            if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
+                return SystemState.UNAVAILABLE
+            if self._fps(t) < self.cfg.fps_floor:
+                return SystemState.DEGRADED
+            return SystemState.OK
+
+    def snapshot(self, t: float) -> tuple[SystemState, float, dict[str, int]]:
+        """State, frame rate and a copy of the counters at ``t``, read together."""
+        with self._lock:
+            if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
+                state = SystemState.UNAVAILABLE
+            else:
+                state = SystemState.DEGRADED if self._fps(t) < self.cfg.fps_floor else SystemState.OK
+            return state, self._fps(t), dict(self._faults)

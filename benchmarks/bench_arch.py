@@ -26,8 +26,10 @@ from torch.utils.flop_counter import FlopCounterMode
 
 from benchmarks.common import eval_run, summary, time_calls, train_run, write_result
 from bsn_edge.cli.common import parse_size
-from bsn_edge.export import session, to_onnx
-from bsn_edge.models import create_model
+from bsn_edge.camera import Intrinsics
+from bsn_edge.export import to_onnx
+from bsn_edge.models import create_model, describe
+from bsn_edge.runtime.model_file import session
 
 ARCHS = ("unet", "small", "small-light", "medium", "large")
 
@@ -39,7 +41,9 @@ def measure(name: str, size: tuple[int, int], repeats: int, workdir: Path) -> di
     with FlopCounterMode(display=False) as fc, torch.no_grad():
         m(torch.zeros(1, 3, *size))
     gmacs = fc.get_total_flops() / 2e9
-    path = to_onnx(m, workdir / f"{name}.onnx", size, {"bsn.model": name})
+    path = workdir / f"{name}.onnx"
+    # timing only: any camera of the right size will do
+    to_onnx(m, path, describe(name, m, Intrinsics.from_fov(size[1], size[0], 80.0)))
     sess = session(path, threads=2)
     frame = np.random.default_rng(0).integers(0, 256, (1, *size, 3), dtype=np.uint8)
     med = summary(time_calls(lambda _: sess.run(None, {"frame": frame}), repeats, warmup=5))["median_ms"] / 1e3

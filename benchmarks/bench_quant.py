@@ -19,13 +19,14 @@ import cv2
 import numpy as np
 
 from benchmarks.common import summary, time_calls, write_result
-from bsn_edge.calibration import load_frames
+from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.data import find_clips
 from bsn_edge.evaluate.metrics import Counts
-from bsn_edge.export import QuantConfig, quantize, session, to_onnx
+from bsn_edge.export import QuantConfig, quantize, to_onnx
+from bsn_edge.runtime.model_file import session
 from bsn_edge.sequence import read_mask
 from bsn_edge.sequence.frames import read_rgb
-from bsn_edge.train import load_model
+from bsn_edge.train.run import Run
 
 BAR_IOU_DROP = 0.01
 BAR_SPEEDUP, BAR_FPS, GOAL_FPS = 2.5, 60.0, 100.0
@@ -93,16 +94,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--runs", type=int, default=60)
     args = p.parse_args(argv)
-    model, meta = load_model(args.run)
+    run = Run(args.run)
+    model, card = run.load_model()
+    info = run.info()
     size = (256, 512)
-    label = meta.get("label", "T5s")
-    seen = set(meta.get("train_clips", [])) | set(meta.get("val_clips", []))
+    card = card.at_size(*size)
+    label = info.get("label", "T5s")
+    seen = set(info.get("train_clips", [])) | set(info.get("val_clips", []))
     clips = [c for c in find_clips(args.data, label) if c.path.name not in seen]
     frames = load_frames(args.calib, size, 64)
-    threshold = float(meta.get("threshold", 0.5))
+    threshold = card.threshold
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        fp32 = to_onnx(model, Path(tmp) / "fp32.onnx", size, {"bsn.model": meta["model"]})
+        fp32 = Path(tmp) / "fp32.onnx"
+        to_onnx(model, fp32, card)
         frame = frames[:1]
         t_fp32 = latency(fp32, frame, args.runs)
         variants = {}
@@ -119,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     m = acc["metrics"]
     drop = m["fp32"]["iou"] - m["int8"]["iou"]
     best = rows[0]
-    res = {"model": meta["model"], "threshold": threshold, "size": list(size),
+    res = {"model": card.variant, "threshold": threshold, "size": list(size),
            "test_clips": [c.path.name for c in clips],
            "fp32": {**m["fp32"], "median_ms": 1e3 * t_fp32, "fps": 1 / t_fp32}, "int8": {**m["int8"], **best},
            "pixel_agreement": acc["pixel_agreement"], "iou_drop": drop, "speed": rows,
@@ -129,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
            "passes": {"iou_drop": drop <= BAR_IOU_DROP, "speedup": best["speedup"] >= BAR_SPEEDUP,
                       "fps": best["fps"] >= BAR_FPS}}
     md = ["# int8 quantization: accuracy and speed", "",
-          f"Model `{meta['model']}` at {size[0]}x{size[1]}, threshold {threshold:.2f}, {len(clips)} held-out clips, "
+          f"Model `{card.variant}` at {size[0]}x{size[1]}, threshold {threshold:.2f}, {len(clips)} held-out clips, "
           "inside V.", "",
           "| model | IoU | recall | precision | ms | frames/s |", "|---|---|---|---|---|---|",
           f"| fp32 | {m['fp32']['iou']:.4f} | {m['fp32']['recall']:.4f} | {m['fp32']['precision']:.4f} | "

@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     path = write_result(args.out, "synth", res, markdown(res))
     print(markdown(res))
     print(f"wrote {path}")
-    return 0 if res["passes_bar"] else 1
+    return 0  # a missed bar is a finding in the report, not a crash of the benchmark run
 
 
 if __name__ == "__main__":

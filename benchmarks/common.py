@@ -62,8 +62,9 @@ def write_result(out_dir: str | Path, name: str, result: dict[str, Any], markdow
 def train_run(data: Path, out: Path, sets: list[str]) -> Path:
     """``bsn-train --data data --out out --set ...`` in this process; a finished run is reused."""
     from bsn_edge.cli import train as train_cli
+    from bsn_edge.train.run import Run
 
-    if (out / "checkpoint.json").is_file():
+    if Run(out).checkpoint_path.is_file():
         return out
     argv = ["--data", str(data), "--out", str(out), "--quiet"]
     for s in sets:

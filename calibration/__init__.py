@@ -1,6 +1,5 @@
-"""Camera intrinsics (chessboard calibration) and quantization calibration sets."""
+"""Camera intrinsics and lens distortion from chessboard views, and the calibration file."""
 
 from bsn_edge.calibration.chessboard import Calibration, calibrate
-from bsn_edge.calibration.frames import load_frames
 
-__all__ = ["Calibration", "calibrate", "load_frames"]
+__all__ = ["Calibration", "calibrate"]

@@ -11,7 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bsn_edge.calibration.frames import IMAGE_EXTS, VIDEO_EXTS
+from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS
 from bsn_edge.camera import Intrinsics
 from bsn_edge.sequence.images import atomic_write_bytes
 

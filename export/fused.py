@@ -2,15 +2,13 @@
 
 Input ``frame``: uint8 ``[1, H, W, 3]``, BGR as OpenCV decodes it, already at the model's size.
 Outputs ``blindspot``: float32 ``[1, 1, H, W]`` probabilities; ``depth``: float32 ``[1, 1, H, W]``
-metres. ``metadata_props`` carries what the runtime needs (see ``METADATA_KEYS``).
+metres. ``metadata_props`` carries the sealed model card (``bsn_edge.card``), all the runtime needs.
 """
 
 from __future__ import annotations
 
-import json
 import warnings
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import onnx
@@ -18,14 +16,15 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from bsn_edge.card import ModelCard
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
+from bsn_edge.export.seal import seal, set_metadata
 from bsn_edge.export.upsample import with_shuffle_upsampling
+from bsn_edge.runtime.model_file import session
 
 OPSET = 17
 PARITY_ATOL = 1e-3      # fp32 onnxruntime vs torch, on probabilities
 DEPTH_RTOL = 1e-3       # and on depth, relative
-METADATA_KEYS = ("bsn.model", "bsn.variant", "bsn.input_size", "bsn.threshold", "bsn.intrinsics",
-                 "bsn.quantization", "bsn.config_digest", "bsn.weights_sha256", "bsn.spec")
 
 
 NORMALISE = "normalise"   # the module (and ONNX node scope) turning the frame into network input
@@ -69,43 +68,27 @@ class FusedModel(nn.Module):
         return torch.sigmoid(logits), depth
 
 
-def to_onnx(model: nn.Module, out: str | Path, size: tuple[int, int], metadata: dict[str, Any]) -> Path:
-    """Export ``model`` (a BlindSpotNet, eval mode) fused, with ``metadata`` as ``bsn.*`` props."""
+def to_onnx(model: nn.Module, out: str | Path, card: ModelCard) -> ModelCard:
+    """Export ``model`` (a BlindSpotNet) fused at ``card.input_size``, sealed with ``card``;
+    returns the sealed card."""
     out = Path(out)
     fused = FusedModel(model.eval()).eval()
-    h, w = size
+    h, w = card.input_size
     dummy = torch.zeros(1, h, w, 3, dtype=torch.uint8)
     tmp = out.with_suffix(".tmp.onnx")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        torch.onnx.export(fused, (dummy,), str(tmp), input_names=["frame"],
-                          output_names=["blindspot", "depth"], opset_version=OPSET, dynamo=False,
-                          do_constant_folding=True)
-    m = onnx.load(str(tmp))
-    del m.metadata_props[:]
-    for k, v in metadata.items():
-        e = m.metadata_props.add()
-        e.key, e.value = k, v if isinstance(v, str) else json.dumps(v)
-    onnx.checker.check_model(m)
-    onnx.save(m, str(out))
-    tmp.unlink(missing_ok=True)
-    return out
-
-
-def session(path: str | Path, threads: int = 2, spinning: bool = True, profile_prefix: str | None = None):
-    """An onnxruntime CPU session with ``threads`` intra-op threads (profiling into files starting
-    with ``profile_prefix`` when given)."""
-    import onnxruntime as ort
-
-    so = ort.SessionOptions()
-    so.intra_op_num_threads = threads
-    so.inter_op_num_threads = 1
-    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    if not spinning:
-        so.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    if profile_prefix:
-        so.enable_profiling, so.profile_file_prefix = True, profile_prefix
-    return ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            torch.onnx.export(fused, (dummy,), str(tmp), input_names=["frame"],
+                              output_names=["blindspot", "depth"], opset_version=OPSET, dynamo=False,
+                              do_constant_folding=True)
+        m = onnx.load(str(tmp))
+        set_metadata(m, card)
+        onnx.checker.check_model(m)
+        onnx.save(m, str(tmp))
+        return seal(tmp, card, out)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def check_parity(model: nn.Module, path: str | Path, frames: list[np.ndarray]) -> dict[str, float]:

@@ -20,6 +20,7 @@ from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, Q
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
 from bsn_edge.export.fused import NORMALISE
+from bsn_edge.export.seal import read_card, seal
 
 METHODS = {"minmax": CalibrationMethod.MinMax, "entropy": CalibrationMethod.Entropy,
            "percentile": CalibrationMethod.Percentile}
@@ -113,8 +114,7 @@ def quantize(fp32: str | Path, out: str | Path, frames: np.ndarray, cfg: QuantCo
     """Quantize ``fp32`` into ``out`` calibrated on ``frames``; returns what stayed float and why."""
     cfg = cfg or QuantConfig()
     fp32, out = Path(fp32), Path(out)
-    src = onnx.load(str(fp32))
-    meta = {p.key: p.value for p in src.metadata_props}
+    card = read_card(fp32)
     with tempfile.TemporaryDirectory() as tmp:
         pre = Path(tmp) / "pre.onnx"
         quant_pre_process(str(fp32), str(pre), skip_symbolic_shape=True)
@@ -125,11 +125,6 @@ def quantize(fp32: str | Path, out: str | Path, frames: np.ndarray, cfg: QuantCo
                         weight_type=TYPES[cfg.weights], calibrate_method=METHODS[cfg.method],
                         nodes_to_exclude=list(excluded),
                         extra_options={"ActivationSymmetric": cfg.activations == "int8"})
-    q = onnx.load(str(out))
-    del q.metadata_props[:]
-    for k, v in {**meta, "bsn.quantization": cfg.scheme()}.items():
-        e = q.metadata_props.add()
-        e.key, e.value = k, v
-    onnx.save(q, str(out))
+    sealed = seal(out, card.replace(quantization=cfg.scheme()))
     return {"config": asdict(cfg), "scheme": cfg.scheme(), "float_nodes": excluded,
-            "calibration_frames": len(frames)}
+            "calibration_frames": len(frames), "card": sealed}

@@ -42,10 +42,12 @@ def _prepare(work: Path) -> tuple[Path, Path, Path]:
                 _py("-m", "bsn_edge.cli.synth", str(data / f"{style}_{s}"), "--frames", "200", "--style", style,
                     "--seed", str(s), "--force")
         _py("-m", "bsn_edge.cli.label", *[str(p) for p in sorted(data.iterdir())])
-    if not (run / "checkpoint.json").is_file():
+    from bsn_edge.train.run import Run
+
+    if not Run(run).checkpoint_path.is_file():
         _py("-m", "bsn_edge.cli.train", "--config", "configs/quick.toml", "--data", str(data), "--out", str(run))
     if not model.is_file():
-        _py("-m", "bsn_edge.export.cli", "--checkpoint", str(run), "--out", str(model), "--int8", "--calib",
+        _py("-m", "bsn_edge.cli.export", "--checkpoint", str(run), "--out", str(model), "--int8", "--calib",
             str(data / "town_0"), "--force")
     return data, run, model
 

@@ -11,7 +11,7 @@ from bsn_edge.data import find_clips
 from bsn_edge.evaluate.evaluator import evaluate, grid_image, load_teacher
 from bsn_edge.sequence import write_image
 from bsn_edge.sequence.images import atomic_write_bytes
-from bsn_edge.train import load_model
+from bsn_edge.train.run import Run
 
 PROG = "bsn-eval"
 
@@ -37,30 +37,30 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    run = Path(args.run)
+    run = Run(args.run)
     try:
-        model, meta = load_model(run)
-        cfg = json.loads((run / "config.json").read_text()) if (run / "config.json").is_file() else {}
-        label = meta.get("label", "T5s")
+        model, card = run.load_model()
+        info, cfg = run.info(), run.config()
+        label = info.get("label", "T5s")
         clips = find_clips(args.data, label)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     if args.clips == "held-out":
-        seen = set(meta.get("train_clips", [])) | set(meta.get("val_clips", []))
+        seen = set(info.get("train_clips", [])) | set(info.get("val_clips", []))
         clips = [c for c in clips if c.path.name not in seen]
     if args.styles:
         clips = [c for c in clips if c.style in args.styles]
     if not clips:
         return fail(PROG, f"no clips to evaluate in {args.data} (held-out: {args.clips == 'held-out'}, "
                           f"styles: {args.styles or 'any'})")
-    size = tuple(args.size or meta["input_size"])
-    teacher = None if args.no_baselines else load_teacher(run, cfg)
-    res = evaluate(model, meta, clips, size, label, teacher,
+    size = tuple(args.size or card.input_size)
+    teacher = None if args.no_baselines else load_teacher(run)
+    res = evaluate(model, card, clips, size, label, teacher,
                    teacher_scale=float(cfg.get("teacher", {}).get("scale", 0.5)))
     if args.no_baselines:
         res["overall"] = {"BSN": res["overall"]["BSN"]}
     rows = res.pop("grid_rows")
-    report = {"run": str(run), "model": meta["model"], "size": list(size),
+    report = {"run": str(run.path), "model": card.variant, "size": list(size),
               "clips": [c.path.name for c in clips], **res}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

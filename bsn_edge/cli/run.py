@@ -4,14 +4,20 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
+import threading
+from pathlib import Path
+from typing import Any
 
 from tqdm import tqdm
 
+from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.senders import CanSender, Sender, SerialSender
 from bsn_edge.calibration.chessboard import Calibration
 from bsn_edge.cli.common import fail
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
+from bsn_edge.sequence.images import atomic_write_bytes
 
 PROG = "bsn-run"
 LOG_CHANNEL = "bsn-can-log"
@@ -23,7 +29,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run the fused blind-spot model on a video file, an image folder, a camera or a stream: "
                     "per frame blind-spot mask and depth -> LEFT / CENTRE / RIGHT sectors -> smoothing -> "
                     "alert state -> CAN and/or serial at a fixed cycle, with a status heartbeat. Prints a "
-                    "summary (frames, dropped, frames/s, p50/p95/p99 latency, per-stage shares).")
+                    "summary (frames, dropped, frames/s, p50/p95/p99 latency, per-stage shares). Before the "
+                    "first frame the model's digest and self-test are checked: a model that fails them is "
+                    "refused (UNAVAILABLE is sent first). Exit codes: 0 done (or stopped by SIGTERM), 1 the "
+                    "source failed, 2 could not start, 130 interrupted (SIGINT).")
     p.add_argument("--model", required=True, help="fused ONNX model from bsn-export")
     p.add_argument("--source", required=True, help="VIDEO file, image DIR, CAMERA_INDEX or stream URL")
     p.add_argument("--can", metavar="IFACE:CHANNEL", help="send on this python-can bus, e.g. socketcan:can0")
@@ -45,19 +54,72 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+CAN_LOG_EXTS = (".log", ".asc", ".blf")   # what python-can writes and bsn-listen reads back
+
+
 def make_senders(args) -> list[Sender]:
+    """The configured senders; ``ValueError`` names the bad option (a sender already opened is
+    closed again)."""
     senders: list[Sender] = []
     if args.can_log:
-        from pathlib import Path
+        ext = Path(args.can_log).suffix.lower()
+        if ext not in CAN_LOG_EXTS:
+            raise ValueError(f"--can-log {args.can_log}: write {', '.join(CAN_LOG_EXTS)} (candump, ASC or BLF), "
+                             f"which bsn-listen can read back; not {ext or 'a file without extension'}")
         Path(args.can_log).parent.mkdir(parents=True, exist_ok=True)
-    if args.can or args.can_log:
-        iface, _, channel = (args.can or f"virtual:{LOG_CHANNEL}").partition(":")
-        if not channel:
-            raise ValueError(f"--can needs IFACE:CHANNEL, got {args.can!r}")
-        senders.append(CanSender(iface, channel, log_path=args.can_log))
-    if args.serial:
-        senders.append(SerialSender(args.serial))
+    try:
+        if args.can or args.can_log:
+            iface, _, channel = (args.can or f"virtual:{LOG_CHANNEL}").partition(":")
+            if not channel:
+                raise ValueError(f"--can needs IFACE:CHANNEL, got {args.can!r}")
+            try:
+                senders.append(CanSender(iface, channel, log_path=args.can_log))
+            except Exception as e:
+                raise ValueError(f"cannot open CAN interface {iface!r} channel {channel!r}: "
+                                 f"{type(e).__name__}: {e}") from None
+        if args.serial:
+            try:
+                senders.append(SerialSender(args.serial))
+            except Exception as e:
+                raise ValueError(f"cannot open serial port {args.serial!r}: {type(e).__name__}: {e}") from None
+    except ValueError:
+        for s in senders:
+            s.close()
+        raise
     return senders
+
+
+def refuse(senders: list[Sender], message: str) -> int:
+    """The runtime cannot start: say UNAVAILABLE on every bus first, then the reason."""
+    frame = AlertFrame.unavailable(0.0)
+    for s in senders:
+        s.send(frame)
+        s.close()
+    return fail(PROG, message + (" (UNAVAILABLE sent)" if senders else ""))
+
+
+class StopOnSignal:
+    """SIGINT and SIGTERM (how a service manager stops a process) both end the run cleanly: the
+    loop finishes its frame, logs are closed, the summary is written, UNAVAILABLE is sent."""
+
+    def __init__(self, source) -> None:
+        self.source, self.event, self.signal = source, threading.Event(), None
+        self._old: dict[int, Any] = {}
+
+    def _handle(self, signum, _frame) -> None:
+        self.signal = signal.Signals(signum).name
+        self.event.set()
+        self.source.stop()
+
+    def __enter__(self) -> StopOnSignal:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -65,35 +127,40 @@ def main(argv: list[str] | None = None) -> int:
     if args.max_frames is not None and args.max_frames < 1:
         return fail(PROG, "--max-frames must be >= 1")
     try:
+        senders = make_senders(args)
+    except ValueError as e:
+        return fail(PROG, str(e))
+    try:
+        calibration = Calibration.read(args.calib) if args.calib else None
         engine = Engine(args.model, args.threads, not args.no_spin)
         source = open_source(args.source, pace=args.pace)
-        calibration = Calibration.read(args.calib) if args.calib else None
-        senders = make_senders(args)
     except (FileNotFoundError, ValueError, OSError) as e:
-        return fail(PROG, str(e))
-    except Exception as e:  # python-can / pyserial open errors
-        return fail(PROG, f"cannot open the output: {type(e).__name__}: {e}")
+        return refuse(senders, str(e))
     try:
-        total = args.max_frames or getattr(source, "total", None) or (len(source.files) if hasattr(source, "files")
-                                                                        else None)
-        with tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
+        total = args.max_frames or getattr(source, "total", None)
+        with StopOnSignal(source) as stopper, \
+                tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
             summary = run(engine, source, senders, RuntimeConfig(cycle_s=args.cycle), overlay=args.overlay,
-                          log=args.log, max_frames=args.max_frames, progress=bar.update, calibration=calibration)
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
-        return 130
+                          log=args.log, max_frames=args.max_frames, progress=bar.update, calibration=calibration,
+                          stop=stopper.event)
     finally:
         source.close()
         for s in senders:
             s.close()
+    summary["signal"] = stopper.signal
     text = json.dumps(summary, indent=1)
     if args.summary:
-        with open(args.summary, "w") as f:
-            f.write(text + "\n")
+        atomic_write_bytes(args.summary, (text + "\n").encode())
     print(text)
     for s in senders:
         if s.stats.errors:
             print(f"{PROG}: warning: {s.name} failed {s.stats.errors} times ({s.stats.last_error})", file=sys.stderr)
+    if summary["source_failure"]:
+        print(f"{PROG}: error: the source failed: {summary['source_failure']}", file=sys.stderr)
+        return 1
+    if stopper.signal == "SIGINT":
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
     return 0
 
 

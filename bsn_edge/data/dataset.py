@@ -13,6 +13,7 @@ from torch.utils.data import Dataset
 
 from bsn_edge import semantics as sm
 from bsn_edge.sequence import SequenceMeta, read_depth, read_mask
+from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.frames import read_rgb
 
 IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], np.float32)
@@ -28,21 +29,28 @@ class Clip:
     frames: tuple[int, ...]     # frames that have labels
 
 
-def find_clips(root: str | Path, label_name: str = "T5s") -> list[Clip]:
-    """Every sequence folder under ``root`` (itself included) that has labels ``label_name``."""
+def find_clips(root: str | Path, label_name: str = "T5s",
+               skipped: list[tuple[str, str]] | None = None) -> list[Clip]:
+    """Every sequence folder under ``root`` (itself included) that has labels ``label_name``.
+    Folders found without usable labels are appended to ``skipped`` as ``(folder, reason)``."""
     root = Path(root)
     if not root.exists():
         raise FileNotFoundError(f"data folder {root} not found")
     out = []
-    for meta_path in sorted([root / "meta.json", *root.rglob("*/meta.json")]):
-        seq = meta_path.parent
-        lab = seq / "labels" / label_name / "blindspot"
-        if not meta_path.exists() or not lab.is_dir():
+    for meta_path in sorted([root / SequenceFolder.META, *root.rglob(f"*/{SequenceFolder.META}")]):
+        if not meta_path.exists():
             continue
-        frames = tuple(sorted(int(p.stem) for p in lab.glob("*.png")))
-        if frames:
-            meta = SequenceMeta.read(seq)
-            out.append(Clip(seq, str(meta.extra.get("style", meta.source)), frames))
+        seq = SequenceFolder(meta_path.parent)
+        labels = seq.labels(label_name)
+        frames = tuple(labels.frames())
+        if not frames:
+            if skipped is not None:
+                why = "labelled, but no frame: the clip is shorter than T" if labels.root.is_dir() \
+                    else f"no labels/{label_name} (run bsn-label on it)"
+                skipped.append((str(seq.path), why))
+            continue
+        meta = SequenceMeta.read(seq.path)
+        out.append(Clip(seq.path, str(meta.extra.get("style", meta.source)), frames))
     if not out:
         raise ValueError(f"no labelled sequence folders (labels/{label_name}) under {root}")
     return out
@@ -92,40 +100,44 @@ class BlindSpotDataset(Dataset):
         self.size = size
         self.augment = augment
         self.label_name = label_name
-        self.rng = np.random.default_rng(seed)
+        self.seed = seed
 
     def __len__(self) -> int:
         return len(self.items)
 
     def load(self, k: int) -> dict[str, np.ndarray]:
         clip, f = self.items[k]
-        name = f"{f:06d}.png"
+        seq = SequenceFolder(clip.path)
         h, w = self.size
-        lab = clip.path / "labels" / self.label_name
+        lab = seq.labels(self.label_name)
         rgb = read_rgb(clip.path, f)
-        sem_raw = cv2.imread(str(clip.path / "semantic" / name), cv2.IMREAD_UNCHANGED)
+        sem_raw = cv2.imread(str(seq.semantic(f)), cv2.IMREAD_UNCHANGED)
         sem = sem_raw if sem_raw is not None else np.full(rgb.shape[:2], sm.IGNORE, np.uint8)
-        dep_p = clip.path / "depth" / name
+        dep_p = seq.depth(f)
         depth = read_depth(dep_p) if dep_p.exists() else np.zeros(rgb.shape[:2], np.float32)
         out = {
             "rgb": cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA),
             "depth": cv2.resize(depth, (w, h), interpolation=cv2.INTER_NEAREST),
             "semantic": cv2.resize(sem, (w, h), interpolation=cv2.INTER_NEAREST),
-            "blindspot": cv2.resize(read_mask(lab / "blindspot" / name).astype(np.uint8), (w, h),
+            "blindspot": cv2.resize(read_mask(lab.blindspot(f)).astype(np.uint8), (w, h),
                                     interpolation=cv2.INTER_NEAREST),
-            "visibility": cv2.resize(read_mask(lab / "visibility" / name).astype(np.uint8), (w, h),
+            "visibility": cv2.resize(read_mask(lab.visibility(f)).astype(np.uint8), (w, h),
                                      interpolation=cv2.INTER_NEAREST),
         }
         return out
 
-    def __getitem__(self, k: int) -> dict[str, torch.Tensor]:
+    def __getitem__(self, key: int | tuple[int, int]) -> dict[str, torch.Tensor]:
+        """Item ``key``, or ``(k, draw)``: item ``k`` augmented with the draw ``draw`` (the
+        trainer's stream gives each sample its own, so augmentation does not depend on order)."""
+        k, draw = key if isinstance(key, tuple) else (key, key)
         a = self.load(k)
         rgb = a["rgb"][..., ::-1].astype(np.float32) / 255.0
         if self.augment:
-            if self.rng.random() < 0.5:
-                a = {key: v[:, ::-1] for key, v in a.items()}
+            rng = np.random.default_rng([self.seed, draw])
+            if rng.random() < 0.5:
+                a = {name: v[:, ::-1] for name, v in a.items()}
                 rgb = rgb[:, ::-1]
-            rgb = np.clip(rgb * self.rng.uniform(0.8, 1.2) + self.rng.uniform(-0.08, 0.08), 0, 1)
+            rgb = np.clip(rgb * rng.uniform(0.8, 1.2) + rng.uniform(-0.08, 0.08), 0, 1)
         img = (rgb - IMAGENET_MEAN) / IMAGENET_STD
         sem = a["semantic"].astype(np.int64)
         return {

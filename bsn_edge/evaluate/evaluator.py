@@ -9,33 +9,39 @@ import cv2
 import numpy as np
 import torch
 
+from bsn_edge.card import ModelCard
 from bsn_edge.data import BlindSpotDataset, Clip
 from bsn_edge.evaluate.baselines import detection_2d, detection_3d, traversable_hidden
 from bsn_edge.evaluate.metrics import Counts
 from bsn_edge.models import create_teacher
 from bsn_edge.sequence import SequenceMeta, read_kitti_poses
+from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth.sheet import tint
+from bsn_edge.train.run import Run
 from bsn_edge.train.trainer import scaled
 
 METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
 
 
-def load_teacher(run: Path, cfg: dict[str, Any]) -> torch.nn.Module | None:
-    p = run / "teacher" / "teacher.pt"
-    if not p.is_file():
+def load_teacher(run: Run) -> torch.nn.Module | None:
+    """The run's segmentation teacher (None if it has none), built as its config says."""
+    state = run.load_teacher_state()
+    if state is None:
         return None
-    t = cfg.get("teacher", {})
+    t = run.config().get("teacher", {})
     teacher = create_teacher(t.get("encoder", 18), t.get("width", 128))
-    teacher.load_state_dict(torch.load(p, map_location="cpu", weights_only=True))
+    teacher.load_state_dict(state)
     return teacher.eval()
 
 
 @torch.no_grad()
-def evaluate(model, meta: dict[str, Any], clips: list[Clip], size: tuple[int, int], label: str,
+def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], label: str,
              teacher: torch.nn.Module | None, grid_frames: int = 3, teacher_scale: float = 0.5
              ) -> dict[str, Any]:
     """Metrics inside V for BSN and the baselines, overall and per clip, plus grid rows."""
-    threshold = float(meta.get("threshold", 0.5))
+    if card.threshold is None:
+        raise ValueError("the run has no decision threshold yet (training did not finish)")
+    threshold = card.threshold
     overall = {m: Counts() for m in METHODS}
     per_clip: dict[str, dict[str, Any]] = {}
     rows = []
@@ -43,8 +49,9 @@ def evaluate(model, meta: dict[str, Any], clips: list[Clip], size: tuple[int, in
         ds = BlindSpotDataset([clip], size, label_name=label)
         smeta = SequenceMeta.read(clip.path)
         intr = smeta.intrinsics.scaled(size[1], size[0])
-        poses = read_kitti_poses(clip.path / "poses.txt") if (clip.path / "poses.txt").exists() else None
-        has_boxes = (clip.path / "boxes").is_dir() and poses is not None
+        seq = SequenceFolder(clip.path)
+        poses = read_kitti_poses(seq.poses_path) if seq.poses_path.exists() else None
+        has_boxes = seq.dir(seq.BOXES).is_dir() and poses is not None
         counts = {m: Counts() for m in METHODS}
         picks = set(np.linspace(0, len(ds) - 1, grid_frames).round().astype(int).tolist()) \
             if grid_frames else set()
@@ -67,7 +74,7 @@ def evaluate(model, meta: dict[str, Any], clips: list[Clip], size: tuple[int, in
                      "Detection-2D": detection_2d(sem)}
             if has_boxes:
                 f = ds.items[k][1]
-                boxes = np.load(clip.path / "boxes" / f"{f:06d}.npy")
+                boxes = np.load(seq.boxes(f))
                 preds["Detection-3D"] = detection_3d(boxes, poses[f], intr, preds["Detection-2D"])
             for m, p in preds.items():
                 counts[m].add(p, label_m, vis)

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import hashlib
+import io
 from dataclasses import asdict, dataclass
 
+import torch
 from torch import nn
 
-from bsn_edge.models.bsn import BlindSpotNet, DepthNet
+from bsn_edge.camera import Intrinsics
+from bsn_edge.card import ModelCard
+from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, DepthNet
 from bsn_edge.models.deeplab import EncoderDecoder
 from bsn_edge.models.resnet import ResNetEncoder
 from bsn_edge.models.unet import UNet
@@ -84,3 +89,20 @@ def create_teacher(encoder_depth: int = 18, width: int = 128) -> EncoderDecoder:
     """The DeepLabV3+ segmentation teacher (Cityscapes trainIds); its decoder output is the
     distillation target."""
     return EncoderDecoder(ResNetEncoder(encoder_depth, 3), NUM_CLASSES, width)
+
+
+def describe(name: str, model: nn.Module, camera: Intrinsics, threshold: float | None = None,
+             config_digest: str = "") -> ModelCard:
+    """The card of ``model`` (a ``name`` network, trained or not) run with the model camera
+    ``camera`` (its size is the input size); the weights' sha256 is taken from ``model``."""
+    return ModelCard(variant=name, spec=get_spec(name).to_dict(), input_size=(camera.height, camera.width),
+                     threshold=threshold, camera=camera, depth_range=(MIN_DEPTH_M, MAX_DEPTH_M),
+                     weights_sha256=hashlib.sha256(weights_bytes(model)).hexdigest(), config_digest=config_digest)
+
+
+def weights_bytes(model: nn.Module) -> bytes:
+    """The serialized state dict of ``model`` (what ``model.pt`` holds; its sha256 is the card's
+    ``weights_sha256``)."""
+    buf = io.BytesIO()
+    torch.save({k: v.detach().cpu() for k, v in model.state_dict().items()}, buf)
+    return buf.getvalue()

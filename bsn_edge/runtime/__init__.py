@@ -1,7 +1,10 @@
-"""The edge runtime: sources, the fused model's engine, the loop, the send cycle, the overlay."""
+"""The edge runtime: sources, the verified model engine, the loop, the send cycle, the overlay.
 
-from bsn_edge.runtime.engine import Engine, ModelInfo
+Nothing here imports torch, onnx or onnxruntime's quantization tools: this is what runs on the car.
+"""
+
+from bsn_edge.runtime.engine import Engine, ModelError
 from bsn_edge.runtime.loop import RuntimeConfig, run
-from bsn_edge.runtime.sources import open_source
+from bsn_edge.runtime.sources import Reconnect, open_source
 
-__all__ = ["Engine", "ModelInfo", "RuntimeConfig", "open_source", "run"]
+__all__ = ["Engine", "ModelError", "Reconnect", "RuntimeConfig", "open_source", "run"]

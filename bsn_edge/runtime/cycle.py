@@ -45,12 +45,18 @@ class CycleEmitter:
                 n += 1
             return n
 
+    def final(self, t: float) -> None:
+        """Send one more cycle at ``t`` now, whatever the schedule (the run is ending: the health
+        has been marked unavailable, so this says UNAVAILABLE on every bus)."""
+        with self._lock:
+            self._send(t)
+
     def _send(self, t: float) -> None:
         h = self.health
-        state = h.state(t)
+        state, fps, faults = h.snapshot(t)
         base = self.latest if self.latest is not None and state != SystemState.UNAVAILABLE \
             else AlertFrame.unavailable(t)
-        frame = replace(base, t=t, state=state, fps=h.fps(t), faults=dict(h.faults))
+        frame = replace(base, t=t, state=state, fps=fps, faults=faults)
         for s in self.senders:
             before_err, before_full = s.stats.errors, s.stats.full
             s.send(frame)
@@ -62,22 +68,36 @@ class CycleEmitter:
 
 
 class Heartbeat:
-    """A thread that drives a CycleEmitter on the wall clock (live sources)."""
+    """A thread that drives a CycleEmitter on the wall clock (live sources). It survives any
+    exception of a cycle: counted as ``heartbeat_errors`` (the next status carries it), then on."""
 
     def __init__(self, emitter: CycleEmitter, clock: Callable[[], float] = time.monotonic) -> None:
         self.emitter, self.clock = emitter, clock
+        self.last_error = ""
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="bsn-heartbeat", daemon=True)
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            self.emitter.emit(self.clock())
+            try:
+                self.emitter.emit(self.clock())
+            except Exception as e:  # the bus must never go silent while the loop runs
+                self.last_error = f"{type(e).__name__}: {e}"
+                try:
+                    self.emitter.health.fault("heartbeat_errors")
+                except Exception:  # noqa: S110 - nothing more to do than to go on
+                    pass
             self._stop.wait(self.emitter.cycle_s / 2)
 
     def __enter__(self) -> Heartbeat:
         self._thread.start()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def close(self) -> None:
+        """Stop the thread (idempotent); the caller sends what comes after."""
         self._stop.set()
-        self._thread.join(timeout=2)
+        if self._thread.is_alive():
+            self._thread.join(timeout=2)
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,39 +1,26 @@
-"""The inference engine: one onnxruntime session on the fused model, configured from its metadata."""
+"""The inference engine: one verified model file, one onnxruntime session, its model card.
+
+At load, in this order, any failure raising :class:`ModelError` (the runtime then refuses to
+start): the file's bytes are read once; its model card is read and validated; the digest of the
+graph and weights is compared with the card's; the session is built from the verified bytes; its
+input and outputs are checked against the card; the self-test frame is run and compared with the
+answer stored at export.
+"""
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from bsn_edge.camera import Intrinsics
-from bsn_edge.export.fused import session
+from bsn_edge.card import ModelCard
+from bsn_edge.runtime import selftest
+from bsn_edge.runtime.model_file import ModelFile, session
 
 
-@dataclass(frozen=True)
-class ModelInfo:
-    """What the runtime reads from ``metadata_props``."""
-
-    variant: str
-    size: tuple[int, int]
-    threshold: float
-    intrinsics: Intrinsics | None
-    quantization: str
-
-    @classmethod
-    def read(cls, sess, path: Path) -> ModelInfo:
-        meta = dict(sess.get_modelmeta().custom_metadata_map)
-        try:
-            size = tuple(json.loads(meta["bsn.input_size"]))
-            threshold = float(json.loads(meta["bsn.threshold"]))
-        except KeyError as e:
-            raise ValueError(f"{path}: not a bsn-export model (metadata {e.args[0]} missing)") from None
-        intr = json.loads(meta.get("bsn.intrinsics", "null"))
-        return cls(meta.get("bsn.variant", "?"), size, threshold, Intrinsics(**intr) if intr else None,
-                   meta.get("bsn.quantization", "?"))
+class ModelError(ValueError):
+    """The model cannot be trusted or run: the runtime must not start on it."""
 
 
 class Engine:
@@ -41,19 +28,50 @@ class Engine:
 
     def __init__(self, model: str | Path, threads: int = 2, spinning: bool = True) -> None:
         self.path = Path(model)
-        if not self.path.is_file():
-            raise FileNotFoundError(f"model {self.path} not found")
+        mf = ModelFile.read(self.path)   # FileNotFoundError / ValueError name the file
         try:
-            self.sess = session(self.path, threads, spinning)
+            self.card = ModelCard.from_metadata(mf.metadata, str(self.path))
+        except ValueError as e:
+            raise ModelError(str(e)) from None
+        if not self.card.sealed:
+            raise ModelError(f"{self.path}: the model carries no integrity digest or self-test answer (exported "
+                             f"before models were sealed); seal a copy you trust with: bsn-export --reseal "
+                             f"{self.path} --out SEALED.onnx")
+        if mf.graph_sha256 != self.card.graph_sha256:
+            raise ModelError(f"{self.path}: the model file is damaged: the sha256 of its graph and weights "
+                             f"({mf.graph_sha256[:12]}...) is not the one its export recorded "
+                             f"({self.card.graph_sha256[:12]}...)")
+        try:
+            self.sess = session(mf.data, threads, spinning)
         except Exception as e:
-            raise ValueError(f"{self.path}: onnxruntime cannot load it: {e}") from None
-        self.info = ModelInfo.read(self.sess, self.path)
-        h, w = self.info.size
+            raise ModelError(f"{self.path}: onnxruntime cannot load it: {e}") from None
+        self._check_io()
+        h, w = self.card.input_size
         self.buf = np.empty((1, h, w, 3), np.uint8)
+        try:
+            self.self_test = selftest.check(lambda f: self.infer(f[None]), self.card.input_size, self.card.self_test)
+        except selftest.SelfTestError as e:
+            raise ModelError(f"{self.path}: {e}") from None
+
+    def _check_io(self) -> None:
+        h, w = self.card.input_size
+        ins, outs = self.sess.get_inputs(), self.sess.get_outputs()
+        if [i.name for i in ins] != ["frame"] or [o.name for o in outs] != ["blindspot", "depth"]:
+            raise ModelError(f"{self.path}: graph has inputs {[i.name for i in ins]} and outputs "
+                             f"{[o.name for o in outs]}; a bsn-export model has 'frame' -> 'blindspot', 'depth'")
+        shape, kind = list(ins[0].shape), ins[0].type
+        if shape != [1, h, w, 3] or kind != "tensor(uint8)":
+            raise ModelError(f"{self.path}: the graph takes {kind} {shape}, its card says uint8 [1, {h}, {w}, 3] "
+                             f"(input size {h}x{w})")
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(H, W) the model runs at."""
+        return self.card.input_size
 
     def preprocess(self, frame: np.ndarray) -> np.ndarray:
         """Resize once, straight into the input buffer (no copy when the size already fits)."""
-        h, w = self.info.size
+        h, w = self.card.input_size
         if frame.shape[:2] == (h, w):
             self.buf[0] = frame
         else:

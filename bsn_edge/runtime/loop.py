@@ -1,12 +1,14 @@
 """The edge loop: frame -> fused model -> sectors -> smoothing -> alert state -> senders.
 
 Never falls over: an undecodable frame, a frame of another size, NaN in the output or a
-failing sender is counted (status message and log), and the loop goes on.
+failing sender is counted (status message and log), and the loop goes on. Never looks healthy
+when it is not: whatever ends the run, the last status on every bus is UNAVAILABLE.
 """
 
 from __future__ import annotations
 
 import json
+import threading
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -31,6 +33,7 @@ from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.overlay import OverlayWriter, draw
 from bsn_edge.runtime.sources import Source
+from bsn_edge.runtime.stats import LatencyStats
 
 STAGES = ("decode", "preprocess", "inference", "postprocess", "send")
 
@@ -44,42 +47,34 @@ class RuntimeConfig:
     warmup: int = 3
 
 
-def _percentiles(xs: list[float]) -> dict[str, float]:
-    if not xs:
-        return {"p50_ms": 0.0, "p95_ms": 0.0, "p99_ms": 0.0}
-    a = np.array(xs) * 1e3
-    return {"p50_ms": float(np.percentile(a, 50)), "p95_ms": float(np.percentile(a, 95)),
-            "p99_ms": float(np.percentile(a, 99))}
-
-
 def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig | None = None,
         overlay: str | Path | None = None, log: str | Path | None = None, max_frames: int | None = None,
-        progress=None, calibration: Calibration | None = None) -> dict[str, Any]:
-    """Process ``source`` until it ends (or ``max_frames``); returns the summary.
+        progress=None, calibration: Calibration | None = None,
+        stop: threading.Event | None = None) -> dict[str, Any]:
+    """Process ``source`` until it ends, ``max_frames`` or ``stop`` is set; returns the summary.
 
-    ``calibration`` (from bsn-calibrate) replaces the model's intrinsics for the sector bearings,
-    and frames are undistorted first when it carries distortion.
+    ``calibration`` (from bsn-calibrate) replaces the model camera's intrinsics for the sector
+    bearings, and frames are undistorted first when it carries distortion. Whatever ends the
+    run, the last cycle on every bus says UNAVAILABLE, and the summary's ``source_failure`` says
+    whether the source failed.
     """
     cfg = cfg or RuntimeConfig()
-    intr = calibration.intrinsics if calibration is not None else engine.info.intrinsics
+    h, w = engine.size
+    intr = calibration.intrinsics.scaled(w, h) if calibration is not None else engine.card.camera
     undistorters: dict[tuple[int, int], Any] = {}
-    h, w = engine.info.size
-    if intr is None:
-        from bsn_edge.camera import Intrinsics
-        intr = Intrinsics.from_fov(w, h, 80.0)
-    geometry = SectorGeometry(intr.scaled(w, h) if (intr.width, intr.height) != (w, h) else intr, cfg.sectors)
+    geometry = SectorGeometry(intr, cfg.sectors)
     machines = [SectorState(cfg.alerts) for _ in range(3)]
     health = Health(cfg.health)
     emitter = CycleEmitter(senders, health, cfg.cycle_s)
     engine.warmup(cfg.warmup)
     stage_s = dict.fromkeys(STAGES, 0.0)
-    latencies: list[float] = []
+    latency = LatencyStats()
     frames = valid = 0
     last_shape = None
+    last_t = 0.0
     t_start = time.perf_counter()
     with ExitStack() as stack:
-        if source.live:
-            stack.enter_context(Heartbeat(emitter))
+        heartbeat = stack.enter_context(Heartbeat(emitter)) if source.live else None
         writer = None
         if overlay is not None:
             fps = getattr(source, "fps", 10.0)
@@ -88,11 +83,13 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
         logf = None
         if log is not None:
             Path(log).parent.mkdir(parents=True, exist_ok=True)
-            logf = stack.enter_context(open(log, "w"))
+            logf = stack.enter_context(open(log, "w", buffering=1))  # line by line: readable while it runs
         for cap in source:
             t0 = time.perf_counter()
             frames += 1
-            health.faults["dropped_frames"] = source.dropped  # live sources drop while we work
+            last_t = cap.t
+            health.set_fault("dropped_frames", source.dropped)  # live sources drop while we work
+            health.set_fault("source_reconnects", source.reconnects)
             stage_s["decode"] += cap.decode_s
             rec: dict[str, Any] = {"frame": cap.index, "t": round(cap.t, 4)}
             if cap.frame is None:
@@ -119,7 +116,7 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                     health.fault("nan_outputs")
                     rec["fault"] = "nan_output"
                 else:
-                    mask = prob >= engine.info.threshold
+                    mask = prob >= engine.card.threshold
                     readings = geometry.read(mask, depth)
                     sectors = []
                     for m, r in zip(machines, readings, strict=True):
@@ -127,7 +124,8 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                         sectors.append(SectorAlert(score, level, r.distance_m))
                     health.valid(cap.t)
                     valid += 1
-                    alert = AlertFrame(cap.t, *sectors, health.state(cap.t), health.fps(cap.t), dict(health.faults))
+                    state, fps_now, faults = health.snapshot(cap.t)
+                    alert = AlertFrame(cap.t, *sectors, state, fps_now, faults)
                     emitter.publish(alert)
                     t3 = time.perf_counter()
                     stage_s["postprocess"] += t3 - t2
@@ -141,21 +139,30 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                 emitter.emit(cap.t)
             t5 = time.perf_counter()
             stage_s["send"] += t5 - t4
-            latencies.append(t5 - t0 + cap.decode_s)
+            latency.add(t5 - t0 + cap.decode_s)
             if logf is not None:
                 rec["latency_ms"] = round(1e3 * (t5 - t0 + cap.decode_s), 2)
                 logf.write(json.dumps(rec) + "\n")
             if progress:
                 progress(1)
-            if max_frames is not None and frames >= max_frames:
+            if (max_frames is not None and frames >= max_frames) or (stop is not None and stop.is_set()):
                 break
+        # no valid inference is coming any more: the last word on every bus is UNAVAILABLE
+        health.set_fault("source_reconnects", source.reconnects)
+        health.unavailable()
+        if heartbeat is not None:
+            heartbeat.close()
+        emitter.final(time.monotonic() if source.live else last_t + cfg.cycle_s)
     wall = time.perf_counter() - t_start
     total = sum(stage_s.values()) or 1.0
     sender_stats = {s.name: vars(s.stats) for s in senders}
+    card = engine.card
     return {"frames": frames, "valid_frames": valid, "dropped": source.dropped, "seconds": round(wall, 3),
-            "fps": frames / wall if wall else 0.0, **_percentiles(latencies),
+            "fps": frames / wall if wall else 0.0, **latency.percentiles(),
             "stage_ms": {k: 1e3 * v / max(frames, 1) for k, v in stage_s.items()},
             "stage_share": {k: v / total for k, v in stage_s.items()},
-            "faults": dict(health.faults), "cycles_sent": emitter.sent_cycles, "senders": sender_stats,
-            "model": {"variant": engine.info.variant, "size": list(engine.info.size),
-                      "threshold": engine.info.threshold, "quantization": engine.info.quantization}}
+            "faults": health.faults, "cycles_sent": emitter.sent_cycles, "senders": sender_stats,
+            "source_failure": source.failure, "stopped": bool(stop is not None and stop.is_set()),
+            "heartbeat_error": heartbeat.last_error if heartbeat is not None else "",
+            "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
+                      "quantization": card.quantization, "self_test": engine.self_test}}

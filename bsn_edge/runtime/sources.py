@@ -17,7 +17,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bsn_edge.calibration.frames import IMAGE_EXTS
+from bsn_edge.sequence.folder import SequenceFolder
+from bsn_edge.sequence.media import IMAGE_EXTS
 
 
 @dataclass(frozen=True)
@@ -29,44 +30,66 @@ class Captured:
 
 
 class Source:
-    """Base: iterate to get frames; ``dropped`` counts frames a live source had to skip."""
+    """Base: iterate to get frames; ``dropped`` counts frames a live source had to skip;
+    ``failure`` says why a source ended before its end (None when it ended normally);
+    ``stop()`` ends the iteration early (safe to call from a signal handler)."""
 
     live = False
     dropped = 0
+    reconnects = 0
+    failure: str | None = None
 
     def __iter__(self) -> Iterator[Captured]:
         raise NotImplementedError
 
-    def close(self) -> None:
+    def stop(self) -> None:  # noqa: B027 - optional hook
+        pass
+
+    def close(self) -> None:  # noqa: B027 - optional hook
         pass
 
 
 class VideoFileSource(Source):
-    def __init__(self, path: str | Path, pace: bool = False) -> None:
+    """A video file on its own clock. Damaged stretches are skipped frame by frame (each one a
+    ``None`` frame the loop counts) and reading goes on after them to the file's last frame; a
+    file that stops decoding for ``give_up`` frames in a row before its end has failed."""
+
+    def __init__(self, path: str | Path, pace: bool = False, give_up: int = 250) -> None:
         self.path = Path(path)
         self.cap = cv2.VideoCapture(str(self.path))
         if not self.cap.isOpened():
             raise ValueError(f"{self.path}: OpenCV cannot open this video")
         self.fps = self.cap.get(cv2.CAP_PROP_FPS) or 10.0
         self.total = int(self.cap.get(cv2.CAP_PROP_FRAME_COUNT)) or None
-        self.pace = pace
+        self.pace, self.give_up = pace, give_up
+        self._stop = threading.Event()
+
+    def stop(self) -> None:
+        self._stop.set()
 
     def __iter__(self) -> Iterator[Captured]:
         start = time.monotonic()
         i = 0
         failures = 0
-        while True:
+        while not self._stop.is_set():
             t0 = time.perf_counter()
             ok, frame = self.cap.read()
             dt = time.perf_counter() - t0
             if not ok:
-                # a broken frame in the middle of a file is skipped; the end of the file stops
-                if self.total is not None and i < self.total - 1 and failures < 10:
-                    failures += 1
-                    yield Captured(i / self.fps, None, i, dt)
-                    i += 1
-                    continue
-                return
+                if self.total is not None and i >= self.total:
+                    if failures:
+                        self.failure = f"{self.path}: the last {failures} of {self.total} frames do not decode"
+                    return  # the end of the file
+                failures += 1
+                if failures > self.give_up or (self.total is None and failures > 1):
+                    # the first failure of a file of unknown length is taken as its end
+                    if self.total is not None:
+                        self.failure = (f"{self.path}: no frame decodes after frame {i - failures}; "
+                                        f"{self.total - i + failures} of {self.total} frames unread")
+                    return
+                yield Captured(i / self.fps, None, i, dt)
+                i += 1
+                continue
             failures = 0
             t = i / self.fps
             if self.pace:
@@ -83,37 +106,107 @@ class VideoFileSource(Source):
 class ImageFolderSource(Source):
     def __init__(self, folder: str | Path, fps: float = 10.0) -> None:
         self.folder = Path(folder)
-        rgb = self.folder / "rgb"
+        rgb = SequenceFolder(self.folder).dir(SequenceFolder.RGB)
         root = rgb if rgb.is_dir() else self.folder
         self.files = sorted(p for p in root.iterdir() if p.suffix.lower() in IMAGE_EXTS)
         if not self.files:
             raise ValueError(f"{self.folder}: no images ({', '.join(IMAGE_EXTS)})")
         self.fps = fps
+        self.total = len(self.files)
+        self._stop = threading.Event()
+
+    def stop(self) -> None:
+        self._stop.set()
 
     def __iter__(self) -> Iterator[Captured]:
         for i, p in enumerate(self.files):
+            if self._stop.is_set():
+                return
             t0 = time.perf_counter()
             frame = cv2.imread(str(p), cv2.IMREAD_COLOR)
             yield Captured(i / self.fps, frame, i, time.perf_counter() - t0)
 
 
+@dataclass(frozen=True)
+class Reconnect:
+    """How a live source comes back: a read that delivers nothing for ``stall_s`` counts as
+    lost; reopen after ``first_s``, doubling up to ``max_s`` between tries; give up after
+    ``give_up_s`` without a frame (0: never) or after ``max_tries`` reopenings in a row (None: no
+    limit; 0: the first loss ends the source, as for a file read as a camera)."""
+
+    stall_s: float = 2.0
+    first_s: float = 0.25
+    max_s: float = 4.0
+    give_up_s: float = 60.0
+    max_tries: int | None = None
+
+    def __post_init__(self) -> None:
+        if not (self.stall_s > 0 and 0 < self.first_s <= self.max_s and self.give_up_s >= 0):
+            raise ValueError("reconnect: stall_s, first_s > 0, first_s <= max_s, give_up_s >= 0")
+        if self.max_tries is not None and self.max_tries < 0:
+            raise ValueError("reconnect: max_tries must be >= 0 or None")
+
+
 class LiveSource(Source):
-    """A camera index or a stream URL, read by a thread that keeps only the newest frame."""
+    """A camera index or a stream URL, read by a thread that keeps only the newest frame.
+
+    A source that fails or stalls is reopened with back-off (``Reconnect``), counted in
+    ``reconnects``; meanwhile no frame comes, so the status goes UNAVAILABLE on the bus. After
+    ``give_up_s`` without a frame the source has failed (``failure`` says why).
+    """
 
     live = True
 
-    def __init__(self, target: int | str) -> None:
-        self.target = target
-        self.cap = cv2.VideoCapture(target)
-        if not self.cap.isOpened():
+    def __init__(self, target: int | str, reconnect: Reconnect | None = None,
+                 opener=cv2.VideoCapture) -> None:
+        self.target, self.policy, self._opener = target, reconnect or Reconnect(), opener
+        self.cap = self._open()
+        if self.cap is None:
             raise ValueError(f"cannot open camera or stream {target!r}")
         self._lock = threading.Lock()
         self._newest: Captured | None = None
         self._taken = True
+        self._last_frame = time.monotonic()
         self._stop = threading.Event()
         self._ended = threading.Event()
         self._thread = threading.Thread(target=self._read, name="bsn-capture", daemon=True)
         self._thread.start()
+
+    def _open(self):
+        cap = self._opener(self.target)
+        if hasattr(cap, "set") and hasattr(cv2, "CAP_PROP_READ_TIMEOUT_MSEC"):
+            # bound a stalled stream's read (OpenCV's FFmpeg default is 30 s)
+            cap.set(cv2.CAP_PROP_READ_TIMEOUT_MSEC, self.policy.stall_s * 1000)
+        if not cap.isOpened():
+            cap.release()
+            return None
+        return cap
+
+    def _reopen(self) -> bool:
+        """Back-off reopening until a frame source is back, or give up."""
+        delay = self.policy.first_s
+        tries = 0
+        while not self._stop.is_set():
+            if self.policy.max_tries is not None and tries >= self.policy.max_tries:
+                if self.policy.max_tries:
+                    self.failure = f"camera or stream {self.target!r}: lost, and {tries} reconnects failed"
+                return False
+            if self.policy.give_up_s and time.monotonic() - self._last_frame > self.policy.give_up_s:
+                self.failure = (f"camera or stream {self.target!r}: no frame for {self.policy.give_up_s:g} s "
+                                f"after {self.reconnects} reconnects")
+                return False
+            tries += 1
+            if self._stop.wait(delay):
+                return False
+            with self._lock:
+                self.reconnects += 1
+            if self.cap is not None:
+                self.cap.release()
+            self.cap = self._open()
+            if self.cap is not None:
+                return True
+            delay = min(2 * delay, self.policy.max_s)
+        return False
 
     def _read(self) -> None:
         i = 0
@@ -121,13 +214,17 @@ class LiveSource(Source):
             t0 = time.perf_counter()
             ok, frame = self.cap.read()
             dt = time.perf_counter() - t0
-            if not ok:
-                self._ended.set()
-                return
+            if not ok or frame is None or dt > self.policy.stall_s:
+                if not self._reopen():
+                    self._ended.set()
+                    return
+                continue
+            now = time.monotonic()
             with self._lock:
+                self._last_frame = now
                 if not self._taken:
                     self.dropped += 1
-                self._newest, self._taken = Captured(time.monotonic(), frame, i, dt), False
+                self._newest, self._taken = Captured(now, frame, i, dt), False
             i += 1
 
     def __iter__(self) -> Iterator[Captured]:
@@ -142,10 +239,14 @@ class LiveSource(Source):
             else:
                 time.sleep(0.002)
 
+    def stop(self) -> None:
+        self._stop.set()
+
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2)
-        self.cap.release()
+        if self.cap is not None:
+            self.cap.release()
 
 
 def open_source(spec: str, pace: bool = False, fps: float = 10.0) -> Source:

@@ -7,18 +7,18 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bsn_edge.sequence.folder import SequenceFolder
+
 
 def read_rgb(seq: str | Path, i: int) -> np.ndarray:
-    """BGR frame ``i`` of a sequence folder (``rgb/NNNNNN.png`` or ``.jpg``)."""
-    seq = Path(seq)
-    for ext in (".png", ".jpg"):
-        p = seq / "rgb" / f"{i:06d}{ext}"
-        if p.exists():
-            img = cv2.imread(str(p), cv2.IMREAD_COLOR)
-            if img is None:
-                raise ValueError(f"{p}: unreadable image")
-            return img
-    raise FileNotFoundError(f"{seq}: no rgb/{i:06d}.png or .jpg")
+    """BGR frame ``i`` of a sequence folder."""
+    p = SequenceFolder(seq).rgb(i)
+    if not p.exists():
+        raise FileNotFoundError(f"{p}: no such frame image")
+    img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+    if img is None:
+        raise ValueError(f"{p}: unreadable image")
+    return img
 
 
 def read_gray(seq: str | Path, i: int) -> np.ndarray:

@@ -15,14 +15,13 @@ import numpy as np
 
 from bsn_edge.camera import Intrinsics, look_pose
 from bsn_edge.sequence import SequenceMeta, write_depth, write_image, write_kitti_poses, write_mask
+from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.synth.config import SynthConfig
 from bsn_edge.synth.populate import Scenario, build_scenario
 from bsn_edge.synth.render import Frame, Renderer
 
 PITCH_DEG = (0.0, 3.0)   # camera tilt range, degrees down
-OUTPUTS = ("rgb", "depth", "semantic", "bsgt", "boxes", "meta.json", "poses.txt", "video.mp4",
-           "synth_config.json")
 
 
 @dataclass(frozen=True)
@@ -67,7 +66,7 @@ def prepare_output(out: Path, force: bool) -> None:
     if out.exists() and any(out.iterdir()):
         if not force:
             raise FileExistsError(f"{out} already exists and is not empty; pass --force to overwrite it")
-        for name in (*OUTPUTS, "labels"):
+        for name in (*SequenceFolder.SYNTH_OUTPUTS, SequenceFolder.LABELS):
             p = out / name
             if p.is_dir():
                 shutil.rmtree(p)
@@ -86,25 +85,25 @@ def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bo
     """
     out = Path(out)
     prepare_output(out, force)
+    seq = SequenceFolder(out)
     clip = make_clip(cfg)
-    for sub in ("rgb", "depth", "semantic", "bsgt", "boxes"):
-        (out / sub).mkdir()
+    for sub in SequenceFolder.FRAME_DIRS:
+        seq.dir(sub).mkdir()
     writer = None
     if video:
-        writer = cv2.VideoWriter(str(out / "video.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), cfg.fps,
+        writer = cv2.VideoWriter(str(seq.video_path), cv2.VideoWriter_fourcc(*"mp4v"), cfg.fps,
                                  (cfg.width, cfg.height))
         if not writer.isOpened():
-            raise OSError(f"OpenCV cannot write {out / 'video.mp4'} (no mp4v encoder?)")
+            raise OSError(f"OpenCV cannot write {seq.video_path} (no mp4v encoder?)")
     with ThreadPoolExecutor(max_workers=2) as pool:
         pending = []
         for i, fr in enumerate(render_frames(clip)):
-            name = f"{i:06d}"
             pending += [
-                pool.submit(write_image, out / "rgb" / f"{name}.png", fr.rgb),
-                pool.submit(write_depth, out / "depth" / f"{name}.png", fr.depth),
-                pool.submit(write_image, out / "semantic" / f"{name}.png", fr.semantic),
-                pool.submit(write_mask, out / "bsgt" / f"{name}.png", fr.bsgt),
-                pool.submit(_write_npy, out / "boxes" / f"{name}.npy", _near_boxes(fr, clip.poses[i])),
+                pool.submit(write_image, seq.rgb(i), fr.rgb),
+                pool.submit(write_depth, seq.depth(i), fr.depth),
+                pool.submit(write_image, seq.semantic(i), fr.semantic),
+                pool.submit(write_mask, seq.bsgt(i), fr.bsgt),
+                pool.submit(_write_npy, seq.boxes(i), _near_boxes(fr, clip.poses[i])),
             ]
             if writer is not None:
                 writer.write(fr.rgb)
@@ -118,16 +117,16 @@ def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bo
             f.result()
     if writer is not None:
         writer.release()
-    write_kitti_poses(out / "poses.txt", clip.poses)
+    write_kitti_poses(seq.poses_path, clip.poses)
     sc = clip.scenario
-    atomic_write_bytes(out / "synth_config.json", (json.dumps({
+    atomic_write_bytes(seq.synth_config_path, (json.dumps({
         "config": cfg.to_dict(), "speed_mps": sc.speed, "pitch_deg": float(np.degrees(clip.pitch)),
         "turns": sc.route.turns, "static_boxes": len(sc.world.static), "agents": len(sc.world.agents),
     }, indent=2) + "\n").encode())
     k = clip.intrinsics
     SequenceMeta(fps=cfg.fps, width=cfg.width, height=cfg.height, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy,
                  source="synth", frames=cfg.frames, seed=cfg.seed,
-                 extra={"style": cfg.style, "video": "video.mp4" if video else None,
+                 extra={"style": cfg.style, "video": SequenceFolder.VIDEO if video else None,
                         "camera_height": cfg.camera_height, "bs_range": cfg.bs_range}).write(out)
     return out
 

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from bsn_edge import semantics as sm
+from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence import SequenceMeta, read_depth, read_mask
 
 BS_TINT = np.array([40, 40, 255], np.float32)  # BGR red
@@ -50,13 +51,13 @@ def sequence_rows(seq: str | os.PathLike, rows: int = 3) -> np.ndarray:
         raise ValueError(f"{seq}: sequence has no frames")
     picks = np.unique(np.linspace(0, meta.frames - 1, rows + 2)[1:-1].round().astype(int))
     out = []
+    folder = SequenceFolder(seq)
     for i in picks:
-        name = f"{i:06d}.png"
-        rgb = cv2.imread(str(seq / "rgb" / name), cv2.IMREAD_COLOR)
+        rgb = cv2.imread(str(folder.rgb(i)), cv2.IMREAD_COLOR)
         if rgb is None:
-            raise FileNotFoundError(f"{seq / 'rgb' / name}: missing or unreadable")
+            raise FileNotFoundError(f"{folder.rgb(i)}: missing or unreadable")
         tiles = [rgb]
-        depth_p, sem_p, bs_p = seq / "depth" / name, seq / "semantic" / name, seq / "bsgt" / name
+        depth_p, sem_p, bs_p = folder.depth(i), folder.semantic(i), folder.bsgt(i)
         tiles.append(colorize_depth(read_depth(depth_p)) if depth_p.exists() else np.zeros_like(rgb))
         sem = cv2.imread(str(sem_p), cv2.IMREAD_GRAYSCALE) if sem_p.exists() else None
         tiles.append(sm.colorize(sem) if sem is not None else np.zeros_like(rgb))

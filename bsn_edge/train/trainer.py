@@ -9,9 +9,8 @@ trained on the dataset's metric depth so the fused model can report distances). 
 
 from __future__ import annotations
 
-import io
-import json
 import os
+import shutil
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,20 +20,18 @@ import numpy as np
 import torch
 import torch.distributed as dist
 import torch.nn.functional as F
-from torch.utils.data import DataLoader, DistributedSampler
+from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from bsn_edge import semantics as sm
+from bsn_edge.card import UNCHOSEN_THRESHOLD, ModelCard
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
 from bsn_edge.evaluate.metrics import ThresholdSweep
-from bsn_edge.models import create_model, create_teacher, get_spec
+from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, create_model, create_teacher, get_spec
 from bsn_edge.sequence import SequenceMeta
-from bsn_edge.sequence.images import atomic_write_bytes
-from bsn_edge.train.checkpoint import CONFIG_FILE, load_model, load_state, save_model, save_state
 from bsn_edge.train.config import Config
 from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce
-
-TEACHER_DIR = "teacher"
+from bsn_edge.train.run import Run, RunError
 
 
 def _dist() -> tuple[int, int]:
@@ -45,18 +42,37 @@ def _dist() -> tuple[int, int]:
     return (dist.get_rank(), world) if world > 1 else (0, 1)
 
 
-def _loader(ds, batch: int, world: int, rank: int, seed: int, workers: int) -> Iterator[dict]:
-    """An endless stream of shuffled batches (a new epoch whenever one runs out)."""
-    sampler = DistributedSampler(ds, world, rank, shuffle=True, seed=seed) if world > 1 else None
-    epoch = 0
-    while True:
-        if sampler is not None:
-            sampler.set_epoch(epoch)
-        g = torch.Generator().manual_seed(seed + epoch)
-        dl = DataLoader(ds, batch_size=batch, shuffle=sampler is None, sampler=sampler,
-                        drop_last=len(ds) >= batch, num_workers=workers, generator=g)
-        yield from dl
-        epoch += 1
+class BatchStream:
+    """An endless, resumable stream of batches: ``[(sample index, augmentation seed), ...]``.
+
+    Epoch ``e`` visits the samples in a permutation drawn from ``seed + e``; a global batch of
+    ``batch x world`` samples is split between the ranks. Batch ``k`` of the stream depends only on
+    ``k``, so a run resumed at step ``s`` sees exactly what an uninterrupted run sees from ``s`` on,
+    augmentation included (each sample's seed is its position in the stream).
+    """
+
+    def __init__(self, n: int, batch: int, seed: int, start: int = 0, world: int = 1, rank: int = 0) -> None:
+        self.n, self.batch, self.seed, self.start, self.world, self.rank = n, batch, seed, start, world, rank
+        glob = batch * world
+        self.per_epoch = max(n // glob, 1)
+        self.glob = min(glob, n)
+
+    def __iter__(self) -> Iterator[list[tuple[int, int]]]:
+        k = self.start
+        while True:
+            epoch, j = divmod(k, self.per_epoch)
+            order = torch.randperm(self.n, generator=torch.Generator().manual_seed(self.seed + epoch)).tolist()
+            for jj in range(j, self.per_epoch):
+                lo = jj * self.glob
+                picked = order[lo:lo + self.glob][self.rank::self.world]
+                yield [(i, (epoch * self.n + lo + r) * self.world + self.rank) for r, i in enumerate(picked)]
+                k += 1
+
+
+def _loader(ds, batch: int, world: int, rank: int, seed: int, workers: int, start: int = 0) -> Iterator[dict]:
+    """Batches of ``ds`` from stream position ``start`` on (see :class:`BatchStream`)."""
+    return iter(DataLoader(ds, batch_sampler=BatchStream(len(ds), batch, seed, start, world, rank),
+                           num_workers=workers))
 
 
 def scaled(x: torch.Tensor, scale: float, mode: str = "bilinear") -> torch.Tensor:
@@ -77,8 +93,10 @@ def _adam(params, lr: float, cfg: Config) -> torch.optim.Optimizer:
 
 
 def datasets(cfg: Config, data_dir: str | Path) -> dict[str, Any]:
-    """Clips split by clip, the training styles applied, and the datasets over them."""
-    clips = find_clips(data_dir, cfg.data.label)
+    """Clips split by clip, the training styles applied, and the datasets over them; ``skipped``
+    lists the sequence folders found without usable labels, with the reason."""
+    skipped: list[tuple[str, str]] = []
+    clips = find_clips(data_dir, cfg.data.label, skipped=skipped)
     split = split_clips(clips, cfg.data.val_fraction, cfg.data.test_fraction, cfg.data.split_seed)
     train = split["train"]
     styles = cfg.data.train_styles
@@ -89,23 +107,26 @@ def datasets(cfg: Config, data_dir: str | Path) -> dict[str, Any]:
     if not train:
         raise ValueError(f"no training clips (styles {styles or 'any'}) in {data_dir}")
     val = [c for c in split["val"] if not styles or c.style in styles]
-    return {"clips": split, "train": train, "val": val,
+    return {"clips": split, "train": train, "val": val, "skipped": skipped,
             "train_ds": BlindSpotDataset(train, cfg.data.size, augment=True, label_name=cfg.data.label,
                                          seed=cfg.train.seed),
             "val_ds": BlindSpotDataset(val, cfg.data.size, label_name=cfg.data.label) if val else None}
 
 
-def train_teacher(cfg: Config, ds, out: Path, rank: int, world: int, progress: bool) -> torch.nn.Module:
+def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool) -> torch.nn.Module:
     """The segmentation teacher, trained on the dataset's semantics (or loaded)."""
     t = cfg.teacher
     teacher = create_teacher(t.encoder, t.width)
     if t.checkpoint:
-        state = torch.load(Path(t.checkpoint) / "teacher.pt", map_location="cpu", weights_only=True)
+        src = Path(t.checkpoint)
+        state = Run(src.parent).load_teacher_state() if src.name == Run.TEACHER else Run(src).load_teacher_state()
+        if state is None:
+            raise FileNotFoundError(f"teacher.checkpoint {t.checkpoint}: no teacher/teacher.pt there")
         teacher.load_state_dict(state)
         return teacher.eval()
-    path = out / TEACHER_DIR / "teacher.pt"
-    if path.is_file():
-        teacher.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
+    state = run.load_teacher_state()
+    if state is not None:
+        teacher.load_state_dict(state)
         return teacher.eval()
     model = torch.nn.parallel.DistributedDataParallel(teacher) if world > 1 else teacher
     opt = _adam(model.parameters(), t.lr, cfg)
@@ -124,10 +145,7 @@ def train_teacher(cfg: Config, ds, out: Path, rank: int, world: int, progress: b
         sched.step()
         bar.set_postfix(ce=f"{loss.item():.3f}")
     if rank == 0:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        buf = io.BytesIO()
-        torch.save(teacher.state_dict(), buf)
-        atomic_write_bytes(path, buf.getvalue())
+        run.save_teacher(teacher.state_dict())
     return teacher.eval()
 
 
@@ -142,41 +160,64 @@ def choose_threshold(model: torch.nn.Module, ds, batch: int = 8) -> tuple[float,
     return sweep.best()
 
 
+def prepare_run(out: str | Path, resume: bool = False, force: bool = False) -> Run:
+    """The run folder to train into: a new one, the same one continued (``resume``), or an existing
+    one started again (``force``, which removes the old checkpoint, state and teacher)."""
+    run = Run(out)
+    if resume and force:
+        raise ValueError("--resume and --force contradict each other: continue the run, or start it again")
+    if run.exists() and not (resume or force):
+        raise RunError(f"{run.path} already holds a run; pass --resume to continue it or --force to start again")
+    if force:
+        for p in (run.model_path, run.checkpoint_path, run.state_path):
+            p.unlink(missing_ok=True)
+        shutil.rmtree(run.teacher_path.parent, ignore_errors=True)
+    return run
+
+
 def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = False,
-          progress: bool = True) -> dict[str, Any]:
-    """Train per ``cfg`` on the labelled clips under ``data_dir``; write the run to ``out``."""
+          progress: bool = True, force: bool = False) -> dict[str, Any]:
+    """Train per ``cfg`` on the labelled clips under ``data_dir``; write the run to ``out``.
+
+    An existing run is refused unless ``resume`` (continue it: verified state, same data stream)
+    or ``force`` (start again)."""
     rank, world = _dist()
-    out = Path(out)
+    run = prepare_run(out, resume, force) if rank == 0 else Run(out)
+    if world > 1:
+        dist.barrier()
     torch.manual_seed(cfg.train.seed + rank)
     np.random.seed(cfg.train.seed + rank)
     torch.set_num_threads(cfg.train.threads)
+    state = run.load_state() if resume else None
+    if resume and state is None and run.exists():
+        raise RunError(f"{run.path}: no {Run.STATE} to resume from (made by an older version, or a run that "
+                       "never checkpointed); --force starts it again")
+    if resume and run.config_path.is_file() and run.config().get("model", {}).get("name") not in (None, cfg.model.name):
+        raise RunError(f"{run.path} trains {run.config()['model']['name']!r}, the config asks for {cfg.model.name!r}")
     data = datasets(cfg, data_dir)
     if rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(out / CONFIG_FILE, (json.dumps(cfg.to_dict(), indent=2) + "\n").encode())
+        run.write_config(cfg.to_dict())
     lam = cfg.distill_weight
-    teacher = train_teacher(cfg, data["train_ds"], out, rank, world, progress) if lam > 0 else None
+    teacher = train_teacher(cfg, data["train_ds"], run, rank, world, progress) if lam > 0 else None
 
     model = create_model(cfg.model.name)
     if cfg.train.init:
-        init, init_meta = load_model(cfg.train.init)
-        if init_meta["model"] != cfg.model.name:
-            raise ValueError(f"train.init {cfg.train.init} holds a {init_meta['model']!r} model, "
+        init, init_card = Run(cfg.train.init).load_model()
+        if init_card.variant != cfg.model.name:
+            raise ValueError(f"train.init {cfg.train.init} holds a {init_card.variant!r} model, "
                              f"not {cfg.model.name!r}")
         model.load_state_dict(init.state_dict())
     start = 0
     opt = _adam(model.parameters(), cfg.train.lr, cfg)
     sched = _poly(opt, cfg.train.steps, cfg.train.poly_power)
-    if resume and (out / "model.pt").is_file():
-        model.load_state_dict(torch.load(out / "model.pt", map_location="cpu", weights_only=True))
-        state = load_state(out)
-        if state:
-            opt.load_state_dict(state["optimizer"])
-            start = int(state["step"])
-            if "scheduler" in state:
-                sched.load_state_dict(state["scheduler"])
+    if state is not None:
+        model.load_state_dict(state["weights"])
+        opt.load_state_dict(state["optimizer"])
+        start = int(state["step"])
+        if "scheduler" in state:
+            sched.load_state_dict(state["scheduler"])
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
-    batches = _loader(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers)
+    batches = _loader(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers, start)
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
                disable=True if (not progress or rank) else None)
     history = []
@@ -203,40 +244,47 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
                         depth=f"{l_depth.item():.3f}")
         done = step + 1
         if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps):
-            _save(out, model, cfg, data, done, threshold=None)
-            save_state(out, opt, done, sched)
+            _save(run, model, cfg, data, done, threshold=None,
+                  resume_state={"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "step": done})
     elapsed = time.perf_counter() - t0
     summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "seconds": round(elapsed, 1),
-                               "final_loss": history[-1] if history else None}
+                               "final_loss": history[-1] if history else None,
+                               "skipped_clips": [f"{name}: {why}" for name, why in data["skipped"]]}
     if rank == 0:
-        threshold, val = (0.5, {})
+        threshold, val = UNCHOSEN_THRESHOLD, {}
         if data["val_ds"] is not None:
             threshold, val = choose_threshold(model, data["val_ds"])
-        meta = _save(out, model, cfg, data, cfg.train.steps, threshold=threshold, val=val, history=history)
-        summary.update(threshold=threshold, val=val, weights_sha256=meta["weights_sha256"])
+        else:
+            summary["threshold_note"] = f"no validation clips: threshold left at {UNCHOSEN_THRESHOLD}"
+        card = _save(run, model, cfg, data, cfg.train.steps, threshold=threshold, val=val, history=history)
+        summary.update(threshold=threshold, val=val, weights_sha256=card.weights_sha256)
     if world > 1:
         dist.barrier()
     return summary
 
 
-def _save(out: Path, model, cfg: Config, data, step: int, threshold: float | None,
-          val: dict | None = None, history: list | None = None) -> dict[str, Any]:
-    first = data["train"][0]
-    meta = SequenceMeta.read(first.path)
+def _save(run: Run, model, cfg: Config, data, step: int, threshold: float | None,
+          val: dict | None = None, history: list | None = None,
+          resume_state: dict[str, Any] | None = None) -> ModelCard:
+    """A checkpoint of ``model`` with its card; ``threshold`` None keeps the previous one (if any)."""
+    train_meta = SequenceMeta.read(data["train"][0].path)
     h, w = cfg.data.size
-    k = meta.intrinsics.scaled(w, h)
-    prev = {}
-    if (out / "checkpoint.json").is_file():
-        prev = json.loads((out / "checkpoint.json").read_text())
+    prev: dict[str, Any] = {}
+    if run.checkpoint_path.is_file():
+        prev = run.info()
+        prev["threshold"] = prev["card"].threshold
+    card_fields = {
+        "variant": cfg.model.name, "spec": get_spec(cfg.model.name).to_dict(), "input_size": (h, w),
+        "threshold": threshold if threshold is not None else prev.get("threshold"),
+        "camera": train_meta.intrinsics.scaled(w, h), "depth_range": (MIN_DEPTH_M, MAX_DEPTH_M),
+        "config_digest": cfg.digest(), "train_camera": train_meta.intrinsics,
+    }
     info = {
-        "model": cfg.model.name, "spec": get_spec(cfg.model.name).to_dict(), "step": step,
-        "threshold": threshold if threshold is not None else prev.get("threshold", 0.5),
-        "input_size": [h, w], "intrinsics": k.to_dict(), "config_digest": cfg.digest(),
-        "label": cfg.data.label, "distill_weight": cfg.distill_weight,
+        "step": step, "label": cfg.data.label, "distill_weight": cfg.distill_weight,
         "train_clips": [c.path.name for c in data["train"]], "val_clips": [c.path.name for c in data["val"]],
         "test_clips": [c.path.name for c in data["clips"]["test"]],
         "val": val if val is not None else prev.get("val", {}),
     }
     if history:
         info["loss_first_last"] = [history[0], history[-1]]
-    return save_model(out, model, info)
+    return run.save(model, card_fields, info, resume_state)

@@ -8,13 +8,15 @@ import onnx
 import pytest
 import torch
 
-from bsn_edge.calibration import load_frames
-from bsn_edge.export import FusedModel, check_parity, head_nodes, quantize, session, to_onnx
-from bsn_edge.export.cli import main as export_main
-from bsn_edge.export.fused import METADATA_KEYS
+from bsn_edge.export.calib_frames import load_frames
+from bsn_edge.card import ModelCard
+from bsn_edge.cli.export import main as export_main
+from bsn_edge.export import FusedModel, check_parity, head_nodes, quantize, read_card, to_onnx
 from bsn_edge.models import create_model
+from bsn_edge.runtime.model_file import session
 from bsn_edge.synth import SynthConfig, write_clip
-from bsn_edge.train.checkpoint import save_model
+from bsn_edge.train.run import Run
+from tests.cards import card_for
 
 SIZE = (64, 128)
 
@@ -25,12 +27,10 @@ def run(tmp_path_factory):
     root = tmp_path_factory.mktemp("export")
     torch.manual_seed(0)
     model = create_model("small-light").eval()
-    spec = {"arch": "deeplab", "encoder_depth": 18, "decoder_width": 64, "separable": True, "use_depth": True,
-            "distill": True, "depth_width": 32, "output_stride": 32, "input_scale": 0.5}
-    save_model(root / "run", model, {"model": "small-light", "spec": spec, "threshold": 0.4,
-                                     "input_size": list(SIZE), "config_digest": "abc",
-                                     "intrinsics": {"fx": 50.0, "fy": 50.0, "cx": 64.0, "cy": 32.0,
-                                                    "width": 128, "height": 64}})
+    card = card_for(SIZE, threshold=0.4)
+    fields = {k: getattr(card, k) for k in ("variant", "spec", "input_size", "threshold", "camera", "depth_range",
+                                            "config_digest")}
+    Run(root / "run").save(model, fields, {"step": 0})
     clip = root / "clip"
     write_clip(SynthConfig(frames=12, height=64, width=128, seed=1), clip)
     return root / "run", clip, model
@@ -47,9 +47,10 @@ def test_fused_graph_contract_parity_and_metadata(run, tmp_path):
     assert [d.dim_value for d in inp.type.tensor_type.shape.dim] == [1, 64, 128, 3]
     assert [o.name for o in m.graph.output] == ["blindspot", "depth"]
     meta = {p.key: p.value for p in m.metadata_props}
-    assert set(METADATA_KEYS) <= set(meta)
+    card = ModelCard.from_metadata(meta)
     assert json.loads(meta["bsn.input_size"]) == [64, 128] and json.loads(meta["bsn.threshold"]) == 0.4
-    assert json.loads(meta["bsn.intrinsics"])["fx"] == pytest.approx(50.0)
+    assert card.camera.fx == pytest.approx(card_for(SIZE).camera.fx) and card.sealed
+    assert card.weights_sha256 == Run(path).card().weights_sha256
     frame = cv2.imread(str(clip / "rgb" / "000003.png"))
     p, d = session(out).run(None, {"frame": frame[None]})
     with torch.no_grad():
@@ -77,8 +78,8 @@ def test_int8_on_a_tiny_calibration_set_keeps_heads_float(run, tmp_path):
     assert export_main(["--checkpoint", str(path), "--out", str(out), "--size", "64x128", "--int8",
                         "--calib", str(clip), "--calib-frames", "6"]) == 0
     q = onnx.load(str(out))
-    meta = {p.key: p.value for p in q.metadata_props}
-    assert "QDQ" in meta["bsn.quantization"] and "uint8" in meta["bsn.quantization"]
+    card = read_card(out)
+    assert "QDQ" in card.quantization and "uint8" in card.quantization and card.self_test.prob_atol == 0.05
     summary = json.loads(out.with_suffix(".json").read_text())
     floats = summary["quantization"]["float_nodes"]
     assert any("Sigmoid" in why for why in floats.values()) and any("'depth' head" in w for w in floats.values())
@@ -93,7 +94,8 @@ def test_int8_on_a_tiny_calibration_set_keeps_heads_float(run, tmp_path):
 
 def test_head_nodes_walk_back_to_the_first_convolution(run, tmp_path):
     _, _, model = run
-    p = to_onnx(model, tmp_path / "m.onnx", SIZE, {})
+    p = tmp_path / "m.onnx"
+    to_onnx(model, p, card_for(SIZE))
     heads = head_nodes(onnx.load(str(p)))
     kinds = sorted({why.split()[0] for why in heads.values()})
     assert "Conv" in kinds and "Sigmoid" in kinds and "Exp" in kinds
@@ -124,7 +126,7 @@ def test_existing_output_and_other_architecture(run, tmp_path, capsys):
     other = tmp_path / "other"
     other.mkdir()
     meta = json.loads((path / "checkpoint.json").read_text())
-    meta["spec"]["decoder_width"] = 96
+    meta["card"]["spec"]["decoder_width"] = 96
     (other / "checkpoint.json").write_text(json.dumps(meta))
     (other / "model.pt").write_bytes((path / "model.pt").read_bytes())
     assert export_main(["--checkpoint", str(other), "--out", str(tmp_path / "y.onnx")]) == 2
@@ -145,9 +147,11 @@ def test_calibration_sets_from_folders_and_videos(run, tmp_path):
 
 def test_quantize_directly_reports_its_scheme(run, tmp_path):
     _, clip, model = run
-    p = to_onnx(model, tmp_path / "m.onnx", SIZE, {"bsn.model": "x"})
+    p = tmp_path / "m.onnx"
+    to_onnx(model, p, card_for(SIZE))
     info = quantize(p, tmp_path / "q.onnx", load_frames(clip, SIZE, 4))
     assert info["scheme"].startswith("static QDQ") and info["calibration_frames"] == 4
+    assert info["card"].quantization == info["scheme"] and info["card"].sealed
     check_parity(model, p, [np.zeros((*SIZE, 3), np.uint8)])
 
 
@@ -159,7 +163,8 @@ def test_opencv_dnn_runs_the_fp32_model(run, tmp_path):
     """
     _, clip, model = run
     size = (128, 256)
-    p = to_onnx(model, tmp_path / "m.onnx", size, {})
+    p = tmp_path / "m.onnx"
+    to_onnx(model, p, card_for(size))
     try:
         net = cv2.dnn.readNetFromONNX(str(p))
     except cv2.error as e:

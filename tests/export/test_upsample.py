@@ -6,6 +6,7 @@ import torch
 import torch.nn.functional as F
 
 from bsn_edge.export import to_onnx
+from tests.cards import card_for
 from bsn_edge.export.upsample import ShuffleUpsample, bilinear_taps, with_shuffle_upsampling
 from bsn_edge.models import create_model
 from bsn_edge.models.upsample import Upsample
@@ -46,7 +47,8 @@ def test_model_copy_swaps_every_upsampler_and_keeps_outputs():
 
 def test_exported_graph_upsamples_without_resize(tmp_path):
     torch.manual_seed(0)
-    g = onnx.load(str(to_onnx(create_model("small-light").eval(), tmp_path / "m.onnx", (64, 128), {})))
+    to_onnx(create_model("small-light").eval(), tmp_path / "m.onnx", card_for((64, 128)))
+    g = onnx.load(str(tmp_path / "m.onnx"))
     ops = [n.op_type for n in g.graph.node]
     assert ops.count("DepthToSpace") == 4, "two per head: the head's x4 and the frame's x2"
     assert "Pad" not in ops and "ConstantOfShape" not in [n.op_type for n in g.graph.node if "up" in n.name]

@@ -6,6 +6,7 @@ from pathlib import Path
 import can
 import cv2
 import numpy as np
+import onnx
 import pytest
 import serial
 import torch
@@ -20,6 +21,7 @@ from bsn_edge.models import create_model
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.sources import ImageFolderSource
 from bsn_edge.synth import SynthConfig, write_clip
+from tests.cards import card_for
 from tests.fakes import FullBus, GonePort
 
 SIZE = (128, 256)
@@ -29,11 +31,8 @@ SIZE = (128, 256)
 def setup(tmp_path_factory):
     root = tmp_path_factory.mktemp("rt")
     torch.manual_seed(0)
-    meta = {"bsn.model": "BlindSpotNet", "bsn.variant": "small-light", "bsn.input_size": list(SIZE),
-            "bsn.threshold": 0.5, "bsn.intrinsics": {"fx": 150.0, "fy": 150.0, "cx": 128.0, "cy": 64.0,
-                                                      "width": 256, "height": 128},
-            "bsn.quantization": "none (fp32)"}
-    model = to_onnx(create_model("small-light").eval(), root / "m.onnx", SIZE, meta)
+    model = root / "m.onnx"
+    to_onnx(create_model("small-light").eval(), model, card_for(SIZE))
     clip = root / "clip"
     write_clip(SynthConfig(frames=15, height=96, width=192, seed=2), clip)
     return model, clip
@@ -57,8 +56,9 @@ def test_video_to_can_log_that_both_decoders_read(setup, tmp_path, capsys):
     assert listen_cli.main(["--can-log", str(asc)]) == 0
     out = capsys.readouterr()
     assert "hazard #0" in out.out and "status #0" in out.out and "0 with a bad CRC, 0 lost" in out.err
-    # 15 frames at 10 fps = 1.4 s on the video's clock: a cycle every 0.1 s
-    assert summary["cycles_sent"] == 15
+    # 15 frames at 10 fps = 1.4 s on the video's clock: a cycle every 0.1 s, then the final UNAVAILABLE
+    assert summary["cycles_sent"] == 16
+    assert "status #15: UNAVAILABLE" in out.out and "status #14: OK" in out.out
 
 
 def test_corrupt_and_resized_frames_are_counted(setup, tmp_path):
@@ -132,7 +132,9 @@ def test_bad_inputs_are_explained(setup, tmp_path, capsys):
     assert run_cli.main(["--model", str(model), "--source", str(tmp_path / "missing.mp4")]) == 2
     assert "not a file, a folder" in capsys.readouterr().err
     other = tmp_path / "plain.onnx"
-    to_onnx(create_model("small-light").eval(), other, SIZE, {})
+    plain = onnx.load(str(model))
+    del plain.metadata_props[:]
+    onnx.save(plain, str(other))
     assert run_cli.main(["--model", str(other), "--source", str(clip)]) == 2
     assert "not a bsn-export model" in capsys.readouterr().err
 
@@ -166,9 +168,9 @@ def test_live_source_keeps_the_newest_frame_and_counts_drops(setup):
     """A reader thread that outruns a slow consumer: stale frames are dropped and counted."""
     import time as _time
 
-    from bsn_edge.runtime.sources import LiveSource
+    from bsn_edge.runtime.sources import LiveSource, Reconnect
     _, clip = setup
-    src = LiveSource(str(clip / "video.mp4"))   # a file read as if it were a camera
+    src = LiveSource(str(clip / "video.mp4"), Reconnect(max_tries=0))   # a file read as if it were a camera
     seen = []
     for cap in src:
         seen.append(cap.index)

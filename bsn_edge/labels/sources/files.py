@@ -8,29 +8,27 @@ import cv2
 import numpy as np
 
 from bsn_edge.labels.sources.base import ClipData, DepthSource, SegSource
-from bsn_edge.sequence import read_depth, read_poses, read_tum_poses
+from bsn_edge.sequence import SequenceMeta, read_depth, read_poses, read_tum_poses
+from bsn_edge.sequence.folder import SequenceFolder
 
 
 def frame_count(seq: Path) -> int:
-    """Frames of a clip: the RGB images in ``rgb/`` (or ``meta.json``'s count for a video clip)."""
-    rgb = seq / "rgb"
-    if rgb.is_dir():
-        n = len(list(rgb.glob("*.png"))) + len(list(rgb.glob("*.jpg")))
-        if n:
-            return n
-    from bsn_edge.sequence import SequenceMeta
-    return SequenceMeta.read(seq).frames
+    """Frames of a clip: the images in ``rgb/``, else ``meta.json``'s count (a video clip)."""
+    return SequenceFolder(seq).count_frames() or SequenceMeta.read(seq).frames
 
 
-def _check_files(clip: ClipData, sub: str) -> Path:
-    folder = clip.seq / sub
+def _check_files(clip: ClipData, sub: str) -> SequenceFolder:
+    seq = SequenceFolder(clip.seq)
+    folder = seq.dir(sub)
     if not folder.is_dir():
-        raise FileNotFoundError(f"{clip.seq}: no {sub}/ folder (needed for --{sub.rstrip('/')} files)")
-    missing = [i for i in range(clip.frames) if not (folder / f"{i:06d}.png").exists()]
+        raise FileNotFoundError(f"{clip.seq}: no {sub}/ folder (needed for --{'seg' if sub == seq.SEMANTIC else sub} "
+                                "files)")
+    path = seq.depth if sub == seq.DEPTH else seq.semantic
+    missing = [i for i in range(clip.frames) if not path(i).exists()]
     if missing:
-        head = ", ".join(f"{i:06d}.png" for i in missing[:5])
+        head = ", ".join(path(i).name for i in missing[:5])
         raise FileNotFoundError(f"{folder}: {len(missing)} of {clip.frames} frames missing ({head}...)")
-    return folder
+    return seq
 
 
 class FilesDepth(DepthSource):
@@ -39,14 +37,15 @@ class FilesDepth(DepthSource):
     name = "files"
 
     def __init__(self, clip: ClipData) -> None:
-        self.folder = _check_files(clip, "depth")
+        self.seq = _check_files(clip, SequenceFolder.DEPTH)
         self.shape = (clip.meta.height, clip.meta.width)
 
     def __call__(self, i: int) -> np.ndarray:
-        d = read_depth(self.folder / f"{i:06d}.png")
+        p = self.seq.depth(i)
+        d = read_depth(p)
         if d.shape != self.shape:
-            raise ValueError(f"{self.folder / f'{i:06d}.png'}: size {d.shape[::-1]} differs from "
-                             f"meta.json's {self.shape[::-1]}")
+            raise ValueError(f"{p}: size {d.shape[0]}x{d.shape[1]} differs from meta.json's "
+                             f"{self.shape[0]}x{self.shape[1]}")
         return d
 
 
@@ -56,16 +55,16 @@ class FilesSeg(SegSource):
     name = "files"
 
     def __init__(self, clip: ClipData) -> None:
-        self.folder = _check_files(clip, "semantic")
+        self.seq = _check_files(clip, SequenceFolder.SEMANTIC)
         self.shape = (clip.meta.height, clip.meta.width)
 
     def __call__(self, i: int) -> np.ndarray:
-        p = self.folder / f"{i:06d}.png"
+        p = self.seq.semantic(i)
         s = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
         if s is None:
             raise FileNotFoundError(f"{p}: unreadable")
         if s.ndim != 2 or s.shape != self.shape:
-            raise ValueError(f"{p}: expected a single-channel {self.shape[1]}x{self.shape[0]} trainId image, "
+            raise ValueError(f"{p}: expected a single-channel {self.shape[0]}x{self.shape[1]} trainId image, "
                              f"got shape {s.shape}")
         return s.astype(np.uint8)
 
@@ -77,7 +76,7 @@ def load_poses(clip: ClipData, spec: str) -> np.ndarray:
     taken as frame 0's time) by nearest stamp within half a frame.
     """
     if spec == "files":
-        path = clip.seq / "poses.txt"
+        path = SequenceFolder(clip.seq).poses_path
         if not path.exists():
             raise FileNotFoundError(f"{clip.seq}: no poses.txt (use --poses TRAJ.txt or --poses vo)")
         poses = read_poses(path)

@@ -11,14 +11,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".bmp")
-VIDEO_EXTS = (".mp4", ".avi", ".mkv", ".mov", ".m4v")
+from bsn_edge.sequence.folder import SequenceFolder
+from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS
 
 
 def _images(folder: Path) -> list[Path]:
     files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in IMAGE_EXTS)
     # a sequence folder: take its RGB frames, not its depth or masks
-    rgb = [p for p in files if p.parent.name == "rgb"]
+    rgb = [p for p in files if p.parent.name == SequenceFolder.RGB]
     return rgb or files
 
 

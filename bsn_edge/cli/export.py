@@ -1,8 +1,9 @@
-"""``bsn-export``: a trained run -> the fused ONNX model the runtime reads (fp32, or int8)."""
+"""``bsn-export``: a trained run -> the sealed, fused ONNX model the runtime reads (fp32, or int8)."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import tempfile
@@ -10,12 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
-from bsn_edge.calibration import load_frames
 from bsn_edge.cli.common import fail, parse_size
-from bsn_edge.export.fused import check_parity, session, to_onnx
+from bsn_edge.export.calib_frames import load_frames
+from bsn_edge.export.fused import check_parity, to_onnx
 from bsn_edge.export.quantize import METHODS, TYPES, QuantConfig, quantize
+from bsn_edge.export.seal import read_card, seal
+from bsn_edge.runtime.model_file import session
 from bsn_edge.sequence.images import atomic_write_bytes
-from bsn_edge.train import load_model
+from bsn_edge.train.run import Run
 
 PROG = "bsn-export"
 
@@ -25,11 +28,14 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Export a trained run to one ONNX graph running D and B together: uint8 BGR frame "
                     "[1, H, W, 3] in, 'blindspot' probabilities and 'depth' metres out, normalisation inside, "
-                    "everything the runtime needs in its metadata. Checked with onnx.checker and against "
-                    "torch in onnxruntime. With --int8, statically quantized (QDQ) on calibration frames.")
-    p.add_argument("--checkpoint", required=True, metavar="RUN", help="training run folder (bsn-train --out)")
+                    "the model card (variant, size, threshold, model camera, depth range, quantization, "
+                    "digests) in its metadata, sealed with the sha256 of the graph and a self-test answer "
+                    "that bsn-run checks before it starts. Checked with onnx.checker and against torch in "
+                    "onnxruntime. With --int8, statically quantized (QDQ) on calibration frames.")
+    p.add_argument("--checkpoint", metavar="RUN", help="training run folder (bsn-train --out)")
     p.add_argument("--out", required=True, help="output .onnx path")
-    p.add_argument("--size", type=parse_size, default=(256, 512), metavar="HxW", help="input size (default 256x512)")
+    p.add_argument("--size", type=parse_size, default=None, metavar="HxW",
+                   help="input size (default: the size the run was trained at)")
     p.add_argument("--int8", action="store_true", help="quantize to int8 (needs --calib)")
     p.add_argument("--calib", help="calibration frames: a folder of images (or sequence folders) or a video")
     p.add_argument("--calib-frames", type=int, default=64, help="calibration frames to use (default 64)")
@@ -39,8 +45,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--per-tensor", action="store_true", help="per-tensor weights instead of per-channel")
     p.add_argument("--quantize-heads", action="store_true",
                    help="quantize the output heads too (by default they stay float)")
+    p.add_argument("--reseal", metavar="MODEL.onnx",
+                   help="instead of exporting: seal a model exported before models were sealed (writes its card "
+                        "with the graph's sha256 and a self-test answer to --out). Only for a file you trust: "
+                        "sealing cannot tell whether it was damaged before")
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     return p
+
+
+def reseal(src: Path, out: Path) -> int:
+    try:
+        card = read_card(src)
+    except (FileNotFoundError, ValueError) as e:
+        return fail(PROG, str(e))
+    sealed = seal(src, card.replace(graph_sha256="", self_test=None), out)
+    print(f"wrote {out}: {sealed.variant} {sealed.input_size[0]}x{sealed.input_size[1]}, graph sha256 "
+          f"{sealed.graph_sha256[:16]}..., self-test recorded")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,33 +69,32 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     if out.exists() and not args.force:
         return fail(PROG, f"{out} exists; pass --force to overwrite it")
+    if args.reseal:
+        return reseal(Path(args.reseal), out)
+    if not args.checkpoint:
+        return fail(PROG, "--checkpoint RUN is required (or --reseal MODEL.onnx)")
     if args.int8 and not args.calib:
         return fail(PROG, "--int8 needs --calib DIR_OR_VIDEO (frames to calibrate activation ranges on)")
+    if args.calib_frames < 1:
+        return fail(PROG, f"--calib-frames must be >= 1, got {args.calib_frames}")
     try:
-        model, meta = load_model(args.checkpoint)
+        model, card = Run(args.checkpoint).load_model()
+        if card.threshold is None:
+            raise ValueError(f"{args.checkpoint}: the run has no decision threshold yet (training did not finish)")
+        h, w = args.size or card.input_size
+        card = card.at_size(h, w)
         qcfg = QuantConfig(args.method, args.activations, args.weights, not args.per_tensor, not args.quantize_heads)
-        frames = load_frames(args.calib, args.size, args.calib_frames) if args.calib else None
+        frames = load_frames(args.calib, (h, w), args.calib_frames) if args.calib else None
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
-    h, w = args.size
-    intr = meta.get("intrinsics")
-    if intr:
-        from bsn_edge.camera import Intrinsics
-        intr = Intrinsics(**intr).scaled(w, h).to_dict()
-    metadata = {
-        "bsn.model": "BlindSpotNet", "bsn.variant": meta["model"], "bsn.spec": meta.get("spec", {}),
-        "bsn.input_size": [h, w], "bsn.threshold": meta.get("threshold", 0.5), "bsn.intrinsics": intr,
-        "bsn.quantization": "none (fp32)", "bsn.config_digest": meta.get("config_digest", ""),
-        "bsn.weights_sha256": meta.get("weights_sha256", ""),
-    }
     out.parent.mkdir(parents=True, exist_ok=True)
     check_frames = list(frames[:4]) if frames is not None else \
         [np.random.default_rng(i).integers(0, 256, (h, w, 3), dtype=np.uint8) for i in range(2)]
     summary: dict = {"checkpoint": str(args.checkpoint), "size": [h, w]}
     with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
         fp32 = Path(tmp) / "fp32.onnx"
-        print(f"exporting {meta['model']} at {h}x{w} ...", file=sys.stderr)
-        to_onnx(model, fp32, (h, w), metadata)
+        print(f"exporting {card.variant} at {h}x{w} ...", file=sys.stderr)
+        sealed = to_onnx(model, fp32, card)
         try:
             summary["parity_fp32"] = check_parity(model, fp32, check_frames)
         except ValueError as e:
@@ -85,13 +105,17 @@ def main(argv: list[str] | None = None) -> int:
             print(f"quantizing on {len(frames)} calibration frames ({qcfg.scheme()}) ...", file=sys.stderr)
             q = Path(tmp) / "int8.onnx"
             info = quantize(fp32, q, frames, qcfg)
+            sealed = info.pop("card")
             summary.update(int8_bytes=q.stat().st_size, quantization=info,
-                           int8_vs_fp32=compare(fp32, q, frames, float(metadata["bsn.threshold"])))
+                           int8_vs_fp32=compare(fp32, q, frames, sealed.threshold))
             final = q
         final.replace(out)
+    card_record = sealed.to_dict()
+    card_record["self_test"] = dataclasses.asdict(sealed.self_test) | {"prob": "...", "depth": "..."}
+    summary["card"] = card_record
     atomic_write_bytes(out.with_suffix(".json"), (json.dumps(summary, indent=1) + "\n").encode())
     print(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); fp32 parity: max |dp| "
-          f"{summary['parity_fp32']['max_abs_prob']:.1e}")
+          f"{summary['parity_fp32']['max_abs_prob']:.1e}; sealed (graph sha256 {sealed.graph_sha256[:16]}...)")
     if args.int8:
         c = summary["int8_vs_fp32"]
         print(f"int8 vs fp32 on {c['frames']} frames: max |dp| {c['max_abs_prob']:.3f}, mask agreement "

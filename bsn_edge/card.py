@@ -1,0 +1,261 @@
+"""The model card: one typed record of what a model is, and the only code that writes or reads it.
+
+A card travels in two places, written and read here alone: a training run's ``checkpoint.json``
+(under ``"card"``) and an exported model's ONNX ``metadata_props`` (one ``bsn.<field>`` entry per
+field, JSON-encoded, so a model viewer shows them). Trainer, evaluator, export, quantizer, runtime
+and benchmarks take model facts from a card, never from defaults of their own.
+
+Reading validates: a missing or bad key raises ``ValueError`` naming the key and the file.
+An exported card is *sealed*: it carries the sha256 of the graph and its weights
+(``graph_sha256``), a known-answer self-test, and ``card_sha256`` over every other entry, so a
+flipped byte anywhere in the file is caught at load.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from bsn_edge.camera import Intrinsics
+
+CARD_VERSION = 1
+MODEL_NAME = "BlindSpotNet"
+PREFIX = "bsn."
+CARD_SHA_KEY = f"{PREFIX}card_sha256"
+FP32 = "none (fp32)"
+# used only when a run has no validation clips to choose the threshold on (the trainer says so)
+UNCHOSEN_THRESHOLD = 0.5
+_HEX64 = re.compile(r"[0-9a-f]{64}")
+
+
+@dataclass(frozen=True)
+class SelfTest:
+    """A known answer: the model's outputs on ``selftest.test_frame`` pooled to ``grid`` cells,
+    and how far a healthy run may stray from them (absolute on probabilities, relative on depth)."""
+
+    grid: tuple[int, int]
+    prob: tuple[float, ...]
+    depth: tuple[float, ...]
+    prob_atol: float
+    depth_rtol: float
+
+    def __post_init__(self) -> None:
+        n = self.grid[0] * self.grid[1]
+        if min(self.grid) < 1 or len(self.prob) != n or len(self.depth) != n:
+            raise ValueError(f"self_test: {len(self.prob)} / {len(self.depth)} values for a "
+                             f"{self.grid[0]}x{self.grid[1]} grid")
+        if not all(0.0 <= p <= 1.0 for p in self.prob) or not all(d > 0 and math.isfinite(d) for d in self.depth):
+            raise ValueError("self_test: probabilities must lie in [0, 1] and depths be positive")
+        if not (0 < self.prob_atol < 1 and 0 < self.depth_rtol < 1):
+            raise ValueError(f"self_test: tolerances must lie in (0, 1), got {self.prob_atol}, {self.depth_rtol}")
+
+
+@dataclass(frozen=True)
+class ModelCard:
+    """What a model is.
+
+    variant:        registry name (``bsn_edge.models.create_model``), e.g. ``small-light``
+    spec:           the architecture record the registry builds it from
+    input_size:     (H, W) the model runs at
+    threshold:      decision threshold on the blind-spot probability, chosen on validation
+                    (``None`` until training has chosen it)
+    camera:         the model camera: pinhole intrinsics at ``input_size``
+    depth_range:    (min, max) metres the depth head can report
+    quantization:   scheme of the weights and activations (``none (fp32)`` or the int8 scheme)
+    config_digest:  digest of the resolved training config
+    weights_sha256: sha256 of the trained weights it came from
+    train_camera:   the training clips' camera at its own size (``None`` if unknown)
+    graph_sha256, self_test: the seal of an exported model (empty / ``None`` in a checkpoint)
+    """
+
+    variant: str
+    spec: Mapping[str, Any]
+    input_size: tuple[int, int]
+    threshold: float | None
+    camera: Intrinsics
+    depth_range: tuple[float, float]
+    weights_sha256: str
+    config_digest: str = ""
+    quantization: str = FP32
+    train_camera: Intrinsics | None = None
+    graph_sha256: str = ""
+    self_test: SelfTest | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.variant or not isinstance(self.variant, str):
+            raise ValueError("variant must be a model name")
+        h, w = self.input_size
+        if not (isinstance(h, int) and isinstance(w, int) and h >= 16 and w >= 16):
+            raise ValueError(f"input_size must be two integers >= 16 (H, W), got {self.input_size}")
+        if self.threshold is not None and not (math.isfinite(self.threshold) and 0.0 < self.threshold < 1.0):
+            raise ValueError(f"threshold must lie in (0, 1), got {self.threshold}")
+        if (self.camera.height, self.camera.width) != (h, w):
+            raise ValueError(f"camera is for {self.camera.height}x{self.camera.width}, the model runs at {h}x{w}")
+        lo, hi = self.depth_range
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
+            raise ValueError(f"depth_range must be 0 < min < max metres, got {self.depth_range}")
+        if not _HEX64.fullmatch(self.weights_sha256):
+            raise ValueError(f"weights_sha256 must be 64 hex digits, got {self.weights_sha256!r}")
+        if self.graph_sha256 and not _HEX64.fullmatch(self.graph_sha256):
+            raise ValueError(f"graph_sha256 must be 64 hex digits, got {self.graph_sha256!r}")
+
+    # -- derived -------------------------------------------------------------------------------
+
+    @property
+    def sealed(self) -> bool:
+        return bool(self.graph_sha256) and self.self_test is not None
+
+    def replace(self, **changes: Any) -> ModelCard:
+        return dataclasses.replace(self, **changes)
+
+    def at_size(self, height: int, width: int) -> ModelCard:
+        """The same model run at another input size (the model camera rescaled with it)."""
+        return self.replace(input_size=(int(height), int(width)), camera=self.camera.scaled(width, height))
+
+    # -- checkpoint.json -----------------------------------------------------------------------
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "card_version": CARD_VERSION, "model": MODEL_NAME, "variant": self.variant, "spec": dict(self.spec),
+            "input_size": list(self.input_size), "threshold": self.threshold, "camera": self.camera.to_dict(),
+            "depth_range": list(self.depth_range), "quantization": self.quantization,
+            "config_digest": self.config_digest, "weights_sha256": self.weights_sha256,
+            "train_camera": None if self.train_camera is None else self.train_camera.to_dict(),
+            "graph_sha256": self.graph_sha256,
+            "self_test": None if self.self_test is None else dataclasses.asdict(self.self_test),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], where: str = "model card") -> ModelCard:
+        """Validate and build; ``ValueError`` names the missing or bad key and ``where``."""
+        if not isinstance(d, Mapping):
+            raise ValueError(f"{where}: the model card must be a JSON object")
+        version = d.get("card_version")
+        if version != CARD_VERSION:
+            raise ValueError(f"{where}: model card version {version!r}, this bsn-edge reads {CARD_VERSION}")
+
+        def get(key: str, required: bool = True) -> Any:
+            if key not in d or (required and d[key] is None and key != "threshold"):
+                if required:
+                    raise ValueError(f"{where}: model card key {key!r} is missing")
+                return None
+            return d[key]
+
+        def build(key: str, fn):
+            v = get(key, required=key not in ("train_camera", "self_test", "config_digest", "graph_sha256"))
+            try:
+                return fn(v)
+            except (TypeError, ValueError, KeyError) as e:
+                raise ValueError(f"{where}: model card key {key!r} is bad ({v!r:.120}): {e}") from None
+
+        intr = lambda v: None if v is None else Intrinsics(**v)  # noqa: E731
+        card_fields = {
+            "variant": build("variant", str),
+            "spec": build("spec", lambda v: dict(v)),
+            "input_size": build("input_size", lambda v: _pair(v, int)),
+            "threshold": build("threshold", lambda v: None if v is None else float(v)),
+            "camera": build("camera", intr),
+            "depth_range": build("depth_range", lambda v: _pair(v, float)),
+            "quantization": build("quantization", str),
+            "config_digest": build("config_digest", lambda v: "" if v is None else str(v)),
+            "weights_sha256": build("weights_sha256", str),
+            "train_camera": build("train_camera", intr),
+            "graph_sha256": build("graph_sha256", lambda v: "" if v is None else str(v)),
+            "self_test": build("self_test", _self_test),
+        }
+        try:
+            return cls(**card_fields)
+        except ValueError as e:
+            raise ValueError(f"{where}: {e}") from None
+
+    # -- ONNX metadata_props -------------------------------------------------------------------
+
+    def to_metadata(self) -> dict[str, str]:
+        """``bsn.<field>`` -> JSON text, plus ``bsn.card_sha256`` over all the others."""
+        props = {f"{PREFIX}{k}": json.dumps(v, sort_keys=True) for k, v in self.to_dict().items()}
+        props[CARD_SHA_KEY] = card_digest(props)
+        return props
+
+    @classmethod
+    def from_metadata(cls, props: Mapping[str, str], where: str = "model") -> ModelCard:
+        """Read a card from ONNX metadata; checks ``bsn.card_sha256`` when the card carries one."""
+        ours = {k: v for k, v in props.items() if k.startswith(PREFIX)}
+        if not ours:
+            raise ValueError(f"{where}: not a bsn-export model (no {PREFIX}* metadata)")
+        if f"{PREFIX}card_version" not in ours:
+            return cls._from_legacy_metadata(ours, where)
+        stored = ours.get(CARD_SHA_KEY)
+        if stored is None:
+            raise ValueError(f"{where}: model card key {CARD_SHA_KEY!r} is missing")
+        if stored != card_digest(ours):
+            raise ValueError(f"{where}: the model card's metadata is damaged ({CARD_SHA_KEY} does not match)")
+        d: dict[str, Any] = {}
+        for k, v in ours.items():
+            if k == CARD_SHA_KEY:
+                continue
+            try:
+                d[k[len(PREFIX):]] = json.loads(v)
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{where}: metadata {k!r} is not JSON ({e}): {v!r:.80}") from None
+        return cls.from_dict(d, where)
+
+    @classmethod
+    def _from_legacy_metadata(cls, props: Mapping[str, str], where: str) -> ModelCard:
+        """Models exported before cards existed (``bsn.intrinsics`` and friends, no seal)."""
+        def value(text: str) -> Any:
+            try:
+                return json.loads(text)
+            except json.JSONDecodeError:
+                return text  # strings were stored as they are
+
+        return cls.from_legacy({k[len(PREFIX):]: value(v) for k, v in props.items()}, where)
+
+    @classmethod
+    def from_legacy(cls, d: Mapping[str, Any], where: str) -> ModelCard:
+        """A card from the flat records written before cards (checkpoint.json or ONNX metadata).
+        Their depth head was the one of this version: 0.5-120 m."""
+        if not d.get("intrinsics"):
+            raise ValueError(f"{where}: no intrinsics recorded; the model's camera is unknown")
+        size = d.get("input_size") or [d["intrinsics"]["height"], d["intrinsics"]["width"]]
+        cam = Intrinsics(**d["intrinsics"])
+        if (cam.height, cam.width) != tuple(size):
+            cam = cam.scaled(int(size[1]), int(size[0]))
+        return cls.from_dict({
+            "card_version": CARD_VERSION, "variant": d.get("variant") or d.get("model"), "spec": d.get("spec", {}),
+            "input_size": size, "threshold": d.get("threshold"), "camera": cam.to_dict(),
+            "depth_range": [0.5, 120.0], "quantization": d.get("quantization") or FP32,
+            "config_digest": d.get("config_digest", ""), "weights_sha256": d.get("weights_sha256"),
+            "train_camera": None, "graph_sha256": "", "self_test": None,
+        }, f"{where} (written before model cards)")
+
+
+def card_digest(props: Mapping[str, str]) -> str:
+    """sha256 over the sorted ``bsn.*`` entries other than the digest itself."""
+    h = hashlib.sha256()
+    for k in sorted(props):
+        if k.startswith(PREFIX) and k != CARD_SHA_KEY:
+            h.update(k.encode() + b"\0" + props[k].encode() + b"\0")
+    return h.hexdigest()
+
+
+def _pair(v: Any, kind: type) -> tuple:
+    if not isinstance(v, list | tuple) or len(v) != 2:
+        raise ValueError("expected two numbers")
+    a, b = kind(v[0]), kind(v[1])
+    if kind is int and (a != v[0] or b != v[1]):
+        raise ValueError("expected two integers")
+    return a, b
+
+
+def _self_test(v: Any) -> SelfTest | None:
+    if v is None:
+        return None
+    return SelfTest(grid=_pair(v["grid"], int), prob=tuple(float(x) for x in v["prob"]),
+                    depth=tuple(float(x) for x in v["depth"]), prob_atol=float(v["prob_atol"]),
+                    depth_rtol=float(v["depth_rtol"]))

@@ -1,0 +1,189 @@
+"""A training run folder, owned by one object: :class:`Run`.
+
+::
+
+    RUN/config.json        the resolved training config
+    RUN/model.pt           weights only (a state dict of tensors, loaded with ``weights_only=True``)
+    RUN/checkpoint.json    {"card": the model card, "step", clips, validation metrics, ...}
+    RUN/state.pt           what resuming needs, in one file: weights, optimizer, schedule, step
+    RUN/teacher/teacher.pt the segmentation teacher
+
+Nothing is unpickled beyond tensors and numbers. A save writes ``state.pt`` first (one atomic
+file holding the weights with their sha256 and the optimizer state of the same step), then
+``model.pt``, then ``checkpoint.json``: a kill between any two leaves a run that resumes from
+``state.pt``; a ``model.pt`` whose sha256 matches neither ``checkpoint.json`` nor ``state.pt`` is
+damaged and refused.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import pickle
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from bsn_edge.card import ModelCard
+from bsn_edge.models import BlindSpotNet, ModelSpec, build, weights_bytes
+from bsn_edge.sequence.images import atomic_write_bytes
+
+
+class RunError(ValueError):
+    """A run folder that cannot be used as asked (damaged, unfinished, or in the way)."""
+
+
+def _to_bytes(obj: Any) -> bytes:
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    return buf.getvalue()
+
+
+def _from_bytes(data: bytes, what: Path) -> Any:
+    try:
+        return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError) as e:
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise RunError(f"{what}: not a weights-only torch file, or damaged ({first[:160]})") from None
+
+
+class Run:
+    """One run folder: where each file is, and the only code that reads or writes them."""
+
+    MODEL, CHECKPOINT, STATE, CONFIG, TEACHER = "model.pt", "checkpoint.json", "state.pt", "config.json", "teacher"
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+
+    def __repr__(self) -> str:
+        return f"Run({str(self.path)!r})"
+
+    @property
+    def model_path(self) -> Path:
+        return self.path / self.MODEL
+
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.path / self.CHECKPOINT
+
+    @property
+    def state_path(self) -> Path:
+        return self.path / self.STATE
+
+    @property
+    def config_path(self) -> Path:
+        return self.path / self.CONFIG
+
+    @property
+    def teacher_path(self) -> Path:
+        return self.path / self.TEACHER / "teacher.pt"
+
+    def exists(self) -> bool:
+        """Whether anything of a run is already here."""
+        return any(p.exists() for p in (self.model_path, self.checkpoint_path, self.state_path))
+
+    # -- reading ---------------------------------------------------------------------------------
+
+    def info(self) -> dict[str, Any]:
+        """``checkpoint.json`` with its card validated (``"card"`` is a :class:`ModelCard`)."""
+        p = self.checkpoint_path
+        if not p.is_file():
+            raise FileNotFoundError(f"{self.path}: not a training run (no {self.CHECKPOINT})")
+        try:
+            d = json.loads(p.read_text())
+        except json.JSONDecodeError as e:
+            raise RunError(f"{p}: not valid JSON ({e})") from None
+        if not isinstance(d, dict):
+            raise RunError(f"{p}: expected a JSON object")
+        if "card" in d:
+            d["card"] = ModelCard.from_dict(d["card"], str(p))
+        else:
+            d = {"card": ModelCard.from_legacy(d, str(p)), **{k: v for k, v in d.items() if k != "card"}}
+        return d
+
+    def card(self) -> ModelCard:
+        return self.info()["card"]
+
+    def config(self) -> dict[str, Any]:
+        """The resolved config the run was trained with ({} if the run has none)."""
+        if not self.config_path.is_file():
+            return {}
+        try:
+            return json.loads(self.config_path.read_text())
+        except json.JSONDecodeError as e:
+            raise RunError(f"{self.config_path}: not valid JSON ({e})") from None
+
+    def load_model(self) -> tuple[BlindSpotNet, ModelCard]:
+        """The trained model (eval mode) and its card. Refuses weights whose sha256 is not the
+        card's, or whose tensors do not fit the recorded architecture."""
+        card = self.card()
+        if not self.model_path.is_file():
+            raise FileNotFoundError(f"{self.path}: no {self.MODEL}")
+        data = self.model_path.read_bytes()
+        if hashlib.sha256(data).hexdigest() != card.weights_sha256:
+            raise RunError(f"{self.model_path}: weights do not match {self.CHECKPOINT} (sha256 differs): the file "
+                           "is damaged or was replaced")
+        return self._build(card, _from_bytes(data, self.model_path)).eval(), card
+
+    def _build(self, card: ModelCard, state: dict[str, torch.Tensor]) -> BlindSpotNet:
+        try:
+            model = build(ModelSpec(**card.spec))
+        except TypeError as e:
+            raise RunError(f"{self.checkpoint_path}: the card's spec does not describe a model ({e})") from None
+        try:
+            model.load_state_dict(state)
+        except RuntimeError as e:
+            raise RunError(f"{self.path}: weights do not fit model {card.variant!r}: {str(e)[:300]}") from None
+        return model
+
+    def load_state(self) -> dict[str, Any] | None:
+        """What resuming needs (``weights``, ``optimizer``, ``scheduler``, ``step``), verified; None if
+        the run has no state. A ``model.pt`` that matches neither the checkpoint nor the state is refused."""
+        if not self.state_path.is_file():
+            return None
+        state = _from_bytes(self.state_path.read_bytes(), self.state_path)
+        if not isinstance(state, dict) or not {"weights", "weights_sha256", "optimizer", "step"} <= set(state):
+            raise RunError(f"{self.state_path}: not a training state of this version")
+        if hashlib.sha256(state["weights"]).hexdigest() != state["weights_sha256"]:
+            raise RunError(f"{self.state_path}: damaged (its weights' sha256 differs)")
+        if self.model_path.is_file():
+            have = hashlib.sha256(self.model_path.read_bytes()).hexdigest()
+            known = {state["weights_sha256"]}
+            if self.checkpoint_path.is_file():
+                known.add(self.card().weights_sha256)
+            if have not in known:
+                raise RunError(f"{self.model_path}: weights match neither {self.CHECKPOINT} nor {self.STATE} "
+                               "(sha256 differs): the file is damaged; --force starts the run again")
+        state["weights"] = _from_bytes(state["weights"], self.state_path)
+        return state
+
+    def load_teacher_state(self) -> dict[str, torch.Tensor] | None:
+        return _from_bytes(self.teacher_path.read_bytes(), self.teacher_path) if self.teacher_path.is_file() else None
+
+    # -- writing ---------------------------------------------------------------------------------
+
+    def write_config(self, config: dict[str, Any]) -> None:
+        self.path.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(self.config_path, (json.dumps(config, indent=2) + "\n").encode())
+
+    def save_teacher(self, state: dict[str, torch.Tensor]) -> None:
+        self.teacher_path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(self.teacher_path, _to_bytes(state))
+
+    def save(self, model: torch.nn.Module, card_fields: dict[str, Any], info: dict[str, Any],
+             resume_state: dict[str, Any] | None = None) -> ModelCard:
+        """Write a checkpoint: ``state.pt`` (when ``resume_state`` is given: optimizer, scheduler,
+        step...), ``model.pt`` and ``checkpoint.json``, in that order. The card is made here from
+        ``card_fields`` and the weights' sha256; returns it."""
+        self.path.mkdir(parents=True, exist_ok=True)
+        data = weights_bytes(model)
+        sha = hashlib.sha256(data).hexdigest()
+        card = ModelCard(**card_fields, weights_sha256=sha)
+        if resume_state is not None:
+            atomic_write_bytes(self.state_path, _to_bytes({**resume_state, "weights": data, "weights_sha256": sha}))
+        atomic_write_bytes(self.model_path, data)
+        record = {"card": card.to_dict(), **{k: v for k, v in info.items() if k != "card"}}
+        atomic_write_bytes(self.checkpoint_path, (json.dumps(record, indent=2) + "\n").encode())
+        return card

@@ -1,0 +1,345 @@
+"""Faults injected into the edge runtime, with what reaches the bus asserted: a damaged model, a
+damaged video, a stalled stream, two threads hammering the health, SIGTERM."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import can
+import cv2
+import numpy as np
+import onnx
+import pytest
+import torch
+
+from bsn_edge.alerts import SystemState
+from bsn_edge.alerts.can_codec import decode
+from bsn_edge.alerts.health import Health, HealthConfig
+from bsn_edge.alerts.senders import CanSender
+from bsn_edge.card import ModelCard
+from bsn_edge.cli import run as run_cli
+from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.export import to_onnx
+from bsn_edge.export.seal import set_metadata
+from bsn_edge.models import create_model
+from bsn_edge.runtime import Engine, ModelError, Reconnect, RuntimeConfig, open_source, run
+from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
+from bsn_edge.runtime.sources import LiveSource
+from bsn_edge.synth import SynthConfig, write_clip
+from tests.cards import card_for
+
+SIZE = (128, 256)
+SHIPPED = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    root = tmp_path_factory.mktemp("failsafe")
+    torch.manual_seed(0)
+    model = root / "m.onnx"
+    to_onnx(create_model("small-light").eval(), model, card_for(SIZE))
+    clip = root / "clip"
+    write_clip(SynthConfig(frames=15, height=96, width=192, seed=3), clip)
+    return model, clip
+
+
+def statuses(rx) -> list[int]:
+    out = []
+    while (m := rx.recv(timeout=0.2)) is not None:
+        d = decode(m.arbitration_id, m.data)
+        if d is not None and d.name == "BSN_Status":
+            assert d.crc_ok
+            out.append(int(d.signals["System_State"]))
+    return out
+
+
+def rewrite_card(src: Path, dst: Path, **changes) -> None:
+    """A model whose card was changed and re-digested, as a buggy or hostile export would write it."""
+    m = onnx.load(str(src))
+    card = ModelCard.from_metadata({p.key: p.value for p in m.metadata_props})
+    set_metadata(m, card.replace(**changes))
+    onnx.save(m, str(dst))
+
+
+# -- a damaged model never starts, and says UNAVAILABLE first ----------------------------------------
+
+def scale_offset(path: Path) -> int:
+    """Byte offset in the file of a quantization scale's raw data (an initializer named *_scale)."""
+    m = onnx.load(str(path))
+    data = path.read_bytes()
+    for init in m.graph.initializer:
+        if init.name.endswith("_scale") and init.raw_data and data.count(init.raw_data) == 1:
+            return data.index(init.raw_data)
+    raise AssertionError("no quantization scale with unique bytes")
+
+
+@pytest.mark.skipif(not SHIPPED.is_file(), reason="the shipped model is not in this checkout")
+def test_a_flipped_byte_in_a_quantization_scale_refuses_to_start(setup, tmp_path, capsys):
+    _, clip = setup
+    data = bytearray(SHIPPED.read_bytes())
+    at = scale_offset(SHIPPED)
+    data[at + 2] ^= 0x01
+    bad = tmp_path / "flipped.onnx"
+    bad.write_bytes(bytes(data))
+    with can.Bus(interface="virtual", channel="bsn-fs-flip") as rx:
+        rc = run_cli.main(["--model", str(bad), "--source", str(clip / "video.mp4"), "--can", "virtual:bsn-fs-flip",
+                           "--log", str(tmp_path / "a.jsonl")])
+        got = statuses(rx)
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "damaged" in err and "sha256" in err and "UNAVAILABLE sent" in err
+    assert got == [SystemState.UNAVAILABLE], "one UNAVAILABLE status before refusing"
+    assert not (tmp_path / "a.jsonl").exists(), "no frame ran"
+    Engine(SHIPPED)   # the intact file loads and passes its self-test
+
+
+@pytest.mark.parametrize("threshold", [float("nan"), 7.0, 0.0])
+def test_out_of_range_metadata_is_refused_even_with_a_fresh_digest(setup, tmp_path, threshold):
+    model, _ = setup
+    bad = tmp_path / "t.onnx"
+    m = onnx.load(str(model))
+    props = {p.key: p.value for p in m.metadata_props}
+    props["bsn.threshold"] = json.dumps(threshold)
+    from bsn_edge.card import CARD_SHA_KEY, card_digest
+    props[CARD_SHA_KEY] = card_digest(props)
+    del m.metadata_props[:]
+    for k, v in props.items():
+        e = m.metadata_props.add()
+        e.key, e.value = k, v
+    onnx.save(m, str(bad))
+    with pytest.raises(ModelError, match="threshold must lie in"):
+        Engine(bad)
+
+
+def test_an_edited_card_without_its_digest_is_damaged(setup, tmp_path):
+    model, _ = setup
+    m = onnx.load(str(model))
+    for p in m.metadata_props:
+        if p.key == "bsn.threshold":
+            p.value = "0.9"
+    onnx.save(m, str(tmp_path / "e.onnx"))
+    with pytest.raises(ModelError, match="metadata is damaged"):
+        Engine(tmp_path / "e.onnx")
+
+
+def test_a_wrong_self_test_answer_refuses_to_start(setup, tmp_path):
+    model, _ = setup
+    card = Engine(model).card
+    st = card.self_test
+    shifted = st.__class__(st.grid, tuple(min(p + 0.2, 1.0) for p in st.prob), st.depth, st.prob_atol, st.depth_rtol)
+    rewrite_card(model, tmp_path / "s.onnx", self_test=shifted)
+    with pytest.raises(ModelError, match="self-test failed: probabilities differ by up to 0.2"):
+        Engine(tmp_path / "s.onnx")
+
+
+def test_an_input_size_that_is_not_the_graphs_is_refused_at_load(setup, tmp_path):
+    model, _ = setup
+    card = Engine(model).card
+    rewrite_card(model, tmp_path / "z.onnx", **{f: getattr(card.at_size(256, 512), f)
+                                                  for f in ("input_size", "camera")})
+    with pytest.raises(ModelError, match=r"takes tensor\(uint8\) \[1, 128, 256, 3\], its card says .*256x512"):
+        Engine(tmp_path / "z.onnx")
+
+
+def test_a_model_without_a_camera_is_refused_not_guessed(setup, tmp_path):
+    model, _ = setup
+    m = onnx.load(str(model))
+    keep = [(p.key, p.value) for p in m.metadata_props if p.key not in ("bsn.camera",)]
+    del m.metadata_props[:]
+    for k, v in keep:
+        e = m.metadata_props.add()
+        e.key, e.value = k, v
+    onnx.save(m, str(tmp_path / "c.onnx"))
+    with pytest.raises(ModelError):
+        Engine(tmp_path / "c.onnx")
+
+
+# -- a damaged video: skipped stretches, every readable frame used, UNAVAILABLE at the end -------------
+
+def damage(src: Path, dst: Path, start: float, length: float) -> None:
+    data = bytearray(src.read_bytes())
+    a, n = int(len(data) * start), int(len(data) * length)
+    data[a:a + n] = bytes(n)
+    dst.write_bytes(bytes(data))
+
+
+def long_video(clip: Path, out: Path, repeats: int) -> Path:
+    frames = [cv2.imread(str(p)) for p in sorted((clip / "rgb").glob("*.png"))]
+    h, w = frames[0].shape[:2]
+    vw = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, (w, h))
+    for _ in range(repeats):
+        for f in frames:
+            vw.write(f)
+    vw.release()
+    return out
+
+
+def test_a_video_damaged_in_the_middle_keeps_the_frames_after_the_damage(setup, tmp_path):
+    model, clip = setup
+    video = long_video(clip, tmp_path / "long.mp4", 4)   # 60 frames
+    bad = tmp_path / "bad.mp4"
+    damage(video, bad, 0.35, 0.2)
+    with can.Bus(interface="virtual", channel="bsn-fs-dmg") as rx, CanSender("virtual", "bsn-fs-dmg") as tx:
+        summary = run(Engine(model), open_source(str(bad)), [tx], log=tmp_path / "l.jsonl")
+        got = statuses(rx)
+    lines = [json.loads(x) for x in (tmp_path / "l.jsonl").read_text().splitlines()]
+    broken = [x["frame"] for x in lines if x.get("fault") == "decode_error"]
+    assert broken, "the damage was seen"
+    assert summary["frames"] == 60 and summary["valid_frames"] == 60 - len(broken)
+    assert max(x["frame"] for x in lines if "levels" in x) == 59, "frames after the damage were used"
+    assert summary["source_failure"] is None
+    assert SystemState.UNAVAILABLE in got[:-1] and got[-1] == SystemState.UNAVAILABLE
+    assert got[0] == SystemState.DEGRADED or got[0] == SystemState.OK
+
+
+def test_a_video_cut_short_is_a_failed_source_with_a_non_zero_exit(setup, tmp_path, capsys):
+    model, clip = setup
+    video = long_video(clip, tmp_path / "long.mp4", 2)
+    cut = tmp_path / "cut.mp4"
+    damage(video, cut, 0.6, 0.37)   # the frame data to the end, not the index after it
+    rc = run_cli.main(["--model", str(model), "--source", str(cut), "--can-log", str(tmp_path / "c.log"),
+                       "--summary", str(tmp_path / "s.json")])
+    assert rc == 1
+    assert "the source failed" in capsys.readouterr().err
+    s = json.loads((tmp_path / "s.json").read_text())
+    assert s["source_failure"] and s["faults"]["decode_errors"] > 0
+
+
+# -- a stalled live stream: back-off reconnects, UNAVAILABLE while it is gone --------------------------
+
+class FlakyCamera:
+    """Frames for a while, then nothing (a stall ends in a failed read)."""
+
+    opened = 0
+
+    def __init__(self, _target, frames: int = 12, stall_s: float = 0.0) -> None:
+        FlakyCamera.opened += 1
+        self.left, self.stall_s, self.n = frames, stall_s, FlakyCamera.opened
+
+    def set(self, *_):
+        return True
+
+    def isOpened(self):
+        # the first reconnect finds the camera still gone, the second brings it back; after the
+        # second loss it never comes back
+        return self.n in (1, 3)
+
+    def read(self):
+        if self.left <= 0:
+            time.sleep(self.stall_s)
+            return False, None
+        self.left -= 1
+        time.sleep(0.02)
+        return True, np.full((96, 192, 3), 90, np.uint8)
+
+    def release(self):
+        pass
+
+
+def test_a_stalled_stream_reconnects_and_the_bus_shows_it(setup):
+    model, _ = setup
+    FlakyCamera.opened = 0
+    policy = Reconnect(stall_s=0.5, first_s=0.4, max_s=0.8, give_up_s=5.0, max_tries=3)
+    src = LiveSource("rtsp://camera", policy, opener=lambda t: FlakyCamera(t, frames=12, stall_s=0.3))
+    cfg = RuntimeConfig(cycle_s=0.05)
+    with can.Bus(interface="virtual", channel="bsn-fs-live") as rx, CanSender("virtual", "bsn-fs-live") as tx:
+        summary = run(Engine(model), src, [tx], cfg)
+        got = statuses(rx)
+    src.close()
+    assert FlakyCamera.opened >= 3 and summary["faults"]["source_reconnects"] >= 2
+    assert summary["frames"] + summary["dropped"] == 24, "frames came again after the reconnect"
+    # OK / DEGRADED while frames come, UNAVAILABLE during the outage (> 0.5 s), again after, and at the end
+    changes = [s for i, s in enumerate(got) if i == 0 or s != got[i - 1]]
+    assert SystemState.UNAVAILABLE in changes[1:-1] and changes[-1] == SystemState.UNAVAILABLE
+    assert summary["source_failure"] and "reconnects failed" in summary["source_failure"]
+
+
+# -- two threads on one Health, and a heartbeat that survives ------------------------------------------
+
+def test_health_survives_two_threads_hammering_it():
+    h = Health(HealthConfig(window_s=0.01))
+    errors: list[BaseException] = []
+    n = 20000
+
+    def writer():
+        try:
+            for i in range(n):
+                h.valid(i * 1e-4)
+                h.fault("decode_errors")
+                h.set_fault("dropped_frames", i)
+        except BaseException as e:  # noqa: BLE001 - the test reports any
+            errors.append(e)
+
+    def reader():
+        try:
+            for i in range(n):
+                h.snapshot(i * 1e-4)
+                h.fps(i * 1e-4)
+                _ = h.faults
+        except BaseException as e:  # noqa: BLE001
+            errors.append(e)
+
+    threads = [threading.Thread(target=writer), threading.Thread(target=reader)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert h.faults["decode_errors"] == n and h.faults["dropped_frames"] == n - 1
+
+
+class ExplodingHealth(Health):
+    """A health whose snapshot raises now and then: a bug the heartbeat must outlive."""
+
+    calls = 0
+
+    def snapshot(self, t):
+        ExplodingHealth.calls += 1
+        if ExplodingHealth.calls % 3 == 1:
+            raise RuntimeError("deque mutated during iteration")
+        return super().snapshot(t)
+
+
+def test_the_heartbeat_counts_an_exception_and_keeps_sending():
+    h = ExplodingHealth()
+    with can.Bus(interface="virtual", channel="bsn-fs-hb") as rx, CanSender("virtual", "bsn-fs-hb") as tx:
+        emitter = CycleEmitter([tx], h, cycle_s=0.02)
+        with Heartbeat(emitter) as hb:
+            deadline = time.monotonic() + 5
+            while emitter.sent_cycles < 5 and time.monotonic() < deadline:
+                time.sleep(0.01)
+        got = statuses(rx)
+    assert emitter.sent_cycles >= 5 and len(got) >= 5
+    assert h.faults["heartbeat_errors"] >= 1 and "deque mutated" in hb.last_error
+
+
+# -- SIGTERM stops like SIGINT: logs, summary and the last UNAVAILABLE are kept -------------------------
+
+def test_sigterm_keeps_the_logs_the_summary_and_sends_unavailable(setup, tmp_path):
+    model, clip = setup
+    video = long_video(clip, tmp_path / "long.mp4", 20)   # 300 frames, 30 s paced
+    log, canlog, summ = tmp_path / "a.jsonl", tmp_path / "a.log", tmp_path / "s.json"
+    env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
+    proc = subprocess.Popen([sys.executable, "-m", "bsn_edge.cli.run", "--model", str(model), "--source", str(video),
+                             "--pace", "--log", str(log), "--can-log", str(canlog), "--summary", str(summ)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (not log.exists() or len(log.read_text().splitlines()) < 3):
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    summary = json.loads(summ.read_text())
+    assert summary["signal"] == "SIGTERM" and summary["stopped"] and 3 <= summary["frames"] < 300
+    assert json.loads(out)["frames"] == summary["frames"]
+    lines = log.read_text().splitlines()
+    assert len(lines) == summary["frames"] and all(json.loads(x) for x in lines)
+    msgs = list(can.LogReader(str(canlog)))
+    st = [decode(m.arbitration_id, bytes(m.data)) for m in msgs]
+    st = [d for d in st if d is not None and d.name == "BSN_Status"]
+    assert st and st[-1].crc_ok and st[-1].signals["System_State"] == SystemState.UNAVAILABLE
