@@ -46,6 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera-height", type=float, default=None,
                    help="camera height above the road, metres, for monocular VO's scale (default: "
                         "meta.json's camera_height, else 1.5)")
+    p.add_argument("--force", action="store_true",
+                   help="relabel clips whose labels for this T were made with other parameters or sources "
+                        "(without it such clips are refused; a rerun with the same ones resumes)")
     p.add_argument("--jobs", type=int, default=None,
                    help="clips labelled in parallel (default: one per core, at most one per clip)")
     p.add_argument("--ray", metavar="ADDRESS", default=None,
@@ -71,11 +74,12 @@ def main(argv: list[str] | None = None) -> int:
             bar.refresh()
         if args.ray:
             try:
-                results = label_many_ray(args.seqs, cfg, sources, args.ray, progress=bar.update)
+                results = label_many_ray(args.seqs, cfg, sources, args.ray, progress=bar.update, force=args.force)
             except RuntimeError as e:
                 return fail(PROG, str(e))
         else:
-            results = label_many(args.seqs, cfg, sources, jobs, progress=bar.update, on_total=on_total)
+            results = label_many(args.seqs, cfg, sources, jobs, progress=bar.update, on_total=on_total,
+                                 force=args.force)
     width = max(len(r.seq) for r in results)
     for r in results:
         line = f"{r.seq:<{width}}  {r.status:<8}"

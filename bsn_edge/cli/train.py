@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from bsn_edge.cli.common import fail
 from bsn_edge.train.config import load_config
@@ -24,7 +25,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="run folder")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set train.steps=100 --set model.name=small")
-    p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the run in --out from its last checkpoint (verified; the data stream goes on "
+                        "where it stopped, so the result is the uninterrupted run's)")
+    p.add_argument("--force", action="store_true",
+                   help="start again in an --out that already holds a run (its checkpoint, state and teacher go)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
@@ -36,9 +41,11 @@ def main(argv: list[str] | None = None) -> int:
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     try:
-        summary = train(cfg, args.data, args.out, resume=args.resume, progress=not args.quiet)
+        summary = train(cfg, args.data, args.out, resume=args.resume, progress=not args.quiet, force=args.force)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
+    for line in summary.get("skipped_clips", []):
+        print(f"{PROG}: skipped {line}", file=sys.stderr)
     print(json.dumps({k: v for k, v in summary.items() if k != "final_loss"}, indent=1))
     return 0
 

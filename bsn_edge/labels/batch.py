@@ -6,7 +6,11 @@ A bad clip is reported and skipped; it never stops the others or loses their lab
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import queue
+import signal
+import threading
+import time
 import traceback
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -15,12 +19,13 @@ from pathlib import Path
 from typing import Any
 
 from bsn_edge.labels.config import LabelConfig
-from bsn_edge.labels.generator import ClipRejectedError, Sources, label_sequence
+from bsn_edge.labels.generator import ClipRejectedError, Sources, StaleLabelsError, label_sequence
 
 
 @dataclass(frozen=True)
 class ClipResult:
-    """Outcome of one clip: ``ok``, ``rejected`` (sources not trustworthy) or ``failed`` (error)."""
+    """Outcome of one clip: ``ok``, ``rejected`` (sources not trustworthy, or the clip too short),
+    ``stale`` (labels made otherwise are there) or ``failed`` (error)."""
 
     seq: str
     status: str
@@ -32,12 +37,14 @@ class ClipResult:
 
 def label_clip(seq: str, cfg: LabelConfig, sources: Sources,
                progress: Callable[[int], None] | None = None,
-               on_total: Callable[[int], None] | None = None) -> ClipResult:
+               on_total: Callable[[int], None] | None = None, force: bool = False) -> ClipResult:
     """Label one clip and turn every failure into a result instead of an exception."""
     try:
-        rep = label_sequence(seq, cfg, sources, progress=progress, on_total=on_total)
+        rep = label_sequence(seq, cfg, sources, progress=progress, on_total=on_total, force=force)
     except ClipRejectedError as e:
         return ClipResult(seq, "rejected", str(e))
+    except StaleLabelsError as e:
+        return ClipResult(seq, "stale", str(e))
     except (OSError, ValueError) as e:
         return ClipResult(seq, "failed", f"{type(e).__name__}: {e}")
     except Exception as e:  # a bug in one clip must not take the batch down
@@ -45,22 +52,43 @@ def label_clip(seq: str, cfg: LabelConfig, sources: Sources,
     return ClipResult(seq, "ok", "", rep["label_frames"], rep["resumed_frames"], rep["seconds"])
 
 
-def _worker(seq: str, cfg: LabelConfig, sources: Sources, q: Any) -> ClipResult:
+def _worker(seq: str, cfg: LabelConfig, sources: Sources, q: Any, force: bool) -> ClipResult:
     return label_clip(seq, cfg, sources, progress=lambda n: q.put(("step", n)),
-                      on_total=lambda n: q.put(("total", n)))
+                      on_total=lambda n: q.put(("total", n)), force=force)
+
+
+def _die_with_parent(parent: int) -> None:
+    """Worker initializer: end this worker when the process that started it is gone (killed
+    with SIGKILL, say), instead of labelling on for nobody."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG: the kernel sends SIGTERM when the parent dies
+    except (OSError, AttributeError):
+        pass
+
+    def watch() -> None:   # other systems (and a race with the prctl call): poll
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="bsn-parent-watch", daemon=True).start()
 
 
 def label_many(seqs: list[str | Path], cfg: LabelConfig, sources: Sources, jobs: int = 1,
                progress: Callable[[int], None] | None = None,
-               on_total: Callable[[int], None] | None = None) -> list[ClipResult]:
-    """Label ``seqs`` with ``jobs`` worker processes (1: in this process); results in input order."""
+               on_total: Callable[[int], None] | None = None, force: bool = False) -> list[ClipResult]:
+    """Label ``seqs`` with ``jobs`` worker processes (1: in this process); results in input order.
+    Workers end with this process."""
     seqs = [str(s) for s in seqs]
     if jobs <= 1 or len(seqs) == 1:
-        return [label_clip(s, cfg, sources, progress, on_total) for s in seqs]
+        return [label_clip(s, cfg, sources, progress, on_total, force) for s in seqs]
     ctx = mp.get_context("spawn")  # no forked copies of threads or BLAS state
-    with ctx.Manager() as manager, ProcessPoolExecutor(jobs, mp_context=ctx) as pool:
+    with ctx.Manager() as manager, ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_die_with_parent,
+                                                       initargs=(os.getpid(),)) as pool:
         q = manager.Queue()
-        futures = [pool.submit(_worker, s, cfg, sources, q) for s in seqs]
+        futures = [pool.submit(_worker, s, cfg, sources, q, force) for s in seqs]
         while True:
             try:
                 kind, n = q.get(timeout=0.2)
@@ -76,7 +104,7 @@ def label_many(seqs: list[str | Path], cfg: LabelConfig, sources: Sources, jobs:
 
 
 def label_many_ray(seqs: list[str | Path], cfg: LabelConfig, sources: Sources, address: str,
-                   progress: Callable[[int], None] | None = None) -> list[ClipResult]:
+                   progress: Callable[[int], None] | None = None, force: bool = False) -> list[ClipResult]:
     """Label ``seqs`` as Ray tasks on the cluster at ``address`` (``local`` starts one here).
 
     Every node must see the sequence folders at the same paths (a shared file system).
@@ -93,7 +121,7 @@ def label_many_ray(seqs: list[str | Path], cfg: LabelConfig, sources: Sources, a
             ray.init(address=address, include_dashboard=False, log_to_driver=False)
     try:
         task = ray.remote(label_clip)
-        refs = {task.remote(str(s), cfg, sources): i for i, s in enumerate(seqs)}
+        refs = {task.remote(str(s), cfg, sources, None, None, force): i for i, s in enumerate(seqs)}
         out: list[ClipResult | None] = [None] * len(seqs)
         pending = list(refs)
         while pending:

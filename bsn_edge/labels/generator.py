@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ from bsn_edge.labels.sources.base import ClipRejectedError
 from bsn_edge.labels.sources.registry import make_depth, make_poses, make_seg
 from bsn_edge.labels.warp import Cloud, Warper, label_frame
 from bsn_edge.sequence import SequenceMeta, read_mask, write_mask
+from bsn_edge.sequence.folder import LabelSet, SequenceFolder
 from bsn_edge.sequence.images import atomic_write_bytes
 
 DEFAULT_CAMERA_HEIGHT = 1.5  # metres, a car's dashcam
@@ -46,16 +48,64 @@ def resample(frames: int, fps: float, rate: float) -> np.ndarray:
     return np.unique(np.rint(np.arange(n) * step).astype(int))
 
 
+class StaleLabelsError(ValueError):
+    """Labels already in the folder were made with other parameters or sources."""
+
+
 def labels_dir(seq: Path, cfg: LabelConfig) -> Path:
-    return Path(seq) / "labels" / cfg.name
+    return SequenceFolder(seq).labels(cfg.name).root
+
+
+def _params(cfg: LabelConfig, sources: Sources) -> dict[str, Any]:
+    """What makes a label set: every parameter and source (resuming is only right if they match)."""
+    return {"config": cfg.to_dict(), "sources": dataclasses.asdict(sources)}
+
+
+def _check_params(labels: LabelSet, params: dict[str, Any], force: bool) -> None:
+    """Refuse labels made otherwise (or, with ``force``, remove them); record ``params``."""
+    p = labels.params_path
+    if p.is_file():
+        try:
+            old = json.loads(p.read_text())
+        except json.JSONDecodeError:
+            old = None
+        if old != params and not force:
+            diff = _differences(old or {}, params)
+            raise StaleLabelsError(f"{labels.root} holds labels made with other parameters ({diff}); pass --force "
+                                   "to relabel, or keep both by giving this run another --T")
+    elif labels.frames() and not force:
+        raise StaleLabelsError(f"{labels.root} holds labels with no record of how they were made; pass --force to "
+                               "relabel")
+    if force and labels.root.is_dir():
+        for sub in (labels.BLINDSPOT, labels.VISIBILITY):
+            shutil.rmtree(labels.root / sub, ignore_errors=True)
+    labels.make_dirs()
+    atomic_write_bytes(p, (json.dumps(params, indent=1, sort_keys=True) + "\n").encode(), durable=True)
+
+
+def _differences(old: dict[str, Any], new: dict[str, Any]) -> str:
+    flat = lambda d: {f"{k}.{j}": w for k, v in d.items() if isinstance(v, dict) for j, w in v.items()}  # noqa: E731
+    a, b = flat(old), flat(new)
+    keys = sorted(k for k in a.keys() | b.keys() if a.get(k) != b.get(k))
+    return ", ".join(f"{k.split('.', 1)[1]} {a.get(k)!r} -> {b.get(k)!r}" for k in keys[:6]) or "unreadable record"
+
+
+def _read_done(labels: LabelSet, i: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """A finished frame's masks; None if missing, empty or undecodable (then it is labelled again)."""
+    try:
+        return read_mask(labels.blindspot(i)), read_mask(labels.visibility(i))
+    except (FileNotFoundError, ValueError):
+        return None
 
 
 def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sources | None = None,
                    progress: Callable[[int], None] | None = None,
-                   on_total: Callable[[int], None] | None = None) -> dict[str, Any]:
+                   on_total: Callable[[int], None] | None = None, force: bool = False) -> dict[str, Any]:
     """Write labels for ``seq`` under ``labels/T<T>s/`` and return the report (also written as
-    ``report.json``). Finished frames are skipped, so a rerun resumes. Raises
-    :class:`ClipRejectedError` for a clip whose sources cannot be trusted (the report says why)."""
+    ``report.json``). Finished frames are skipped, so a rerun with the same parameters and sources
+    resumes; one with others raises :class:`StaleLabelsError` unless ``force`` (relabel). Raises
+    :class:`ClipRejectedError` for a clip whose sources cannot be trusted or that is too short
+    for ``T`` (the report says why)."""
     cfg = cfg or LabelConfig()
     sources = sources or Sources()
     seq = Path(seq)
@@ -66,14 +116,18 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         k = Calibration.read(sources.calib).intrinsics.scaled(meta.width, meta.height)
         meta = dataclasses.replace(meta, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy)
     clip = ClipData(seq, meta, frame_count(seq))
-    out = labels_dir(seq, cfg)
-    for sub in ("blindspot", "visibility"):
-        (out / sub).mkdir(parents=True, exist_ok=True)
+    labels = SequenceFolder(seq).labels(cfg.name)
+    out = labels.root
+    idx = resample(clip.frames, meta.fps, cfg.rate)
+    if len(idx) <= cfg.horizon_frames:
+        raise ClipRejectedError(f"too short for T = {cfg.horizon_s:g} s: {clip.frames} frames at {meta.fps:g} "
+                                f"frames/s give {len(idx)} at {cfg.rate:g} frames/s; a label needs "
+                                f"{cfg.horizon_frames + 1} (at least {_min_frames(cfg, meta.fps)} frames of the clip)")
+    _check_params(labels, _params(cfg, sources), force)
     report: dict[str, Any] = {
         "sequence": str(seq), "config": cfg.to_dict(), "sources": vars(sources),
         "frames": clip.frames, "fps": meta.fps, "size": [meta.height, meta.width],
     }
-    idx = resample(clip.frames, meta.fps, cfg.rate)
     try:
         seg = make_seg(sources.seg, clip)
         if sources.poses == "vo" and sources.depth != "files":
@@ -120,10 +174,10 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     skipped = 0
     for k in todo:
         i = int(idx[k])
-        name = f"{i:06d}.png"
-        bs_path, vis_path = out / "blindspot" / name, out / "visibility" / name
-        if bs_path.exists() and vis_path.exists():
-            omega, vis = read_mask(bs_path), read_mask(vis_path)
+        bs_path, vis_path = labels.blindspot(i), labels.visibility(i)
+        done = _read_done(labels, i)
+        if done is not None:
+            omega, vis = done
             per_frame.append({"frame": i, "blindspot_px": int(omega.sum()), "visible_px": int(vis.sum()),
                               "blindspot_in_v_px": int((omega & vis).sum()), "resumed": True})
             skipped += 1
@@ -136,8 +190,8 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
             lab = label_frame(warper, [cloud(k + j) for j in range(1, T + 1)], d_t,
                               sm.is_traversable(sem_t), sem_t == sm.SKY, poses[i],
                               cfg.depth_tol, cfg.vis_range, min_area, cfg.shrink_margin)
-            write_mask(bs_path, lab.omega)
-            write_mask(vis_path, lab.visibility)
+            write_mask(bs_path, lab.omega, durable=True)
+            write_mask(vis_path, lab.visibility, durable=True)
             per_frame.append({
                 "frame": i, "blindspot_px": int(lab.omega.sum()), "visible_px": int(lab.visibility.sum()),
                 "blindspot_in_v_px": int((lab.omega & lab.visibility).sum()),
@@ -156,5 +210,11 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     return report
 
 
+def _min_frames(cfg: LabelConfig, fps: float) -> int:
+    """The shortest clip (in its own frames) that gives one label."""
+    return int(np.ceil(cfg.horizon_frames * fps / cfg.rate)) + 1
+
+
 def _write_report(out: Path, report: dict[str, Any]) -> None:
-    atomic_write_bytes(out / "report.json", (json.dumps(report, indent=1) + "\n").encode())
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out / LabelSet.REPORT, (json.dumps(report, indent=1) + "\n").encode(), durable=True)

@@ -23,14 +23,18 @@ MAX_DEPTH_M = 65535 / DEPTH_SCALE
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1]
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = False) -> None:
     """Write ``data`` to ``path`` through a temporary file and a rename, so readers never
-    see a half-written file and an interrupted run leaves nothing behind."""
+    see a half-written file and an interrupted run leaves nothing behind. ``durable`` also
+    fsyncs the data before the rename, so a power cut cannot leave an empty file in its place."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+            if durable:
+                f.flush()
+                os.fsync(f.fileno())
         os.chmod(tmp, _FILE_MODE)  # mkstemp makes files private; outputs are ordinary files
         os.replace(tmp, path)
     except BaseException:
@@ -38,14 +42,14 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
         raise
 
 
-def write_image(path: str | os.PathLike, image: np.ndarray) -> None:
-    """Atomically write an image; the format follows the file's extension."""
+def write_image(path: str | os.PathLike, image: np.ndarray, durable: bool = False) -> None:
+    """Atomically write an image (``durable``: fsynced first); the format follows the extension."""
     ext = Path(path).suffix or ".png"
     params = PNG_FAST if ext.lower() == ".png" else []
     ok, buf = cv2.imencode(ext, image, params)
     if not ok:
         raise OSError(f"could not encode image for {path}")
-    atomic_write_bytes(path, buf.tobytes())
+    atomic_write_bytes(path, buf.tobytes(), durable)
 
 
 def _read(path: str | os.PathLike, flags: int) -> np.ndarray:
@@ -75,9 +79,9 @@ def read_depth(path: str | os.PathLike) -> np.ndarray:
     return raw.astype(np.float32) / DEPTH_SCALE
 
 
-def write_mask(path: str | os.PathLike, mask: np.ndarray) -> None:
+def write_mask(path: str | os.PathLike, mask: np.ndarray, durable: bool = False) -> None:
     """Write a boolean mask as an 8-bit PNG of 0 / 255."""
-    write_image(path, np.where(mask, 255, 0).astype(np.uint8))
+    write_image(path, np.where(mask, 255, 0).astype(np.uint8), durable)
 
 
 def read_mask(path: str | os.PathLike) -> np.ndarray:

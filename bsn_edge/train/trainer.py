@@ -218,6 +218,9 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             sched.load_state_dict(state["scheduler"])
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
     batches = _loader(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers, start)
+    if state is not None and "torch_rng" in state:
+        # dropout draws go on where they stopped (after the loader, which takes a draw of its own)
+        torch.set_rng_state(state["torch_rng"])
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
                disable=True if (not progress or rank) else None)
     history = []
@@ -245,7 +248,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         done = step + 1
         if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps):
             _save(run, model, cfg, data, done, threshold=None,
-                  resume_state={"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "step": done})
+                  resume_state={"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "step": done,
+                                "torch_rng": torch.get_rng_state()})
     elapsed = time.perf_counter() - t0
     summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "seconds": round(elapsed, 1),
                                "final_loss": history[-1] if history else None,

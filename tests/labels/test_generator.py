@@ -117,7 +117,7 @@ def test_cli_labels_good_clips_and_reports_bad_ones(seq, tmp_path, capsys):
 def test_cli_rejects_bad_parameters(seq, capsys):
     assert label_cli.main([str(seq), "--T", "0"]) == 2
     assert "horizon T must be positive" in capsys.readouterr().err
-    assert label_cli.main([str(seq), "--depth", "lidar"]) == 1
+    assert label_cli.main([str(seq), "--T", "1", "--depth", "lidar"]) == 1
     assert "unknown depth source 'lidar'" in capsys.readouterr().out
 
 
@@ -141,3 +141,41 @@ def test_calibration_file_replaces_the_intrinsics(seq, tmp_path):
     shutil.rmtree(labels_dir(seq, CFG))
     rep = label_sequence(seq, CFG, Sources(calib=str(tmp_path / "c.json")))
     assert [f["blindspot_px"] for f in rep["per_frame"]] == [f["blindspot_px"] for f in ref["per_frame"]]
+
+
+def test_a_rerun_with_other_parameters_refuses_then_relabels_with_force(seq, capsys):
+    assert label_cli.main([str(seq), "--T", "1", "--jobs", "1"]) == 0
+    out = labels_dir(seq, CFG)
+    before = {p.name: p.read_bytes() for p in (out / "blindspot").iterdir()}
+    argv = [str(seq), "--T", "1", "--jobs", "1", "--depth-tol", "3", "--vis-range", "5", "--min-area", "5000"]
+    capsys.readouterr()
+    assert label_cli.main(argv) == 1
+    text = capsys.readouterr().out
+    assert "stale" in text and "depth_tol 1.0 -> 3.0" in text and "--force" in text
+    assert {p.name: p.read_bytes() for p in (out / "blindspot").iterdir()} == before, "nothing was touched"
+    assert json.loads((out / "report.json").read_text())["config"]["depth_tol"] == 1.0
+    assert label_cli.main([*argv, "--force"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["config"]["depth_tol"] == 3.0 and rep["resumed_frames"] == 0
+    assert json.loads((out / "params.json").read_text())["config"]["min_area"] == 5000
+    # min-area 5000 px on a 64x128 frame leaves no component
+    assert not any(read_mask(p).any() for p in (out / "blindspot").iterdir())
+    assert label_cli.main([*argv]) == 0 and "10 frames (10 already done)" in capsys.readouterr().out
+
+
+def test_a_damaged_label_file_is_relabelled_on_resume(seq):
+    label_sequence(seq, CFG)
+    out = labels_dir(seq, CFG)
+    good = (out / "blindspot" / "000008.png").read_bytes()
+    (out / "blindspot" / "000008.png").write_bytes(b"")                    # zero length
+    (out / "visibility" / "000010.png").write_bytes(b"\x89PNG garbage")    # undecodable
+    rep = label_sequence(seq, CFG)
+    assert rep["resumed_frames"] == 8
+    assert (out / "blindspot" / "000008.png").read_bytes() == good
+    assert read_mask(out / "visibility" / "000010.png").shape == (64, 128)
+
+
+def test_a_clip_too_short_for_T_is_not_labelled_and_says_why(seq, capsys):
+    assert label_cli.main([str(seq), "--T", "10", "--jobs", "1"]) == 1
+    out = capsys.readouterr().out
+    assert "rejected" in out and "too short for T = 10 s" in out and "at least 101 frames" in out

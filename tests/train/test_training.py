@@ -2,6 +2,7 @@
 
 import json
 import os
+import pickle
 import shutil
 import subprocess
 import sys
@@ -16,7 +17,7 @@ from bsn_edge.cli import label as label_cli
 from bsn_edge.cli import synth as synth_cli
 from bsn_edge.cli import train as train_cli
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
-from bsn_edge.train import load_config, load_model
+from bsn_edge.train import Run, RunError, load_config
 from bsn_edge.train.losses import masked_bce
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -99,13 +100,13 @@ def test_smoke_config_end_to_end(data, tmp_path, capsys):
     run = tmp_path / "run"
     assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet",
                            "--set", "data.label=\"T2s\"", "--set", "data.val_fraction=0.34"]) == 0
-    meta = json.loads((run / "checkpoint.json").read_text())
-    assert meta["model"] == "small-light" and 0 < meta["threshold"] < 1 and meta["input_size"] == [64, 128]
+    card = json.loads((run / "checkpoint.json").read_text())["card"]
+    assert card["variant"] == "small-light" and 0 < card["threshold"] < 1 and card["input_size"] == [64, 128]
     assert json.loads((run / "config.json").read_text())["train"]["steps"] == 6
     assert (run / "teacher" / "teacher.pt").is_file()
     # reload gives identical outputs
-    model, _ = load_model(run)
-    again, _ = load_model(run)
+    model, _ = Run(run).load_model()
+    again, _ = Run(run).load_model()
     x = torch.randn(1, 3, 64, 128)
     with torch.no_grad():
         assert torch.equal(model(x)[0], again(x)[0])
@@ -129,15 +130,15 @@ def test_checkpoints_refuse_tampering_and_other_architectures(data, tmp_path):
     meta = json.loads((run / "checkpoint.json").read_text())
     other = tmp_path / "other"
     shutil.copytree(run, other)
-    meta["spec"]["decoder_width"] = 128
+    meta["card"]["spec"]["decoder_width"] = 128
     (other / "checkpoint.json").write_text(json.dumps(meta))
     with pytest.raises(ValueError, match="do not fit"):
-        load_model(other)
+        Run(other).load_model()
     data_bytes = bytearray((run / "model.pt").read_bytes())
     data_bytes[-10] ^= 0xFF
     (other / "model.pt").write_bytes(bytes(data_bytes))
     with pytest.raises(ValueError, match="sha256"):
-        load_model(other)
+        Run(other).load_model()
 
 
 def test_cli_errors_are_explained(data, tmp_path, capsys):
@@ -162,5 +163,101 @@ def test_distributed_training_with_two_processes(data, tmp_path):
     res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
     assert res.returncode == 0, res.stderr[-2000:]
     assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
-    model, _ = load_model(run)
+    model, _ = Run(run).load_model()
     assert np.isfinite(model(torch.randn(1, 3, 64, 128))[0].detach().numpy()).all()
+
+
+FAST = ["--config", SMOKE, "--quiet", "--set", "data.label=\"T2s\"", "--set", "train.distill_weight=0",
+        "--set", "train.steps=6", "--set", "train.checkpoint_every=3"]
+
+
+def weights(run: Path) -> dict:
+    return Run(run).load_model()[0].state_dict()
+
+
+def assert_same_weights(a: Path, b: Path) -> None:
+    wa, wb = weights(a), weights(b)
+    assert all(torch.allclose(wa[k].float(), wb[k].float(), atol=1e-6) for k in wa)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(data, tmp_path_factory):
+    run = tmp_path_factory.mktemp("full") / "run"
+    assert train_cli.main([*FAST, "--data", str(data), "--out", str(run)]) == 0
+    return run
+
+
+def test_an_existing_run_is_refused_without_resume_or_force(data, uninterrupted, capsys):
+    before = (uninterrupted / "model.pt").read_bytes()
+    assert train_cli.main([*FAST, "--data", str(data), "--out", str(uninterrupted)]) == 2
+    assert "--resume" in capsys.readouterr().err and (uninterrupted / "model.pt").read_bytes() == before
+
+
+class Killed(Exception):
+    pass
+
+
+def test_a_resumed_run_is_the_uninterrupted_run(data, uninterrupted, tmp_path, monkeypatch):
+    """Killed after the checkpoint at step 3: resuming sees the same data stream and ends equal."""
+    run = tmp_path / "run"
+    real = Run.save
+
+    def save(self, model, card_fields, info, resume_state=None):
+        if info["step"] == 6:
+            raise Killed
+        return real(self, model, card_fields, info, resume_state)
+
+    monkeypatch.setattr(Run, "save", save)
+    with pytest.raises(Killed):
+        train_cli.main([*FAST, "--data", str(data), "--out", str(run)])
+    monkeypatch.setattr(Run, "save", real)
+    assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
+    assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--resume"]) == 0
+    assert_same_weights(run, uninterrupted)
+
+
+def test_a_kill_between_weights_and_state_resumes_consistently(data, uninterrupted, tmp_path, monkeypatch):
+    """state.pt of step 6 written, then killed before model.pt: the run resumes from the state."""
+    import bsn_edge.train.run as run_mod
+
+    run = tmp_path / "run"
+    real = run_mod.atomic_write_bytes
+    states = []
+
+    def write(path, data_):
+        if Path(path).name == Run.STATE:
+            states.append(path)
+        elif Path(path).name == Run.MODEL and len(states) == 2:
+            raise Killed
+        return real(path, data_)
+
+    monkeypatch.setattr(run_mod, "atomic_write_bytes", write)
+    with pytest.raises(Killed):
+        train_cli.main([*FAST, "--data", str(data), "--out", str(run)])
+    monkeypatch.setattr(run_mod, "atomic_write_bytes", real)
+    assert torch.load(run / Run.STATE, weights_only=True)["step"] == 6
+    assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
+    assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--resume"]) == 0
+    assert_same_weights(run, uninterrupted)
+
+
+def test_resume_refuses_damaged_or_foreign_weights(data, uninterrupted, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(uninterrupted, run)
+    raw = bytearray((run / "model.pt").read_bytes())
+    raw[-20] ^= 0xFF
+    (run / "model.pt").write_bytes(bytes(raw))
+    assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--resume"]) == 2
+    assert "damaged" in capsys.readouterr().err and (run / "model.pt").read_bytes() == bytes(raw)
+    (run / Run.STATE).write_bytes(pickle.dumps({"step": 3, "weights": os.system}))   # pickled code
+    assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--resume"]) == 2
+    assert "not a weights-only torch file" in capsys.readouterr().err
+
+
+def test_clips_without_labels_are_named(data, tmp_path, capsys):
+    shutil.copytree(data, tmp_path / "d")
+    assert synth_cli.main([str(tmp_path / "d" / "unlabelled"), "--frames", "5", "--size", "64x128", "--no-video"]) == 0
+    assert train_cli.main([*FAST, "--data", str(tmp_path / "d"), "--out", str(tmp_path / "r"),
+                           "--set", "train.steps=1"]) == 0
+    err = capsys.readouterr().err
+    assert "skipped" in err and "unlabelled" in err and "run bsn-label" in err
