@@ -25,8 +25,8 @@ import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from benchmarks.common import eval_run, summary, time_calls, train_run, write_result
-from bsn_edge.cli.common import parse_size
 from bsn_edge.camera import Intrinsics
+from bsn_edge.cli.common import parse_size
 from bsn_edge.export import to_onnx
 from bsn_edge.models import create_model, describe
 from bsn_edge.runtime.model_file import session

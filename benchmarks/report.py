@@ -17,7 +17,7 @@ from matplotlib.ticker import NullFormatter, ScalarFormatter
 
 from benchmarks.common import machine
 
-ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "runtime")
+ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "runtime", "footprint")
 
 
 def _load(results: Path, name: str) -> dict | None:

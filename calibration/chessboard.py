@@ -11,9 +11,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS
 from bsn_edge.camera import Intrinsics
 from bsn_edge.sequence.images import atomic_write_bytes
+from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS
 
 SUBPIX = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
 

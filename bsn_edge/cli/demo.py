@@ -23,7 +23,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="demo", help="output folder (default ./demo)")
     p.add_argument("--frames", type=int, default=150, help="frames of the clip (default 150, 15 s)")
     p.add_argument("--seed", type=int, default=7, help="random seed of the clip (default 7)")
-    p.add_argument("--style", default="town", choices=("town", "suburb"))
+    p.add_argument("--style", default="town", choices=("town", "suburb"),
+                   help="synthetic world style of the clip (default town)")
     p.add_argument("--model", default=str(DEFAULT_MODEL), help="fused ONNX model (default: the shipped one)")
     return p
 

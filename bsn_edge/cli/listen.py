@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
+from collections.abc import Iterator
+from pathlib import Path
 
 from bsn_edge.alerts.can_codec import decode, to_alert_text
 from bsn_edge.alerts.e2e import counter_gap
@@ -12,36 +15,97 @@ from bsn_edge.alerts.serial_codec import FrameDecoder
 from bsn_edge.cli.common import fail
 
 PROG = "bsn-listen"
+# candump -L: "(1700000000.123456) can0 500#0011223344556677", python-can adds " T" / " R" (direction)
+CANDUMP = re.compile(r"^\((\d+(?:\.\d+)?)\)\s+\S+\s+([0-9A-Fa-f]{1,8})#([0-9A-Fa-f]*)(?:\s+[TR])?\s*$")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog=PROG, description="Decode bsn-run's alerts from a CAN bus, a CAN log "
-                                "(.asc/.blf) or a serial port, with the decoders the tests use; report CRC "
-                                "mismatches and lost frames.")
+    p = argparse.ArgumentParser(prog=PROG, description="Decode bsn-run's alerts from a CAN bus, a CAN log or a "
+                                "serial port, with the decoders the tests use; report CRC mismatches, repeated and "
+                                "lost frames, and log lines that cannot be read. Exit code 1 when anything was wrong.")
     g = p.add_mutually_exclusive_group(required=True)
-    g.add_argument("--can", metavar="IFACE:CHANNEL")
-    g.add_argument("--can-log", metavar="FILE")
-    g.add_argument("--serial", metavar="URL")
+    g.add_argument("--can", metavar="IFACE:CHANNEL", help="listen on this python-can bus, e.g. socketcan:can0")
+    g.add_argument("--can-log", metavar="FILE",
+                   help="read a log bsn-run --can-log wrote: .log (candump), .asc or .blf")
+    g.add_argument("--serial", metavar="URL", help="listen on this serial port (pyserial URL)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (live inputs)")
     p.add_argument("--max", type=int, default=None, help="stop after this many frames")
     return p
 
 
 class Printer:
+    """Prints each decoded frame; counts bad CRCs, repeats and losses per message."""
+
     def __init__(self, out=None) -> None:
         self.out, self.last = out, {}
-        self.frames = self.bad_crc = self.lost = 0
+        self.frames = self.bad_crc = self.lost = self.repeated = self.bad_lines = 0
 
-    def __call__(self, frame_id: int, data: bytes) -> None:
-        d = decode(frame_id, data)
+    def __call__(self, frame_id: int, data: bytes, where: str = "") -> None:
+        try:
+            d = decode(frame_id, data)
+        except Exception as e:  # a frame of our ids with the wrong length or layout
+            self.bad_line(where or "frame", f"id {frame_id:#x} cannot be decoded ({type(e).__name__}: {e})")
+            return
         if d is None:
             return
         self.frames += 1
-        self.bad_crc += not d.crc_ok
-        gap = counter_gap(self.last.get(d.name), d.counter)
-        self.lost += gap
-        self.last[d.name] = d.counter
-        print(to_alert_text(d) + (f"  ({gap} lost)" if gap else ""), file=self.out or sys.stdout)
+        note = ""
+        if not d.crc_ok:
+            self.bad_crc += 1   # its counter cannot be trusted: the counter state stays
+        else:
+            prev = self.last.get(d.name)
+            if prev == d.counter:
+                self.repeated += 1
+                note = "  (repeated)"
+            else:
+                gap = counter_gap(prev, d.counter)
+                self.lost += gap
+                note = f"  ({gap} lost)" if gap else ""
+            self.last[d.name] = d.counter
+        print(to_alert_text(d) + note, file=self.out or sys.stdout)
+
+    def bad_line(self, where: str, why: str) -> None:
+        self.bad_lines += 1
+        print(f"{PROG}: {where}: {why}", file=sys.stderr)
+
+    @property
+    def ok(self) -> bool:
+        return not (self.bad_crc or self.repeated or self.bad_lines)
+
+
+def candump_lines(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]:
+    """Frames of a candump log; comment, malformed and truncated lines are reported and skipped."""
+    with open(path, errors="replace") as f:
+        for n, line in enumerate(f, 1):
+            text = line.strip()
+            if not text or text.startswith(("#", ";")):
+                if text:
+                    show.bad_line(f"{path}:{n}", "comment line skipped")
+                continue
+            m = CANDUMP.match(text)
+            if m is None:
+                show.bad_line(f"{path}:{n}", f"not a candump line: {text[:60]!r}")
+                continue
+            payload = m.group(3)
+            if len(payload) % 2 or len(payload) > 16:
+                show.bad_line(f"{path}:{n}", f"truncated or oversized data {payload!r}")
+                continue
+            yield int(m.group(2), 16), bytes.fromhex(payload), f"{path}:{n}"
+
+
+def python_can_log(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]:
+    import can
+
+    reader = iter(can.LogReader(str(path)))
+    while True:
+        try:
+            msg = next(reader)
+        except StopIteration:
+            return
+        except Exception as e:  # a damaged record: python-can cannot go on after it
+            show.bad_line(str(path), f"unreadable from here on ({type(e).__name__}: {e})")
+            return
+        yield msg.arbitration_id, bytes(msg.data), str(path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -54,11 +118,14 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         if args.can_log:
-            import can
-            for msg in can.LogReader(args.can_log):
+            path = Path(args.can_log)
+            if not path.is_file():
+                return fail(PROG, f"CAN log {path} not found")
+            frames = candump_lines(path, show) if path.suffix.lower() == ".log" else python_can_log(path, show)
+            for fid, data, where in frames:
                 if not more():
                     break
-                show(msg.arbitration_id, bytes(msg.data))
+                show(fid, data, where)
         elif args.can:
             import can
             iface, _, channel = args.can.partition(":")
@@ -75,14 +142,13 @@ def main(argv: list[str] | None = None) -> int:
                     for fid, data in dec.feed(port.read(256)):
                         show(fid, data)
             show.bad_crc += dec.errors
-    except FileNotFoundError as e:
-        return fail(PROG, str(e))
     except KeyboardInterrupt:
         pass
     except Exception as e:
         return fail(PROG, f"{type(e).__name__}: {e}")
-    print(f"{show.frames} frames, {show.bad_crc} with a bad CRC, {show.lost} lost", file=sys.stderr)
-    return 0 if show.bad_crc == 0 else 1
+    print(f"{show.frames} frames, {show.bad_crc} with a bad CRC, {show.lost} lost, {show.repeated} repeated, "
+          f"{show.bad_lines} unreadable lines", file=sys.stderr)
+    return 0 if show.ok else 1
 
 
 if __name__ == "__main__":

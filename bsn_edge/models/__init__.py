@@ -12,5 +12,18 @@ from bsn_edge.models.registry import (
     weights_bytes,
 )
 
-__all__ = ["MAX_DEPTH_M", "MIN_DEPTH_M", "MODELS", "BlindSpotNet", "DepthNet", "ModelSpec", "build", "create_model", "create_teacher", "describe",
-           "depth_feature", "get_spec", "weights_bytes"]
+__all__ = [
+    "MAX_DEPTH_M",
+    "MIN_DEPTH_M",
+    "MODELS",
+    "BlindSpotNet",
+    "DepthNet",
+    "ModelSpec",
+    "build",
+    "create_model",
+    "create_teacher",
+    "depth_feature",
+    "describe",
+    "get_spec",
+    "weights_bytes",
+]

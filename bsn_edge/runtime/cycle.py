@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections.abc import Callable
@@ -83,10 +84,8 @@ class Heartbeat:
                 self.emitter.emit(self.clock())
             except Exception as e:  # the bus must never go silent while the loop runs
                 self.last_error = f"{type(e).__name__}: {e}"
-                try:
+                with contextlib.suppress(Exception):   # nothing more to do than to go on
                     self.emitter.health.fault("heartbeat_errors")
-                except Exception:  # noqa: S110 - nothing more to do than to go on
-                    pass
             self._stop.wait(self.emitter.cycle_s / 2)
 
     def __enter__(self) -> Heartbeat:

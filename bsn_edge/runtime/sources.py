@@ -42,10 +42,10 @@ class Source:
     def __iter__(self) -> Iterator[Captured]:
         raise NotImplementedError
 
-    def stop(self) -> None:  # noqa: B027 - optional hook
+    def stop(self) -> None:
         pass
 
-    def close(self) -> None:  # noqa: B027 - optional hook
+    def close(self) -> None:
         pass
 
 

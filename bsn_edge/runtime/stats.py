@@ -13,7 +13,7 @@ class LatencyStats:
 
     def __init__(self) -> None:
         decades = np.log10(HI_S / LO_S)
-        self.counts = np.zeros(int(round(decades * BINS_PER_DECADE)) + 1, np.int64)
+        self.counts = np.zeros(round(decades * BINS_PER_DECADE) + 1, np.int64)
         self.n = 0
         self.total_s = 0.0
         self.max_s = 0.0

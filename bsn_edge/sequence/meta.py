@@ -59,13 +59,19 @@ class SequenceMeta:
             d = json.loads(path.read_text())
         except json.JSONDecodeError as e:
             raise ValueError(f"{path}: invalid JSON: {e}") from None
+        if not isinstance(d, dict):
+            raise ValueError(f"{path}: expected a JSON object")
         known = {"fps", "width", "height", "fx", "fy", "cx", "cy", "source", "frames", "seed"}
-        missing = sorted(known - {"seed"} - d.keys())
+        missing = sorted(known - {"seed", "frames", "source"} - d.keys())
         if missing:
             raise ValueError(f"{path}: missing keys {missing}")
+        if "frames" not in d:   # a user's own clip: count what the folder holds
+            from bsn_edge.sequence.folder import SequenceFolder
+
+            d["frames"] = SequenceFolder(seq_dir).count_frames()
         extra = {k: v for k, v in d.items() if k not in known}
         return cls(
             fps=float(d["fps"]), width=int(d["width"]), height=int(d["height"]),
             fx=float(d["fx"]), fy=float(d["fy"]), cx=float(d["cx"]), cy=float(d["cy"]),
-            source=str(d["source"]), frames=int(d["frames"]), seed=d.get("seed"), extra=extra,
+            source=str(d.get("source", "user")), frames=int(d["frames"]), seed=d.get("seed"), extra=extra,
         )

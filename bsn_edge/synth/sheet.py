@@ -13,8 +13,8 @@ import cv2
 import numpy as np
 
 from bsn_edge import semantics as sm
-from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence import SequenceMeta, read_depth, read_mask
+from bsn_edge.sequence.folder import SequenceFolder
 
 BS_TINT = np.array([40, 40, 255], np.float32)  # BGR red
 HEADER = 22

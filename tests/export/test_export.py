@@ -8,10 +8,10 @@ import onnx
 import pytest
 import torch
 
-from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.card import ModelCard
 from bsn_edge.cli.export import main as export_main
 from bsn_edge.export import FusedModel, check_parity, head_nodes, quantize, read_card, to_onnx
+from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.models import create_model
 from bsn_edge.runtime.model_file import session
 from bsn_edge.synth import SynthConfig, write_clip

@@ -6,10 +6,10 @@ import torch
 import torch.nn.functional as F
 
 from bsn_edge.export import to_onnx
-from tests.cards import card_for
 from bsn_edge.export.upsample import ShuffleUpsample, bilinear_taps, with_shuffle_upsampling
 from bsn_edge.models import create_model
 from bsn_edge.models.upsample import Upsample
+from tests.cards import card_for
 
 
 @pytest.mark.parametrize("factor", [2, 4, 8])

@@ -108,3 +108,24 @@ def test_tum_write_read_roundtrip(tmp_path):
     poses = np.stack([look_pose(rng.normal(size=3), *rng.uniform(-3, 3, 2)) for _ in range(20)])
     write_tum_poses(tmp_path / "t.txt", np.arange(20) * 0.1, poses)
     np.testing.assert_allclose(read_tum_poses(tmp_path / "t.txt")[1], poses, atol=1e-8)
+
+
+def test_a_users_meta_without_frames_counts_the_folder(tmp_path):
+    """A clip written to the documented format by hand: frames derived from rgb/."""
+    import json
+
+    import numpy as np
+
+    from bsn_edge.sequence import SequenceMeta, write_image
+    from bsn_edge.sequence.folder import SequenceFolder
+
+    seq = SequenceFolder(tmp_path / "mine")
+    (seq.path / "rgb").mkdir(parents=True)
+    for i in range(7):
+        write_image(seq.rgb(i), np.zeros((32, 64, 3), np.uint8))
+    seq.meta_path.write_text(json.dumps({"fps": 10, "width": 64, "height": 32, "fx": 40, "fy": 40, "cx": 32,
+                                         "cy": 16}))
+    meta = SequenceMeta.read(seq.path)
+    assert meta.frames == 7 and meta.source == "user"
+    assert seq.rgb(3).name == "000003.png" and seq.labels("T5s").blindspot(3).parts[-3:] == (
+        "T5s", "blindspot", "000003.png")

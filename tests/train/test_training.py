@@ -17,7 +17,7 @@ from bsn_edge.cli import label as label_cli
 from bsn_edge.cli import synth as synth_cli
 from bsn_edge.cli import train as train_cli
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
-from bsn_edge.train import Run, RunError, load_config
+from bsn_edge.train import Run, load_config
 from bsn_edge.train.losses import masked_bce
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -193,22 +193,22 @@ def test_an_existing_run_is_refused_without_resume_or_force(data, uninterrupted,
     assert "--resume" in capsys.readouterr().err and (uninterrupted / "model.pt").read_bytes() == before
 
 
-class Killed(Exception):
+class KilledError(Exception):
     pass
 
 
 def test_a_resumed_run_is_the_uninterrupted_run(data, uninterrupted, tmp_path, monkeypatch):
-    """Killed after the checkpoint at step 3: resuming sees the same data stream and ends equal."""
+    """KilledError after the checkpoint at step 3: resuming sees the same data stream and ends equal."""
     run = tmp_path / "run"
     real = Run.save
 
     def save(self, model, card_fields, info, resume_state=None):
         if info["step"] == 6:
-            raise Killed
+            raise KilledError
         return real(self, model, card_fields, info, resume_state)
 
     monkeypatch.setattr(Run, "save", save)
-    with pytest.raises(Killed):
+    with pytest.raises(KilledError):
         train_cli.main([*FAST, "--data", str(data), "--out", str(run)])
     monkeypatch.setattr(Run, "save", real)
     assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
@@ -228,11 +228,11 @@ def test_a_kill_between_weights_and_state_resumes_consistently(data, uninterrupt
         if Path(path).name == Run.STATE:
             states.append(path)
         elif Path(path).name == Run.MODEL and len(states) == 2:
-            raise Killed
+            raise KilledError
         return real(path, data_)
 
     monkeypatch.setattr(run_mod, "atomic_write_bytes", write)
-    with pytest.raises(Killed):
+    with pytest.raises(KilledError):
         train_cli.main([*FAST, "--data", str(data), "--out", str(run)])
     monkeypatch.setattr(run_mod, "atomic_write_bytes", real)
     assert torch.load(run / Run.STATE, weights_only=True)["step"] == 6

@@ -1,0 +1,72 @@
+"""Checksums and framing against published values, and bsn-listen on damaged logs."""
+
+import pytest
+
+from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+from bsn_edge.alerts.can_codec import CanEncoder
+from bsn_edge.alerts.e2e import crc8_sae_j1850, crc16_ccitt
+from bsn_edge.alerts.serial_codec import cobs_decode, cobs_encode
+from bsn_edge.cli import listen as listen_cli
+
+CHECK = b"123456789"
+
+
+def test_crcs_match_their_catalogue_check_values():
+    # reveng CRC catalogue: CRC-8/SAE-J1850 check=0x4b, CRC-16/IBM-3740 (CCITT-FALSE) check=0x29b1
+    assert crc8_sae_j1850(CHECK) == 0x4B
+    assert crc16_ccitt(CHECK) == 0x29B1
+    assert crc8_sae_j1850(b"") == 0x00 and crc16_ccitt(b"") == 0xFFFF
+
+
+@pytest.mark.parametrize("raw, encoded", [
+    # the examples published with COBS (Cheshire and Baker 1999; Wikipedia's table)
+    ("00", "0101"),
+    ("0000", "010101"),
+    ("001100", "01021101"),
+    ("11220033", "0311220233"),
+    ("11223344", "0511223344"),
+    ("11000000", "0211010101"),
+])
+def test_cobs_matches_the_published_examples(raw, encoded):
+    assert cobs_encode(bytes.fromhex(raw)) == bytes.fromhex(encoded)
+    assert cobs_decode(bytes.fromhex(encoded)) == bytes.fromhex(raw)
+
+
+def candump(fid: int, data: bytes, t: float) -> str:
+    return f"({t:.6f}) vcan0 {fid:03X}#{data.hex().upper()}\n"
+
+
+def frames(n: int) -> list[tuple[int, bytes]]:
+    enc = CanEncoder()
+    none = SectorAlert(0.0, Level.NONE, None)
+    out = []
+    for k in range(n):
+        out += enc.encode(AlertFrame(k * 0.1, none, none, none, SystemState.OK, 10.0, {}))
+    return out
+
+
+def test_listen_reports_bad_lines_with_their_numbers_and_goes_on(tmp_path, capsys):
+    fs = frames(4)
+    lines = [candump(f, d, i * 0.05) for i, (f, d) in enumerate(fs)]
+    lines.insert(2, "# a comment\n")
+    lines.insert(4, "garbage that is not candump\n")
+    lines.append("(1.000000) vcan0 500#0011")  # truncated: 2 of 8 bytes, and no newline
+    log = tmp_path / "a.log"
+    log.write_text("".join(lines))
+    assert listen_cli.main(["--can-log", str(log)]) == 1
+    out = capsys.readouterr()
+    assert f"{log}:3: comment line skipped" in out.err and f"{log}:5: not a candump line" in out.err
+    assert "8 frames" in out.err and "3 unreadable lines" in out.err and "0 lost" in out.err
+    assert out.out.count("hazard #") == 4 and "status #3" in out.out
+
+
+def test_a_repeat_is_a_repeat_and_a_bad_crc_does_not_move_the_counter(tmp_path, capsys):
+    (h0, d0), _, (h1, d1), _, (h2, d2), _ = frames(3)
+    bad = bytearray(d1)
+    bad[0] ^= 0x04                       # CRC fails
+    log = tmp_path / "b.log"
+    log.write_text(candump(h0, d0, 0) + candump(h0, d0, 0.1) + candump(h1, bytes(bad), 0.2) + candump(h1, d1, 0.3)
+                   + candump(h2, d2, 0.4))
+    assert listen_cli.main(["--can-log", str(log)]) == 1
+    err = capsys.readouterr().err
+    assert "5 frames, 1 with a bad CRC, 0 lost, 1 repeated" in err
