@@ -1,8 +1,8 @@
 """The inference engine: one verified model file, one onnxruntime session, its model card.
 
 At load, in this order, any failure raising :class:`ModelError` (the runtime then refuses to
-start): the file's bytes are read once; its model card is read and validated; the digest of the
-graph and weights is compared with the card's; the session is built from the verified bytes; its
+start): the file is read in chunks; its model card is read and validated; the digest of the
+graph and weights is compared with the card's; the session is built from the file; its
 input and outputs are checked against the card; the self-test frame is run and compared with the
 answer stored at export.
 """
@@ -42,7 +42,7 @@ class Engine:
                              f"({mf.graph_sha256[:12]}...) is not the one its export recorded "
                              f"({self.card.graph_sha256[:12]}...)")
         try:
-            self.sess = session(mf.data, threads, spinning)
+            self.sess = session(mf.path, threads, spinning)
         except Exception as e:
             raise ModelError(f"{self.path}: onnxruntime cannot load it: {e}") from None
         self._check_io()
