@@ -23,7 +23,7 @@ class Intrinsics:
 
     def __post_init__(self) -> None:
         if self.width <= 0 or self.height <= 0:
-            raise ValueError(f"image size must be positive, got {self.width}x{self.height}")
+            raise ValueError(f"image size must be positive, got {self.height}x{self.width} (H x W)")
         if not (np.isfinite(self.fx) and np.isfinite(self.fy) and self.fx > 0 and self.fy > 0):
             raise ValueError(f"focal lengths must be positive and finite, got fx={self.fx} fy={self.fy}")
         if not (np.isfinite(self.cx) and np.isfinite(self.cy)):

@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     cal.write(args.out)
     print(f"{len(cal.used)} views used, {len(cal.skipped)} skipped; RMS reprojection error {cal.rms_px:.3f} px")
-    print(f"fx {cal.fx:.1f}  fy {cal.fy:.1f}  cx {cal.cx:.1f}  cy {cal.cy:.1f}  at {cal.width}x{cal.height}")
+    print(f"fx {cal.fx:.1f}  fy {cal.fy:.1f}  cx {cal.cx:.1f}  cy {cal.cy:.1f}  at {cal.height}x{cal.width} (H x W)")
     print("distortion k1 k2 p1 p2 k3: " + " ".join(f"{d:+.4f}" for d in cal.dist))
     for s in cal.skipped:
         print(f"  skipped {s['view']}: {s['reason']}")

@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
         write_image(out, img)
     except (FileNotFoundError, ValueError, OSError) as e:
         return fail(PROG, str(e))
-    print(f"wrote {out} ({img.shape[1]}x{img.shape[0]})")
+    print(f"wrote {out} ({img.shape[0]}x{img.shape[1]})")
     return 0
 
 

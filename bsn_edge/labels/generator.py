@@ -15,6 +15,7 @@ import numpy as np
 
 from bsn_edge import semantics as sm
 from bsn_edge.calibration.chessboard import Calibration
+from bsn_edge.camera import Intrinsics
 from bsn_edge.labels.config import LabelConfig
 from bsn_edge.labels.monocular import metric_depth_and_poses, seed_poses
 from bsn_edge.labels.sources import ClipData, FilesDepth, frame_count
@@ -56,9 +57,20 @@ def labels_dir(seq: Path, cfg: LabelConfig) -> Path:
     return SequenceFolder(seq).labels(cfg.name).root
 
 
-def _params(cfg: LabelConfig, sources: Sources) -> dict[str, Any]:
-    """What makes a label set: every parameter and source (resuming is only right if they match)."""
-    return {"config": cfg.to_dict(), "sources": dataclasses.asdict(sources)}
+def _params(cfg: LabelConfig, sources: Sources, camera: Intrinsics) -> dict[str, Any]:
+    """What makes a label set: every parameter and source (resuming is only right if they match),
+    and the camera the labels were computed with (the one training records in the model card)."""
+    return {"config": cfg.to_dict(), "sources": dataclasses.asdict(sources), "camera": camera.to_dict()}
+
+
+def label_camera(labels: LabelSet) -> Intrinsics | None:
+    """The camera a label set was made with (a ``--calib`` calibration's, else the clip's), or None
+    for labels made before it was recorded."""
+    try:
+        cam = json.loads(labels.params_path.read_text()).get("camera")
+    except (OSError, json.JSONDecodeError):
+        return None
+    return Intrinsics(**cam) if cam else None
 
 
 def _check_params(labels: LabelSet, params: dict[str, Any], force: bool) -> None:
@@ -123,7 +135,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         raise ClipRejectedError(f"too short for T = {cfg.horizon_s:g} s: {clip.frames} frames at {meta.fps:g} "
                                 f"frames/s give {len(idx)} at {cfg.rate:g} frames/s; a label needs "
                                 f"{cfg.horizon_frames + 1} (at least {_min_frames(cfg, meta.fps)} frames of the clip)")
-    _check_params(labels, _params(cfg, sources), force)
+    _check_params(labels, _params(cfg, sources, meta.intrinsics), force)
     report: dict[str, Any] = {
         "sequence": str(seq), "config": cfg.to_dict(), "sources": vars(sources),
         "frames": clip.frames, "fps": meta.fps, "size": [meta.height, meta.width],

@@ -67,7 +67,7 @@ def sequence_rows(seq: str | os.PathLike, rows: int = 3) -> np.ndarray:
         out.append(row)
     grid = np.vstack(out)
     style = meta.extra.get("style", meta.source)
-    return _label(grid, f"{seq.name} ({style}, {meta.width}x{meta.height}, {meta.fps:g} fps)   "
+    return _label(grid, f"{seq.name} ({style}, {meta.height}x{meta.width}, {meta.fps:g} fps)   "
                         f"|  RGB  |  depth  |  semantics  |  true blind spots (red)")
 
 

@@ -27,8 +27,10 @@ from bsn_edge import semantics as sm
 from bsn_edge.card import UNCHOSEN_THRESHOLD, ModelCard
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
 from bsn_edge.evaluate.metrics import ThresholdSweep
+from bsn_edge.labels.generator import label_camera
 from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, create_model, create_teacher, get_spec
 from bsn_edge.sequence import SequenceMeta
+from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.train.config import Config
 from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce
 from bsn_edge.train.run import Run, RunError
@@ -271,7 +273,9 @@ def _save(run: Run, model, cfg: Config, data, step: int, threshold: float | None
           val: dict | None = None, history: list | None = None,
           resume_state: dict[str, Any] | None = None) -> ModelCard:
     """A checkpoint of ``model`` with its card; ``threshold`` None keeps the previous one (if any)."""
-    train_meta = SequenceMeta.read(data["train"][0].path)
+    first = data["train"][0].path
+    # the labels' camera (bsn-label --calib's calibration when one was given), else the clip's
+    camera = label_camera(SequenceFolder(first).labels(cfg.data.label)) or SequenceMeta.read(first).intrinsics
     h, w = cfg.data.size
     prev: dict[str, Any] = {}
     if run.checkpoint_path.is_file():
@@ -280,8 +284,8 @@ def _save(run: Run, model, cfg: Config, data, step: int, threshold: float | None
     card_fields = {
         "variant": cfg.model.name, "spec": get_spec(cfg.model.name).to_dict(), "input_size": (h, w),
         "threshold": threshold if threshold is not None else prev.get("threshold"),
-        "camera": train_meta.intrinsics.scaled(w, h), "depth_range": (MIN_DEPTH_M, MAX_DEPTH_M),
-        "config_digest": cfg.digest(), "train_camera": train_meta.intrinsics,
+        "camera": camera.scaled(w, h), "depth_range": (MIN_DEPTH_M, MAX_DEPTH_M),
+        "config_digest": cfg.digest(), "train_camera": camera,
     }
     info = {
         "step": step, "label": cfg.data.label, "distill_weight": cfg.distill_weight,

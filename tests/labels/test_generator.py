@@ -143,6 +143,21 @@ def test_calibration_file_replaces_the_intrinsics(seq, tmp_path):
     assert [f["blindspot_px"] for f in rep["per_frame"]] == [f["blindspot_px"] for f in ref["per_frame"]]
 
 
+def test_the_calibrated_camera_is_recorded_where_training_reads_it(seq, tmp_path):
+    """bsn-label --calib: the calibration's intrinsics (at the clip's size) go with the labels, and
+    training takes the model card's camera from there."""
+    from bsn_edge.calibration import Calibration
+    from bsn_edge.labels.generator import label_camera
+    from bsn_edge.sequence import SequenceMeta
+    from bsn_edge.sequence.folder import SequenceFolder
+    m = SequenceMeta.read(seq)
+    Calibration(m.fx * 2.2, m.fy * 2.2, m.width, m.height, m.width * 2, m.height * 2).write(tmp_path / "c.json")
+    label_sequence(seq, CFG, Sources(calib=str(tmp_path / "c.json")))
+    cam = label_camera(SequenceFolder(seq).labels(CFG.name))
+    assert (cam.width, cam.height) == (m.width, m.height)
+    assert cam.fx == pytest.approx(m.fx * 1.1) and cam.fy == pytest.approx(m.fy * 1.1)
+
+
 def test_a_rerun_with_other_parameters_refuses_then_relabels_with_force(seq, capsys):
     assert label_cli.main([str(seq), "--T", "1", "--jobs", "1"]) == 0
     out = labels_dir(seq, CFG)
