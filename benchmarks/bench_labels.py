@@ -23,6 +23,7 @@ from benchmarks.oracle import revealed_share
 from bsn_edge.labels import LabelConfig, Sources, label_sequence, labels_dir
 from bsn_edge.labels.batch import label_many
 from bsn_edge.sequence import read_mask
+from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth import SynthConfig, write_clip
 
 PAPER = {"a": {"recall": 0.372}, "b": {"recall": 0.297}}
@@ -103,11 +104,11 @@ def _score_world(work: Path, cfg: LabelConfig, world: str, clips, seeds, realist
 def score(labelled: Path, truth: Path, cfg: LabelConfig) -> dict[str, float]:
     """Pooled counts, inside V, of the labels made in ``labelled`` against the true blind spots of
     ``truth`` (the same clip, or the clip the realistic sources were derived from)."""
-    out = labels_dir(labelled, cfg)
+    labels, gt_seq = SequenceFolder(labelled).labels(cfg.name), SequenceFolder(truth)
     tp = fp = fn = v = 0
-    for p in sorted((out / "blindspot").iterdir()):
-        omega, vis = read_mask(p), read_mask(out / "visibility" / p.name)
-        gt = read_mask(truth / "bsgt" / p.name)
+    for i in labels.frames():
+        omega, vis = read_mask(labels.blindspot(i)), read_mask(labels.visibility(i))
+        gt = read_mask(gt_seq.bsgt(i))
         tp += int((omega & gt & vis).sum())
         fp += int((omega & ~gt & vis).sum())
         fn += int((~omega & gt & vis).sum())

@@ -25,6 +25,7 @@ from bsn_edge.export import QuantConfig, quantize, to_onnx
 from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.runtime.model_file import session
 from bsn_edge.sequence import read_mask
+from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.frames import read_rgb
 from bsn_edge.train.run import Run
 
@@ -74,10 +75,10 @@ def accuracy(paths: dict[str, Path], clips, size, threshold: float, label: str) 
     for clip in clips:
         for f in clip.frames:
             frame = cv2.resize(read_rgb(clip.path, f), (w, h), interpolation=cv2.INTER_AREA)[None]
-            lab = clip.path / "labels" / label
-            y = cv2.resize(read_mask(lab / "blindspot" / f"{f:06d}.png").astype(np.uint8), (w, h),
+            lab = SequenceFolder(clip.path).labels(label)
+            y = cv2.resize(read_mask(lab.blindspot(f)).astype(np.uint8), (w, h),
                            interpolation=cv2.INTER_NEAREST) > 0
-            v = cv2.resize(read_mask(lab / "visibility" / f"{f:06d}.png").astype(np.uint8), (w, h),
+            v = cv2.resize(read_mask(lab.visibility(f)).astype(np.uint8), (w, h),
                            interpolation=cv2.INTER_NEAREST) > 0
             masks = {k: s.run(None, {"frame": frame})[0][0, 0] >= threshold for k, s in sess.items()}
             for k, m in masks.items():

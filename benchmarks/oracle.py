@@ -13,8 +13,9 @@ import cv2
 import numpy as np
 
 from bsn_edge import semantics as sm
-from bsn_edge.labels import LabelConfig, labels_dir, resample
+from bsn_edge.labels import LabelConfig, resample
 from bsn_edge.sequence import SequenceMeta, read_depth, read_kitti_poses, read_mask
+from bsn_edge.sequence.folder import SequenceFolder
 
 TOL_M = 0.5
 
@@ -23,25 +24,26 @@ def revealed_share(seq: Path, cfg: LabelConfig) -> tuple[int, int]:
     """``(revealed, total)`` true blind-spot pixels inside V over the labelled frames of ``seq``."""
     meta = SequenceMeta.read(seq)
     K = meta.intrinsics
-    poses = read_kitti_poses(seq / "poses.txt")
+    folder = SequenceFolder(seq)
+    labels = folder.labels(cfg.name)
+    poses = read_kitti_poses(folder.poses_path)
     idx = resample(meta.frames, meta.fps, cfg.rate)
     rays = K.rays()
     cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def frame(i: int):
         if i not in cache:
-            sem = cv2.imread(str(seq / "semantic" / f"{i:06d}.png"), cv2.IMREAD_UNCHANGED)
-            cache[i] = (read_depth(seq / "depth" / f"{i:06d}.png"), sm.is_traversable(sem))
+            sem = cv2.imread(str(folder.semantic(i)), cv2.IMREAD_UNCHANGED)
+            cache[i] = (read_depth(folder.depth(i)), sm.is_traversable(sem))
         return cache[i]
 
-    out = labels_dir(seq, cfg)
     seen_total = total = 0
     for k in range(len(idx) - cfg.horizon_frames):
         i = int(idx[k])
-        vis_path = out / "visibility" / f"{i:06d}.png"
+        vis_path = labels.visibility(i)
         if not vis_path.exists():
             continue
-        gt = read_mask(seq / "bsgt" / f"{i:06d}.png") & read_mask(vis_path)
+        gt = read_mask(folder.bsgt(i)) & read_mask(vis_path)
         if not gt.any():
             continue
         T = poses[i]

@@ -19,6 +19,7 @@ import numpy as np
 
 from bsn_edge.labels import Sources
 from bsn_edge.sequence import SequenceMeta, read_depth
+from bsn_edge.sequence.folder import SequenceFolder, frame_name
 from bsn_edge.synth.shading import periodic_noise
 
 DEPTH_ERROR = 0.10      # multiplicative, smooth
@@ -35,27 +36,26 @@ def prepare_realistic(seq: Path, out: Path, seed: int) -> tuple[Path, Sources]:
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
-    for name in ("meta.json", "rgb"):
-        src = seq / name
-        (shutil.copytree if src.is_dir() else shutil.copy)(src, out / name)
+    src, dst = SequenceFolder(seq), SequenceFolder(out)
+    shutil.copy(src.meta_path, dst.meta_path)
+    shutil.copytree(src.dir(src.RGB), dst.dir(dst.RGB))
     meta = SequenceMeta.read(seq)
     h, w = meta.height, meta.width
     rng = np.random.default_rng([seed, 0xB])
     scale, shift = rng.uniform(2.0, 20.0), rng.uniform(0.0, 0.2)
     err_a, err_b = _smooth_field(rng, h, w, 0.02), _smooth_field(rng, h, w, 0.02)
     (out / "rel_depth").mkdir()
-    (out / "semantic").mkdir()
+    dst.dir(dst.SEMANTIC).mkdir()
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     for i in range(meta.frames):
-        name = f"{i:06d}"
-        d = read_depth(seq / "depth" / f"{name}.png")
+        d = read_depth(src.depth(i))
         phase = i / max(meta.frames - 1, 1)
         err = 1.0 + DEPTH_ERROR * ((1 - phase) * err_a + phase * err_b)
         inv = np.where(d > 0, 1.0 / np.maximum(d, 1e-3), 0.0) * err
-        np.save(out / "rel_depth" / f"{name}.npy", (scale * inv + shift).astype(np.float32))
-        sem = cv2.imread(str(seq / "semantic" / f"{name}.png"), cv2.IMREAD_UNCHANGED)
+        np.save(out / "rel_depth" / frame_name(i, ".npy"), (scale * inv + shift).astype(np.float32))
+        sem = cv2.imread(str(src.semantic(i)), cv2.IMREAD_UNCHANGED)
         fx = SEG_SHIFT_PX * _smooth_field(rng, h, w, 0.05)
         fy = SEG_SHIFT_PX * _smooth_field(rng, h, w, 0.05)
         jittered = cv2.remap(sem, xx + fx, yy + fy, cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE)
-        cv2.imwrite(str(out / "semantic" / f"{name}.png"), jittered)
+        cv2.imwrite(str(dst.semantic(i)), jittered)
     return out, Sources(depth="rel:rel_depth:inverse", seg="files", poses="vo")

@@ -9,6 +9,7 @@ import numpy as np
 
 from bsn_edge.labels.sources.base import ClipData
 from bsn_edge.labels.sources.onnx_depth import AlignedDepth
+from bsn_edge.sequence.folder import frame_name
 
 
 class RelFilesDepth(AlignedDepth):
@@ -32,7 +33,7 @@ class RelFilesDepth(AlignedDepth):
         shape = (clip.meta.height, clip.meta.width)
 
         def predict(i: int) -> np.ndarray:
-            p = root / f"{i:06d}.npy"
+            p = root / frame_name(i, ".npy")
             if not p.exists():
                 raise FileNotFoundError(f"{p} missing")
             a = np.load(p, allow_pickle=False)
