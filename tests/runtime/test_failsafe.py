@@ -343,3 +343,16 @@ def test_sigterm_keeps_the_logs_the_summary_and_sends_unavailable(setup, tmp_pat
     st = [decode(m.arbitration_id, bytes(m.data)) for m in msgs]
     st = [d for d in st if d is not None and d.name == "BSN_Status"]
     assert st and st[-1].crc_ok and st[-1].signals["System_State"] == SystemState.UNAVAILABLE
+
+
+def test_a_can_log_bsn_listen_cannot_read_is_refused_before_anything_runs(setup, tmp_path, capsys):
+    model, clip = setup
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--can-log",
+                         str(tmp_path / "alerts.txt"), "--log", str(tmp_path / "a.jsonl")]) == 2
+    assert ".log, .asc, .blf" in capsys.readouterr().err and not (tmp_path / "a.jsonl").exists()
+
+
+def test_a_missing_can_interface_is_named(setup, capsys):
+    model, clip = setup
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--can", "nosuchbus:x"]) == 2
+    assert "cannot open CAN interface 'nosuchbus' channel 'x'" in capsys.readouterr().err
