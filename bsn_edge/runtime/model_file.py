@@ -10,6 +10,7 @@ code. The runtime reads the file in chunks (the weights are never held twice in 
 from __future__ import annotations
 
 import hashlib
+import io
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,64 +21,8 @@ CHUNK = 1 << 20
 ENTRY_KEY, ENTRY_VALUE = 1, 2  # StringStringEntryProto
 
 
-def _varint(buf: bytes, i: int) -> tuple[int, int]:
-    shift = value = 0
-    while True:
-        if i >= len(buf):
-            raise ValueError("truncated varint")
-        b = buf[i]
-        i += 1
-        value |= (b & 0x7F) << shift
-        if b < 0x80:
-            return value, i
-        shift += 7
-        if shift > 63:
-            raise ValueError("varint too long")
-
-
-def _fields(buf: bytes) -> Iterator[tuple[int, int, int, int]]:
-    """(field number, start of the field's bytes, start of its value, end) of each top-level field."""
-    i = 0
-    while i < len(buf):
-        start = i
-        tag, i = _varint(buf, i)
-        number, wire = tag >> 3, tag & 7
-        if wire == 0:
-            _, end = _varint(buf, i)
-        elif wire == 1:
-            end = i + 8
-        elif wire == 2:
-            n, i = _varint(buf, i)
-            end = i + n
-        elif wire == 5:
-            end = i + 4
-        else:
-            raise ValueError(f"unsupported protobuf wire type {wire} at byte {start}")
-        if end > len(buf) or number == 0:
-            raise ValueError(f"truncated or malformed protobuf field at byte {start}")
-        yield number, start, i, end
-        i = end
-
-
-def graph_digest(data: bytes) -> str:
-    """sha256 of the model bytes without ``metadata_props``."""
-    h = hashlib.sha256()
-    for number, start, _, end in _fields(data):
-        if number != METADATA_FIELD:
-            h.update(data[start:end])
-    return h.hexdigest()
-
-
-def read_metadata(data: bytes) -> dict[str, str]:
-    """``metadata_props`` of serialized model bytes."""
-    out: dict[str, str] = {}
-    for number, _, vstart, end in _fields(data):
-        if number == METADATA_FIELD:
-            out.update(read_metadata_entry(data[vstart:end]))
-    return out
-
-
 def _read_varint(f: BinaryIO) -> int | None:
+    """The next varint, or None at the end of the stream."""
     shift = value = 0
     while True:
         b = f.read(1)
@@ -93,54 +38,69 @@ def _read_varint(f: BinaryIO) -> int | None:
             raise ValueError("varint too long")
 
 
-def _scan(f: BinaryIO, size: int) -> tuple[dict[str, str], str]:
-    """Metadata and graph digest of a model file, read in chunks (the weights never sit in memory)."""
-    h = hashlib.sha256()
-    metadata: dict[str, str] = {}
+def _fields(f: BinaryIO, size: int) -> Iterator[tuple[int, int, int, int]]:
+    """(field number, start of the field's bytes, start of its value, end) of each top-level field
+    of the protobuf message in ``f``; the caller may read within a field, the walk seeks past it."""
     while True:
         start = f.tell()
         tag = _read_varint(f)
         if tag is None:
-            return metadata, h.hexdigest()
+            return
         number, wire = tag >> 3, tag & 7
-        if wire == 2:
+        if wire == 0:
+            _read_varint(f)
+            value, end = start, f.tell()
+        elif wire in (1, 5):
+            value = f.tell()
+            end = value + (8 if wire == 1 else 4)
+        elif wire == 2:
             n = _read_varint(f)
             if n is None:
                 raise ValueError(f"truncated field at byte {start}")
-            head_end = f.tell()
-            end = head_end + n
-        elif wire in (0, 1, 5):
-            if wire == 0:
-                _read_varint(f)
-                end = f.tell()
-            else:
-                end = f.tell() + (8 if wire == 1 else 4)
-            head_end = end
+            value = f.tell()
+            end = value + n
         else:
             raise ValueError(f"unsupported protobuf wire type {wire} at byte {start}")
         if end > size or number == 0:
             raise ValueError(f"truncated or malformed protobuf field at byte {start}")
-        if number == METADATA_FIELD:
-            f.seek(head_end)
-            metadata.update(read_metadata_entry(f.read(end - head_end)))
-        else:
-            f.seek(start)
-            left = end - start
-            while left:
-                chunk = f.read(min(left, CHUNK))
-                if not chunk:
-                    raise ValueError(f"truncated field at byte {start}")
-                h.update(chunk)
-                left -= len(chunk)
+        yield number, start, value, end
         f.seek(end)
 
 
-def read_metadata_entry(entry: bytes) -> dict[str, str]:
-    kv = {}
-    for n, _, s, e in _fields(entry):
-        if n in (ENTRY_KEY, ENTRY_VALUE):
-            kv[n] = entry[s:e].decode("utf-8", errors="replace")
-    return {kv.get(ENTRY_KEY, ""): kv.get(ENTRY_VALUE, "")}
+def _scan(f: BinaryIO, size: int) -> tuple[dict[str, str], str]:
+    """Metadata and graph digest of a serialized model, read in chunks (the weights never sit in
+    memory at once)."""
+    h = hashlib.sha256()
+    metadata: dict[str, str] = {}
+    for number, start, value, end in _fields(f, size):
+        if number == METADATA_FIELD:
+            f.seek(value)
+            entry = f.read(end - value)
+            kv = {}
+            for n, _, s, e in _fields(io.BytesIO(entry), len(entry)):
+                if n in (ENTRY_KEY, ENTRY_VALUE):
+                    kv[n] = entry[s:e].decode("utf-8", errors="replace")
+            metadata[kv.get(ENTRY_KEY, "")] = kv.get(ENTRY_VALUE, "")
+            continue
+        f.seek(start)
+        left = end - start
+        while left:
+            chunk = f.read(min(left, CHUNK))
+            if not chunk:
+                raise ValueError(f"truncated field at byte {start}")
+            h.update(chunk)
+            left -= len(chunk)
+    return metadata, h.hexdigest()
+
+
+def graph_digest(data: bytes) -> str:
+    """sha256 of serialized model bytes without ``metadata_props``."""
+    return _scan(io.BytesIO(data), len(data))[1]
+
+
+def read_metadata(data: bytes) -> dict[str, str]:
+    """``metadata_props`` of serialized model bytes."""
+    return _scan(io.BytesIO(data), len(data))[0]
 
 
 @dataclass(frozen=True)

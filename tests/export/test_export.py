@@ -177,3 +177,20 @@ def test_opencv_dnn_runs_the_fp32_model(run, tmp_path):
     p_ref, d_ref = session(p).run(None, {"frame": frame})
     np.testing.assert_allclose(outs["blindspot"].reshape(p_ref.shape), p_ref, atol=1e-4)
     np.testing.assert_allclose(outs["depth"].reshape(d_ref.shape), d_ref, rtol=1e-3)
+
+
+def test_the_seal_digest_and_metadata_agree_with_onnx_itself(run, tmp_path):
+    """The runtime's protobuf walk (no onnx package) against onnx's own serializer and parser."""
+    import hashlib
+
+    from bsn_edge.runtime.model_file import ModelFile
+
+    path, _, _ = run
+    out = tmp_path / "m.onnx"
+    assert export_main(["--checkpoint", str(path), "--out", str(out)]) == 0
+    m = onnx.load(str(out))
+    props = {p.key: p.value for p in m.metadata_props}
+    del m.metadata_props[:]
+    mf = ModelFile.read(out)
+    assert mf.metadata == props
+    assert mf.graph_sha256 == hashlib.sha256(m.SerializeToString()).hexdigest() == read_card(out).graph_sha256
