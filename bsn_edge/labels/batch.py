@@ -5,6 +5,7 @@ A bad clip is reported and skipped; it never stops the others or loses their lab
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import queue
@@ -12,8 +13,9 @@ import signal
 import threading
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
+from multiprocessing.managers import SyncManager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -76,6 +78,21 @@ def _die_with_parent(parent: int) -> None:
     threading.Thread(target=watch, name="bsn-parent-watch", daemon=True).start()
 
 
+@contextlib.contextmanager
+def worker_pool(jobs: int) -> Iterator[tuple[ProcessPoolExecutor, Any]]:
+    """``jobs`` spawned worker processes and a queue they can report on; every process started here
+    (the workers and the queue's manager) ends when this process ends, however it ends."""
+    ctx = mp.get_context("spawn")  # no forked copies of threads or BLAS state
+    manager = SyncManager(ctx=ctx)
+    manager.start(_die_with_parent, (os.getpid(),))
+    try:
+        with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_die_with_parent,
+                                 initargs=(os.getpid(),)) as pool:
+            yield pool, manager.Queue()
+    finally:
+        manager.shutdown()
+
+
 def label_many(seqs: list[str | Path], cfg: LabelConfig, sources: Sources, jobs: int = 1,
                progress: Callable[[int], None] | None = None,
                on_total: Callable[[int], None] | None = None, force: bool = False) -> list[ClipResult]:
@@ -84,10 +101,7 @@ def label_many(seqs: list[str | Path], cfg: LabelConfig, sources: Sources, jobs:
     seqs = [str(s) for s in seqs]
     if jobs <= 1 or len(seqs) == 1:
         return [label_clip(s, cfg, sources, progress, on_total, force) for s in seqs]
-    ctx = mp.get_context("spawn")  # no forked copies of threads or BLAS state
-    with ctx.Manager() as manager, ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_die_with_parent,
-                                                       initargs=(os.getpid(),)) as pool:
-        q = manager.Queue()
+    with worker_pool(jobs) as (pool, q):
         futures = [pool.submit(_worker, s, cfg, sources, q, force) for s in seqs]
         while True:
             try:

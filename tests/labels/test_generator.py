@@ -194,3 +194,40 @@ def test_a_clip_too_short_for_T_is_not_labelled_and_says_why(seq, capsys):
     assert label_cli.main([str(seq), "--T", "10", "--jobs", "1"]) == 1
     out = capsys.readouterr().out
     assert "rejected" in out and "too short for T = 10 s" in out and "at least 101 frames" in out
+
+
+def test_label_workers_end_when_bsn_label_is_killed(tmp_path):
+    """SIGKILL the process that started the pool: its workers and the queue's manager go too."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    script = ("import time; from bsn_edge.labels.batch import worker_pool\n"
+              "with worker_pool(2) as (pool, q):\n"
+              "    fs = [pool.submit(time.sleep, 60) for _ in range(2)]\n"
+              "    time.sleep(60)\n")
+    parent = subprocess.Popen([sys.executable, "-c", script], cwd=root, env={**os.environ, "PYTHONPATH": str(root)})
+
+    def children() -> list[int]:
+        with open(f"/proc/{parent.pid}/task/{parent.pid}/children") as f:
+            return [int(x) for x in f.read().split()]
+
+    deadline = time.monotonic() + 60
+    kids: list[int] = []
+    while time.monotonic() < deadline and len(kids) < 3:   # the manager and two workers
+        time.sleep(0.2)
+        kids = children()
+    assert len(kids) >= 3, kids
+    os.kill(parent.pid, signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and any(Path(f"/proc/{k}").exists() and
+                                              "Z" not in Path(f"/proc/{k}/stat").read_text().split()[2]
+                                              for k in kids):
+        time.sleep(0.2)
+    alive = [k for k in kids if Path(f"/proc/{k}").exists() and Path(f"/proc/{k}/stat").read_text().split()[2] != "Z"]
+    assert not alive, f"still running after their parent was killed: {alive}"
