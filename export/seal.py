@@ -13,7 +13,7 @@ import onnx
 
 from bsn_edge.card import ModelCard
 from bsn_edge.runtime import selftest
-from bsn_edge.runtime.model_file import graph_digest, session
+from bsn_edge.runtime.model_file import ModelFile, graph_digest, session
 from bsn_edge.sequence.images import atomic_write_bytes
 
 
@@ -50,6 +50,5 @@ def seal(path: str | Path, card: ModelCard, out: str | Path | None = None) -> Mo
 
 
 def read_card(path: str | Path) -> ModelCard:
-    """The card of an exported model (validated)."""
-    model = onnx.load(str(path), load_external_data=False)
-    return ModelCard.from_metadata({p.key: p.value for p in model.metadata_props}, str(path))
+    """The card of an exported model (validated), read as the runtime reads it."""
+    return ModelCard.from_metadata(ModelFile.read(path).metadata, str(path))

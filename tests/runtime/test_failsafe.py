@@ -15,7 +15,6 @@ import cv2
 import numpy as np
 import onnx
 import pytest
-import torch
 
 from bsn_edge.alerts import SystemState
 from bsn_edge.alerts.can_codec import decode
@@ -24,28 +23,12 @@ from bsn_edge.alerts.senders import CanSender
 from bsn_edge.card import ModelCard
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli.common import CHECKOUT
-from bsn_edge.export import to_onnx
 from bsn_edge.export.seal import set_metadata
-from bsn_edge.models import create_model
 from bsn_edge.runtime import Engine, ModelError, Reconnect, RuntimeConfig, open_source, run
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.sources import LiveSource
-from bsn_edge.synth import SynthConfig, write_clip
-from tests.cards import card_for
 
-SIZE = (128, 256)
 SHIPPED = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
-
-
-@pytest.fixture(scope="module")
-def setup(tmp_path_factory):
-    root = tmp_path_factory.mktemp("failsafe")
-    torch.manual_seed(0)
-    model = root / "m.onnx"
-    to_onnx(create_model("small-light").eval(), model, card_for(SIZE))
-    clip = root / "clip"
-    write_clip(SynthConfig(frames=15, height=96, width=192, seed=3), clip)
-    return model, clip
 
 
 def statuses(rx) -> list[int]:

@@ -9,33 +9,15 @@ import numpy as np
 import onnx
 import pytest
 import serial
-import torch
 
 from bsn_edge.alerts import SystemState
 from bsn_edge.alerts.can_codec import decode
 from bsn_edge.alerts.senders import CanSender, SerialSender
 from bsn_edge.cli import listen as listen_cli
 from bsn_edge.cli import run as run_cli
-from bsn_edge.export import to_onnx
-from bsn_edge.models import create_model
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.sources import ImageFolderSource
-from bsn_edge.synth import SynthConfig, write_clip
-from tests.cards import card_for
 from tests.fakes import FullBus, GonePort
-
-SIZE = (128, 256)
-
-
-@pytest.fixture(scope="module")
-def setup(tmp_path_factory):
-    root = tmp_path_factory.mktemp("rt")
-    torch.manual_seed(0)
-    model = root / "m.onnx"
-    to_onnx(create_model("small-light").eval(), model, card_for(SIZE))
-    clip = root / "clip"
-    write_clip(SynthConfig(frames=15, height=96, width=192, seed=2), clip)
-    return model, clip
 
 
 def test_video_to_can_log_that_both_decoders_read(setup, tmp_path, capsys):
