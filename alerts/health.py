@@ -1,4 +1,5 @@
-"""System state: OK, DEGRADED (too slow), UNAVAILABLE (no valid inference lately), and fault counters.
+"""System state: OK, DEGRADED (too slow), UNAVAILABLE (no valid inference lately), CALIBRATING (the
+camera's mounting is still being estimated: the sectors are not to be trusted yet), and fault counters.
 
 Shared between the frame loop (which reports valid inferences and faults) and the heartbeat
 thread (which asks for the state and the counters every cycle): every method takes the lock.
@@ -16,6 +17,7 @@ class SystemState(IntEnum):
     OK = 0
     DEGRADED = 1
     UNAVAILABLE = 2
+    CALIBRATING = 3
 
 
 FAULTS = ("decode_errors", "size_changes", "nan_outputs", "dropped_frames", "tx_errors", "tx_full",
@@ -43,7 +45,13 @@ class Health:
         self._faults = dict.fromkeys(FAULTS, 0)
         self._valid: deque[float] = deque()
         self._down = False
+        self._calibrating = False
         self._lock = threading.Lock()
+
+    def calibrating(self, on: bool) -> None:
+        """While on, a state that would be OK or DEGRADED reads CALIBRATING."""
+        with self._lock:
+            self._calibrating = bool(on)
 
     def valid(self, t: float) -> None:
         with self._lock:
@@ -91,6 +99,8 @@ class Health:
         with self._lock:
             if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
                 return SystemState.UNAVAILABLE
+            if self._calibrating:
+                return SystemState.CALIBRATING
             if self._fps(t) < self.cfg.fps_floor:
                 return SystemState.DEGRADED
             return SystemState.OK
@@ -100,6 +110,8 @@ class Health:
         with self._lock:
             if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
                 state = SystemState.UNAVAILABLE
+            elif self._calibrating:
+                state = SystemState.CALIBRATING
             else:
                 state = SystemState.DEGRADED if self._fps(t) < self.cfg.fps_floor else SystemState.OK
             return state, self._fps(t), dict(self._faults)

@@ -18,7 +18,7 @@ def run(frames: int = 100, height: int = 256, width: int = 512) -> dict:
     rows = []
     for style in sorted(STYLES):
         clip = make_clip(SynthConfig(frames=frames, height=height, width=width, style=style, seed=0))
-        r = Renderer(clip.intrinsics, far=clip.config.far, bs_range=clip.config.bs_range)
+        r = Renderer(clip.lens.canvas, far=clip.config.far, bs_range=clip.config.bs_range)
         world = clip.scenario.world
 
         def one(i, r=r, world=world, clip=clip):

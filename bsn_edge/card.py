@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.mounting import Mounting
 
 CARD_VERSION = 1
 MODEL_NAME = "BlindSpotNet"
@@ -32,6 +33,9 @@ FP32 = "none (fp32)"
 # used only when a run has no validation clips to choose the threshold on (the trainer says so)
 UNCHOSEN_THRESHOLD = 0.5
 _HEX64 = re.compile(r"[0-9a-f]{64}")
+# Cards written before the model camera had a mounting come from the synthetic world of that time:
+# cameras 1.5 m above the road, pitched 0-3 degrees down (1.5 on average), no yaw or roll.
+EARLY_MOUNTING = Mounting(height_m=1.5, pitch_deg=1.5)
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,8 @@ class ModelCard:
     threshold:      decision threshold on the blind-spot probability, chosen on validation
                     (``None`` until training has chosen it)
     camera:         the model camera: pinhole intrinsics at ``input_size``
+    mounting:       the model camera's reference height above the road and pitch (zero yaw and
+                    roll: it looks along the car); every user camera is warped into this camera
     depth_range:    (min, max) metres the depth head can report
     quantization:   scheme of the weights and activations (``none (fp32)`` or the int8 scheme)
     config_digest:  digest of the resolved training config
@@ -86,6 +92,7 @@ class ModelCard:
     train_camera: Intrinsics | None = None
     graph_sha256: str = ""
     self_test: SelfTest | None = field(default=None, repr=False)
+    mounting: Mounting = EARLY_MOUNTING
 
     def __post_init__(self) -> None:
         if not self.variant or not isinstance(self.variant, str):
@@ -104,6 +111,13 @@ class ModelCard:
             raise ValueError(f"weights_sha256 must be 64 hex digits, got {self.weights_sha256!r}")
         if self.graph_sha256 and not _HEX64.fullmatch(self.graph_sha256):
             raise ValueError(f"graph_sha256 must be 64 hex digits, got {self.graph_sha256!r}")
+        if self.mounting.yaw_deg != 0.0 or self.mounting.roll_deg != 0.0:
+            raise ValueError(f"the model camera looks along the car (zero yaw and roll), got {self.mounting}")
+
+    @property
+    def horizon_row(self) -> float:
+        """Row of the level horizon in the model camera at ``input_size``."""
+        return self.mounting.horizon_row(self.camera)
 
     # -- derived -------------------------------------------------------------------------------
 
@@ -129,6 +143,7 @@ class ModelCard:
             "train_camera": None if self.train_camera is None else self.train_camera.to_dict(),
             "graph_sha256": self.graph_sha256,
             "self_test": None if self.self_test is None else dataclasses.asdict(self.self_test),
+            "mounting": self.mounting.to_dict(),
         }
 
     @classmethod
@@ -148,7 +163,8 @@ class ModelCard:
             return d[key]
 
         def build(key: str, fn):
-            v = get(key, required=key not in ("train_camera", "self_test", "config_digest", "graph_sha256"))
+            v = get(key, required=key not in ("train_camera", "self_test", "config_digest", "graph_sha256",
+                                              "mounting"))
             try:
                 return fn(v)
             except (TypeError, ValueError, KeyError) as e:
@@ -168,6 +184,7 @@ class ModelCard:
             "train_camera": build("train_camera", intr),
             "graph_sha256": build("graph_sha256", lambda v: "" if v is None else str(v)),
             "self_test": build("self_test", _self_test),
+            "mounting": build("mounting", lambda v: EARLY_MOUNTING if v is None else Mounting.from_dict(v)),
         }
         try:
             return cls(**card_fields)

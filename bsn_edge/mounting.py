@@ -49,6 +49,58 @@ class Mounting:
         axes = ry @ rx @ rz   # columns: the camera's x, y, z in the level frame
         return axes.T
 
+    @classmethod
+    def from_axes(cls, axes: np.ndarray, height_m: float) -> Mounting:
+        """The mounting whose camera axes (the columns of ``axes``) are these, in the level frame."""
+        pitch, yaw, roll = angles_of(axes)
+        return cls(float(height_m), pitch, yaw, roll)
+
+    @classmethod
+    def from_forward(cls, forward_cam: np.ndarray, height_m: float, roll_deg: float = 0.0) -> Mounting:
+        """Pitch and yaw from the car's direction of travel seen in the camera frame (the focus of
+        expansion of a straight drive), with the roll given."""
+        t = np.asarray(forward_cam, np.float64)
+        t = t / np.linalg.norm(t)
+        # undo the roll first: it turns the whole picture about the optical axis
+        r = math.radians(roll_deg)
+        rz = np.array([[math.cos(r), -math.sin(r), 0], [math.sin(r), math.cos(r), 0], [0, 0, 1]])
+        x, y, z = rz @ t
+        # for zero roll, the level forward axis seen from the camera is
+        # (-sin yaw, -sin pitch cos yaw, cos pitch cos yaw)
+        yaw = -math.asin(float(np.clip(x, -1.0, 1.0)))
+        pitch = math.atan2(-float(y), float(z))
+        return cls(float(height_m), math.degrees(pitch), math.degrees(yaw), float(roll_deg))
+
+    def horizon_row(self, intrinsics: Intrinsics) -> float:
+        """Image row of the level horizon at the principal column (rows grow downwards)."""
+        d = self.rotation() @ np.array([0.0, 0.0, 1.0])
+        return float(intrinsics.cy + intrinsics.fy * d[1] / d[2])
+
+    def to_dict(self) -> dict[str, float]:
+        return {"height_m": self.height_m, "pitch_deg": self.pitch_deg, "yaw_deg": self.yaw_deg,
+                "roll_deg": self.roll_deg}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Mounting:
+        return cls(float(d["height_m"]), float(d.get("pitch_deg", 0.0)), float(d.get("yaw_deg", 0.0)),
+                   float(d.get("roll_deg", 0.0)))
+
+
+
+def angles_of(axes: np.ndarray) -> tuple[float, float, float]:
+    """Pitch, yaw and roll (degrees, unchecked) of the camera whose axes in the level frame are the
+    columns of ``axes``."""
+    a = np.asarray(axes, np.float64)
+    z = a[:, 2]
+    pitch = math.asin(float(np.clip(z[1], -1.0, 1.0)))
+    yaw = math.atan2(float(z[0]), float(z[2]))
+    # what is left once yaw and pitch are undone is the roll about the optical axis
+    ry = np.array([[math.cos(yaw), 0, math.sin(yaw)], [0, 1, 0], [-math.sin(yaw), 0, math.cos(yaw)]])
+    rx = np.array([[1, 0, 0], [0, math.cos(pitch), math.sin(pitch)], [0, -math.sin(pitch), math.cos(pitch)]])
+    rz = (ry @ rx).T @ a
+    roll = math.atan2(float(rz[1, 0]), float(rz[0, 0]))
+    return math.degrees(pitch), math.degrees(yaw), math.degrees(roll)
+
 
 def warp_maps(raw: Intrinsics, dist: tuple[float, ...], mounting: Mounting, model: Intrinsics,
               model_mounting: Mounting) -> tuple[np.ndarray, np.ndarray]:

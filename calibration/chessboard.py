@@ -1,70 +1,18 @@
-"""Camera intrinsics and distortion from chessboard views (OpenCV), and the calibration file."""
+"""Camera intrinsics and distortion from chessboard views (OpenCV)."""
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from bsn_edge.camera import Intrinsics
-from bsn_edge.sequence.images import atomic_write_bytes
+from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS
 
 SUBPIX = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """What ``bsn-calibrate`` writes and the runtime and label generator read."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    width: int
-    height: int
-    dist: tuple[float, ...] = ()          # OpenCV order k1 k2 p1 p2 k3
-    rms_px: float = 0.0
-    used: tuple[str, ...] = ()
-    skipped: tuple[dict, ...] = field(default_factory=tuple)
-    board: tuple[int, int] = (9, 6)
-    square_m: float = 0.025
-
-    @property
-    def intrinsics(self) -> Intrinsics:
-        return Intrinsics(self.fx, self.fy, self.cx, self.cy, self.width, self.height)
-
-    @property
-    def has_distortion(self) -> bool:
-        return any(abs(d) > 1e-9 for d in self.dist)
-
-    def write(self, path: str | os.PathLike) -> None:
-        atomic_write_bytes(path, (json.dumps(asdict(self), indent=2) + "\n").encode())
-
-    @classmethod
-    def read(cls, path: str | os.PathLike) -> Calibration:
-        p = Path(path)
-        if not p.is_file():
-            raise FileNotFoundError(f"calibration file {p} not found")
-        try:
-            d = json.loads(p.read_text())
-            return cls(**{**d, "dist": tuple(d.get("dist", ())), "used": tuple(d.get("used", ())),
-                          "skipped": tuple(d.get("skipped", ())), "board": tuple(d.get("board", (9, 6)))})
-        except (json.JSONDecodeError, TypeError) as e:
-            raise ValueError(f"{p}: not a calibration file: {e}") from None
-
-    def undistorter(self, width: int, height: int):
-        """A function that undistorts frames of this size (identity without distortion)."""
-        if not self.has_distortion:
-            return lambda img: img
-        k = self.intrinsics.scaled(width, height).K
-        m1, m2 = cv2.initUndistortRectifyMap(k, np.array(self.dist), None, k, (width, height), cv2.CV_16SC2)
-        return lambda img: cv2.remap(img, m1, m2, cv2.INTER_LINEAR)
 
 
 def _views(source: Path, every: int) -> Iterator[tuple[str, np.ndarray | None]]:

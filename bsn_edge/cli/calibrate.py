@@ -1,13 +1,17 @@
-"""``bsn-calibrate``: camera intrinsics and distortion from chessboard photos or a video."""
+"""``bsn-calibrate``: camera intrinsics and distortion from chessboard photos or a video, and the
+camera's mounting from a short straight drive (``--mount``)."""
 
 from __future__ import annotations
 
 import argparse
 import re
+from pathlib import Path
 
 from tqdm import tqdm
 
-from bsn_edge.calibration import calibrate
+from bsn_edge.calibration import Calibration, calibrate
+from bsn_edge.calibration.mount_fit import MountFitConfig
+from bsn_edge.calibration.mounting_step import MountingRefusedError, calibrate_mounting
 from bsn_edge.cli.common import fail
 
 PROG = "bsn-calibrate"
@@ -21,20 +25,74 @@ def _board(text: str) -> tuple[int, int]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog=PROG, description="Calibrate a camera from views of a printed chessboard: "
-                                "intrinsics fx fy cx cy, distortion k1 k2 p1 p2 k3 and the RMS reprojection "
-                                "error, written as JSON for bsn-run --calib and bsn-label. Views where the "
-                                "whole board is not found are skipped and listed with the reason.")
-    p.add_argument("source", metavar="IMAGES_OR_VIDEO", help="folder of chessboard images, or a video")
+    p = argparse.ArgumentParser(prog=PROG, description="Calibrate a camera. Step 1, from views of a printed "
+                                "chessboard: intrinsics fx fy cx cy, distortion k1 k2 p1 p2 k3 and the RMS "
+                                "reprojection error (views where the whole board is not found are skipped and "
+                                "listed). Step 2, --mount, from a short straight drive: pitch and yaw from the focus "
+                                "of expansion, roll from the road plane, the height measured (--height) or from a "
+                                "known lane width (--lane-width); each with its spread, or a refusal with reasons "
+                                "(turning, standing still, too short). Both write the camera file that bsn-run "
+                                "--calib and bsn-label --calib read.")
+    p.add_argument("source", metavar="IMAGES_OR_VIDEO",
+                   help="folder of chessboard images or a video of a chessboard; with --mount, a driving video")
     p.add_argument("--board", type=_board, default=(9, 6), help="inner corners, COLSxROWS (default 9x6)")
     p.add_argument("--square", type=float, default=0.025, help="square size in metres (default 0.025)")
     p.add_argument("--every", type=int, default=10, help="for a video: use every Nth frame (default 10)")
-    p.add_argument("--out", required=True, help="output CALIB.json")
+    p.add_argument("--out", required=True, help="output CALIB.json (refused if it exists, unless --force)")
+    p.add_argument("--force", action="store_true", help="overwrite --out")
+    m = p.add_argument_group("mounting (--mount)")
+    m.add_argument("--mount", action="store_true", help="estimate the mounting from a driving video")
+    m.add_argument("--calib", metavar="INTRINSICS.json", help="the camera file with the intrinsics (step 1)")
+    m.add_argument("--height", type=float, metavar="M", help="camera height above the road, measured, in metres")
+    m.add_argument("--lane-width", type=float, metavar="M",
+                   help="width of the lanes driven in, marking centre to marking centre (e.g. 3.7 on a US "
+                        "highway): the height is estimated from it")
+    m.add_argument("--max-error", type=float, default=MountFitConfig.max_spread_deg, metavar="DEG",
+                   help="accept the pitch and yaw once their standard error over the clip is at most this "
+                        f"(default {MountFitConfig.max_spread_deg})")
+    m.add_argument("--max-frames", type=int, default=None, metavar="N", help="use at most this many frames")
     return p
+
+
+def mount(args) -> int:
+    if not args.calib:
+        return fail(PROG, "--mount needs --calib INTRINSICS.json (run the chessboard step first)")
+    for name in ("height", "lane_width"):
+        v = getattr(args, name)
+        if v is not None and not (0.2 <= v <= 10.0):
+            return fail(PROG, f"--{name.replace('_', '-')} must lie in [0.2, 10] metres, got {v}")
+    try:
+        camera = Calibration.read(args.calib)
+        with tqdm(desc="frames", unit="frame", disable=None) as bar:
+            cal = calibrate_mounting(args.source, camera, args.height, args.lane_width,
+                                     MountFitConfig(max_spread_deg=args.max_error), max_frames=args.max_frames,
+                                     progress=bar.update)
+    except MountingRefusedError as e:
+        return fail(PROG, f"cannot estimate the mounting from {args.source}: {e}")
+    except (FileNotFoundError, ValueError) as e:
+        return fail(PROG, str(e))
+    cal.write(args.out)
+    m, r = cal.mounting, cal.mounting_report
+    sp = r["spread_deg"]
+    se = r["standard_error_deg"]
+    print(f"{r['used']} of {r['pairs']} frame pairs used ({r['method']}); standard error pitch {se['pitch']:.2f}, "
+          f"yaw {se['yaw']:.2f} degrees")
+    print(f"pitch {m.pitch_deg:+.2f} (spread {sp['pitch']:.2f})  yaw {m.yaw_deg:+.2f} (spread {sp['yaw']:.2f})  "
+          f"roll {m.roll_deg:+.2f} degrees" + (f" (spread {sp['roll']:.2f})" if sp["roll"] is not None else
+                                              " (road plane not seen: 0 assumed)"))
+    hr = r["height"]
+    print(f"height {m.height_m:.2f} m ({hr['method']}" + (f", spread {hr['spread_m']:.2f} m)" if "spread_m" in hr
+                                                           else ")"))
+    print(f"wrote {args.out}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if Path(args.out).exists() and not args.force:
+        return fail(PROG, f"{args.out} exists; pass --force to overwrite it")
+    if args.mount:
+        return mount(args)
     if args.square <= 0 or args.every < 1:
         return fail(PROG, "--square must be positive and --every >= 1")
     try:

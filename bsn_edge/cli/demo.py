@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     summary = out / "summary.json"
     rc = run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--overlay",
                        str(out / "overlay.mp4"), "--log", str(out / "alerts.jsonl"), "--can-log",
-                       str(out / "alerts.log"), "--summary", str(summary)])
+                       str(out / "alerts.log"), "--summary", str(summary), "--calib", str(clip / "calibration.json")])
     if rc:
         return rc
     s = json.loads(summary.read_text())

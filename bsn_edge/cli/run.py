@@ -14,9 +14,10 @@ from tqdm import tqdm
 
 from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.senders import CanSender, Sender, SerialSender
-from bsn_edge.calibration.chessboard import Calibration
+from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.cli.common import fail
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
+from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.sequence.images import atomic_write_bytes
 
 PROG = "bsn-run"
@@ -49,8 +50,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cycle", type=float, default=0.1, help="send cycle in seconds (default 0.1)")
     p.add_argument("--summary", metavar="OUT.json", help="also write the summary here")
     p.add_argument("--calib", metavar="CALIB.json",
-                   help="camera calibration from bsn-calibrate: its intrinsics replace the model's, and frames "
-                        "are undistorted first")
+                   help="the camera file from bsn-calibrate (intrinsics, lens distortion and, after --mount, the "
+                        "mounting): every frame is warped into the model's own camera with it. Without a mounting "
+                        "in it, the camera is calibrated online (status CALIBRATING until pitch and yaw have "
+                        "converged over forward driving). Without --calib the camera is taken to be the model's "
+                        "own, rescaled, and calibrated online")
+    p.add_argument("--height", type=float, metavar="M",
+                   help="camera height above the road in metres (overrides the camera file's; default: the "
+                        "file's, else the model camera's reference height). Distances scale with it")
+    p.add_argument("--save-calib", metavar="CALIB.json",
+                   help="where online calibration writes the camera file once it has converged (refuses an "
+                        "existing file unless --force)")
+    p.add_argument("--save-maps", metavar="DIR",
+                   help="per frame, NAME_blindspot.png (8-bit probability) and NAME_depth.png (16-bit, metres x "
+                        "256, 0 = none) in the raw frame's own pixels, NAME the image's stem or the frame number")
+    p.add_argument("--force", action="store_true", help="let --save-calib overwrite an existing file")
     return p
 
 
@@ -132,7 +146,12 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     try:
         calibration = Calibration.read(args.calib) if args.calib else None
+        if args.height is not None and not 0.2 <= args.height <= 5.0:
+            raise ValueError(f"--height must lie in [0.2, 5] metres, got {args.height}")
+        if args.save_calib and Path(args.save_calib).exists() and not args.force:
+            raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
         engine = Engine(args.model, args.threads, not args.no_spin)
+        camera = CameraState(engine.card, calibration, args.height, args.save_calib)
         source = open_source(args.source, pace=args.pace)
     except (FileNotFoundError, ValueError, OSError) as e:
         return refuse(senders, str(e))
@@ -141,8 +160,8 @@ def main(argv: list[str] | None = None) -> int:
         with StopOnSignal(source) as stopper, \
                 tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
             summary = run(engine, source, senders, RuntimeConfig(cycle_s=args.cycle), overlay=args.overlay,
-                          log=args.log, max_frames=args.max_frames, progress=bar.update, calibration=calibration,
-                          stop=stopper.event)
+                          log=args.log, max_frames=args.max_frames, progress=bar.update, camera=camera,
+                          save_maps=args.save_maps, stop=stopper.event)
     finally:
         source.close()
         for s in senders:

@@ -12,6 +12,11 @@ import torch
 from torch.utils.data import Dataset
 
 from bsn_edge import semantics as sm
+from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.camera import Intrinsics
+from bsn_edge.labels.generator import label_camera
+from bsn_edge.model_frame import ModelFrame
+from bsn_edge.mounting import Mounting
 from bsn_edge.sequence import SequenceMeta, read_depth, read_mask
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.frames import read_rgb
@@ -83,21 +88,58 @@ def split_clips(clips: list[Clip], val_fraction: float, test_fraction: float,
     return out
 
 
+def clip_camera(path: Path, model_mounting: Mounting) -> Calibration:
+    """A clip's camera file (``calibration.json``), else its meta's intrinsics, sitting as the model
+    camera does (clips made before cameras were recorded came from that camera)."""
+    seq = SequenceFolder(path)
+    if seq.calibration_path.is_file():
+        cal = Calibration.read(seq.calibration_path)
+        return cal if cal.mounting is not None else cal.with_mounting(model_mounting, method="assumed")
+    return Calibration.of(SequenceMeta.read(path).intrinsics, (), model_mounting, method="assumed")
+
+
+class ClipWarps:
+    """The warps of one clip into the model camera: its frames (with the clip's lens) and its
+    labels (made in the clip's undistorted camera, bsn-label's)."""
+
+    def __init__(self, path: Path, label_name: str, model: Intrinsics, model_mounting: Mounting) -> None:
+        meta = SequenceMeta.read(path)
+        cam = clip_camera(path, model_mounting)
+        self.frames = cam.model_frame(meta.width, meta.height, model, model_mounting)
+        lab_cam = label_camera(SequenceFolder(path).labels(label_name)) or cam.intrinsics
+        self.labels = ModelFrame(lab_cam.scaled(meta.width, meta.height), (), cam.mounting, model, model_mounting)
+        # the clip camera's pose turned into the model camera's: T_wc_model = T_wc_raw [R_raw<-model]
+        self.pose_fix = np.eye(4)
+        self.pose_fix[:3, :3] = cam.mounting.rotation() @ model_mounting.rotation().T
+
+
 class BlindSpotDataset(Dataset):
-    """Samples of labelled clips resized to ``size`` (H, W).
+    """Samples of labelled clips warped into the model camera ``camera`` at ``size`` (H, W).
 
     Each item: ``image`` [3, H, W] normalised RGB, ``depth`` [1, H, W] metres (0 = none),
     ``semantic`` [H, W] trainIds (255 ignore), ``blindspot`` and ``visibility`` [1, H, W] 0/1,
-    ``sky`` [1, H, W] bool. ``augment`` flips horizontally (everything together, so left stays
+    ``sky`` [1, H, W] bool. Every clip is warped into the model camera (``camera`` and
+    ``mounting``, :class:`ModelFrame`: frames with their lens, masks nearest, depth converted to
+    the model camera at its reference height); outside the clip's view and on the car's hood
+    the visibility mask is 0. ``augment`` flips horizontally (everything together, so left stays
     left of right in image, labels, depth and semantics alike) and jitters brightness/contrast.
     """
 
     def __init__(self, clips: list[Clip], size: tuple[int, int], augment: bool = False,
-                 label_name: str = "T5s", seed: int = 0) -> None:
+                 label_name: str = "T5s", seed: int = 0, camera: Intrinsics | None = None,
+                 mounting: Mounting | None = None) -> None:
         self.items = [(c, f) for c in clips for f in c.frames]
         if not self.items:
             raise ValueError("dataset is empty")
         self.size = size
+        if camera is None or mounting is None:
+            from bsn_edge.train.config import DataConfig
+
+            camera, mounting = DataConfig(size=tuple(size)).model_camera()
+        self.camera, self.mounting = camera, mounting
+        if (self.camera.height, self.camera.width) != tuple(size):
+            raise ValueError(f"model camera is {self.camera.height}x{self.camera.width}, the size {size[0]}x{size[1]}")
+        self._warps: dict[Path, ClipWarps] = {}
         self.augment = augment
         self.label_name = label_name
         self.seed = seed
@@ -105,26 +147,35 @@ class BlindSpotDataset(Dataset):
     def __len__(self) -> int:
         return len(self.items)
 
+    def warps(self, clip: Clip) -> ClipWarps:
+        if clip.path not in self._warps:
+            self._warps[clip.path] = ClipWarps(clip.path, self.label_name, self.camera, self.mounting)
+        return self._warps[clip.path]
+
     def load(self, k: int) -> dict[str, np.ndarray]:
         clip, f = self.items[k]
         seq = SequenceFolder(clip.path)
-        h, w = self.size
         lab = seq.labels(self.label_name)
+        warp = self.warps(clip)
         rgb = read_rgb(clip.path, f)
         sem_raw = cv2.imread(str(seq.semantic(f)), cv2.IMREAD_UNCHANGED)
         sem = sem_raw if sem_raw is not None else np.full(rgb.shape[:2], sm.IGNORE, np.uint8)
         dep_p = seq.depth(f)
         depth = read_depth(dep_p) if dep_p.exists() else np.zeros(rgb.shape[:2], np.float32)
-        out = {
-            "rgb": cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA),
-            "depth": cv2.resize(depth, (w, h), interpolation=cv2.INTER_NEAREST),
-            "semantic": cv2.resize(sem, (w, h), interpolation=cv2.INTER_NEAREST),
-            "blindspot": cv2.resize(read_mask(lab.blindspot(f)).astype(np.uint8), (w, h),
-                                    interpolation=cv2.INTER_NEAREST),
-            "visibility": cv2.resize(read_mask(lab.visibility(f)).astype(np.uint8), (w, h),
-                                     interpolation=cv2.INTER_NEAREST),
+        fr = warp.frames
+        sem_m = fr.labels_to_model(sem)
+        sem_m[~fr.seen] = sm.IGNORE
+        vis = warp.labels.labels_to_model(read_mask(lab.visibility(f)).astype(np.uint8))
+        vis[~fr.seen] = 0                      # the clip's camera does not see there
+        if sem_raw is not None:
+            vis[sem_m == sm.IGNORE] = 0        # the car's own hood
+        return {
+            "rgb": fr.to_model(rgb),
+            "depth": fr.depth_to_model(depth),
+            "semantic": sem_m,
+            "blindspot": warp.labels.labels_to_model(read_mask(lab.blindspot(f)).astype(np.uint8)),
+            "visibility": vis,
         }
-        return out
 
     def __getitem__(self, key: int | tuple[int, int]) -> dict[str, torch.Tensor]:
         """Item ``key``, or ``(k, draw)``: item ``k`` augmented with the draw ``draw`` (the

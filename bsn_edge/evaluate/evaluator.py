@@ -13,7 +13,7 @@ from bsn_edge.data import BlindSpotDataset, Clip
 from bsn_edge.evaluate.baselines import detection_2d, detection_3d, traversable_hidden
 from bsn_edge.evaluate.metrics import Counts
 from bsn_edge.models import create_teacher
-from bsn_edge.sequence import SequenceMeta, read_kitti_poses
+from bsn_edge.sequence import read_kitti_poses
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth.sheet import tint
 from bsn_edge.train.run import Run
@@ -45,11 +45,14 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
     per_clip: dict[str, dict[str, Any]] = {}
     rows = []
     for clip in clips:
-        ds = BlindSpotDataset([clip], size, label_name=label)
-        smeta = SequenceMeta.read(clip.path)
-        intr = smeta.intrinsics.scaled(size[1], size[0])
+        # everything in the model camera: the frames, the labels and the baselines' geometry
+        card_at = card.at_size(*size)
+        ds = BlindSpotDataset([clip], size, label_name=label, camera=card_at.camera, mounting=card_at.mounting)
+        intr = card_at.camera
         seq = SequenceFolder(clip.path)
         poses = read_kitti_poses(seq.poses_path) if seq.poses_path.exists() else None
+        if poses is not None:
+            poses = poses @ ds.warps(clip).pose_fix
         has_boxes = seq.dir(seq.BOXES).is_dir() and poses is not None
         counts = {m: Counts() for m in METHODS}
         picks = set(np.linspace(0, len(ds) - 1, grid_frames).round().astype(int).tolist()) \

@@ -14,14 +14,16 @@ from typing import Any
 import numpy as np
 
 from bsn_edge import semantics as sm
-from bsn_edge.calibration.chessboard import Calibration
+from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.camera import Intrinsics
+from bsn_edge.card import EARLY_MOUNTING
 from bsn_edge.labels.config import LabelConfig
 from bsn_edge.labels.monocular import metric_depth_and_poses, seed_poses
 from bsn_edge.labels.sources import ClipData, FilesDepth, frame_count
 from bsn_edge.labels.sources.base import ClipRejectedError
 from bsn_edge.labels.sources.registry import make_depth, make_poses, make_seg
 from bsn_edge.labels.warp import Cloud, Warper, label_frame
+from bsn_edge.model_frame import ModelFrame
 from bsn_edge.sequence import SequenceMeta, read_mask, write_mask
 from bsn_edge.sequence.folder import LabelSet, SequenceFolder
 from bsn_edge.sequence.images import atomic_write_bytes
@@ -104,6 +106,8 @@ def _differences(old: dict[str, Any], new: dict[str, Any]) -> str:
 
 def _read_done(labels: LabelSet, i: int) -> tuple[np.ndarray, np.ndarray] | None:
     """A finished frame's masks; None if missing, empty or undecodable (then it is labelled again)."""
+    if not (labels.blindspot(i).is_file() and labels.visibility(i).is_file()):
+        return None
     try:
         return read_mask(labels.blindspot(i)), read_mask(labels.visibility(i))
     except (FileNotFoundError, ValueError):
@@ -123,10 +127,18 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     seq = Path(seq)
     t_start = time.perf_counter()
     meta = SequenceMeta.read(seq)
-    if sources.calib:
-        # a camera calibration replaces the clip's intrinsics, rescaled to the clip's frame size
-        k = Calibration.read(sources.calib).intrinsics.scaled(meta.width, meta.height)
+    cam_path = Path(sources.calib) if sources.calib else SequenceFolder(seq).calibration_path
+    lens = None
+    if sources.calib or cam_path.is_file():
+        # a camera file replaces the clip's intrinsics, rescaled to the clip's frame size; with lens
+        # distortion, depth and segmentation are undistorted first, so the labels are made in the
+        # undistorted (pinhole) camera the loader warps them from
+        cal = Calibration.read(cam_path)
+        k = cal.intrinsics.scaled(meta.width, meta.height)
         meta = dataclasses.replace(meta, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy)
+        if cal.has_distortion:
+            m = cal.mounting or EARLY_MOUNTING
+            lens = ModelFrame(k, cal.dist, m, k, m)
     clip = ClipData(seq, meta, frame_count(seq))
     labels = SequenceFolder(seq).labels(cfg.name)
     out = labels.root
@@ -173,7 +185,10 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     def frame(k: int) -> tuple[np.ndarray, np.ndarray]:
         if k not in sources_at:
             i = int(idx[k])
-            sources_at[k] = (depth(i), seg(i))
+            d, s = depth(i), seg(i)
+            if lens is not None:
+                d, s = lens.depth_to_model(d), lens.labels_to_model(s)
+            sources_at[k] = (d, s)
         return sources_at[k]
 
     def cloud(k: int) -> Cloud:

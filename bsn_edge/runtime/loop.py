@@ -28,12 +28,14 @@ from bsn_edge.alerts import (
 )
 from bsn_edge.alerts.health import Health
 from bsn_edge.alerts.senders import Sender
-from bsn_edge.calibration.chessboard import Calibration
+from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.engine import Engine
+from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.runtime.overlay import OverlayWriter, draw
 from bsn_edge.runtime.sources import Source
 from bsn_edge.runtime.stats import LatencyStats
+from bsn_edge.sequence.folder import frame_name
 
 STAGES = ("decode", "preprocess", "inference", "postprocess", "send")
 
@@ -49,20 +51,22 @@ class RuntimeConfig:
 
 def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig | None = None,
         overlay: str | Path | None = None, log: str | Path | None = None, max_frames: int | None = None,
-        progress=None, calibration: Calibration | None = None,
+        progress=None, camera: CameraState | None = None, save_maps: str | Path | None = None,
         stop: threading.Event | None = None) -> dict[str, Any]:
     """Process ``source`` until it ends, ``max_frames`` or ``stop`` is set; returns the summary.
 
-    ``calibration`` (from bsn-calibrate) replaces the model camera's intrinsics for the sector
-    bearings, and frames are undistorted first when it carries distortion. Whatever ends the
-    run, the last cycle on every bus says UNAVAILABLE, and the summary's ``source_failure`` says
-    whether the source failed.
+    Every frame is warped into the model camera by ``camera`` (a :class:`CameraState`: the
+    user's camera file, or online calibration, see there); the sectors are bearings in the model
+    camera, which looks along the car, and distances are brought to the user's camera height.
+    The overlay and ``save_maps`` (per frame ``<name>_blindspot.png``, 8-bit probability, and
+    ``<name>_depth.png``, 16-bit metres x 256, 0 = none) are in the raw frame's own pixels.
+    Whatever ends the run, the last cycle on every bus says UNAVAILABLE, and the summary's
+    ``source_failure`` says whether the source failed.
     """
     cfg = cfg or RuntimeConfig()
-    h, w = engine.size
-    intr = calibration.intrinsics.scaled(w, h) if calibration is not None else engine.card.camera
-    undistorters: dict[tuple[int, int], Any] = {}
-    geometry = SectorGeometry(intr, cfg.sectors)
+    camera = camera or CameraState(engine.card)
+    geometry = SectorGeometry(engine.card.camera, cfg.sectors)
+    maps = MapWriter(save_maps) if save_maps is not None else None
     machines = [SectorState(cfg.alerts) for _ in range(3)]
     health = Health(cfg.health)
     emitter = CycleEmitter(senders, health, cfg.cycle_s)
@@ -77,8 +81,7 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
         heartbeat = stack.enter_context(Heartbeat(emitter)) if source.live else None
         writer = None
         if overlay is not None:
-            fps = getattr(source, "fps", 10.0)
-            writer = OverlayWriter(overlay, (h, w), fps)
+            writer = OverlayWriter(overlay, getattr(source, "fps", 10.0))
             stack.callback(writer.close)
         logf = None
         if log is not None:
@@ -100,13 +103,10 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                     health.fault("size_changes")
                     rec["fault"] = "size_change"
                 last_shape = cap.frame.shape
-                img = cap.frame
-                if calibration is not None and calibration.has_distortion:
-                    fh, fw = img.shape[:2]
-                    if (fw, fh) not in undistorters:
-                        undistorters[(fw, fh)] = calibration.undistorter(fw, fh)
-                    img = undistorters[(fw, fh)](img)
-                batch = engine.preprocess(img)
+                mf = camera.frame_for(cap.frame)
+                health.calibrating(camera.calibrating)
+                batch = engine.buf
+                mf.to_model(cap.frame, dst=batch[0])
                 t1 = time.perf_counter()
                 prob, depth = engine.infer(batch)
                 t2 = time.perf_counter()
@@ -117,7 +117,7 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                     rec["fault"] = "nan_output"
                 else:
                     mask = prob >= engine.card.threshold
-                    readings = geometry.read(mask, depth)
+                    readings = geometry.read(mask, mf.depth_to_metres(depth))
                     sectors = []
                     for m, r in zip(machines, readings, strict=True):
                         score, level = m.update(cap.t, r.score)
@@ -133,7 +133,9 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                                distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in sectors],
                                state=alert.state.name)
                     if writer is not None:
-                        writer.write(draw(batch[0], mask, alert, geometry))
+                        writer.write(draw(cap.frame, mf, mask, alert, geometry))
+                    if maps is not None:
+                        maps.write(cap.name or frame_name(cap.index, ""), mf.to_raw(prob), mf.depth_to_raw(depth))
             t4 = time.perf_counter()
             if not source.live:
                 emitter.emit(cap.t)
@@ -164,5 +166,6 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
             "faults": health.faults, "cycles_sent": emitter.sent_cycles, "senders": sender_stats,
             "source_failure": source.failure, "stopped": bool(stop is not None and stop.is_set()),
             "heartbeat_error": heartbeat.last_error if heartbeat is not None else "",
+            "camera": camera.summary(), "maps_written": 0 if maps is None else maps.written,
             "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
                       "quantization": card.quantization, "self_test": engine.self_test}}

@@ -10,18 +10,22 @@ import numpy as np
 from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.sectors import SectorGeometry
 from bsn_edge.alerts.state_machine import Level
+from bsn_edge.model_frame import ModelFrame
 
 LEVEL_BGR = {Level.NONE: (80, 160, 80), Level.CAUTION: (0, 190, 255), Level.WARNING: (0, 0, 255)}
 TINT = np.array([40, 40, 255], np.float32)
 
 
-def draw(frame: np.ndarray, mask: np.ndarray, alert: AlertFrame, geometry: SectorGeometry) -> np.ndarray:
-    """``frame`` at model size with the mask tinted and a bar per sector."""
+def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
+         geometry: SectorGeometry) -> np.ndarray:
+    """The raw ``frame`` with the model's mask brought back onto it and tinted, and a bar per
+    sector (sector edges are bearings in the model camera, drawn where they fall in this frame)."""
     img = frame.copy()
-    if mask.any():
-        img[mask] = (img[mask] * 0.45 + TINT * 0.55).astype(np.uint8)
+    raw_mask = mf.to_raw(mask.astype(np.uint8), cv2.INTER_NEAREST) > 0
+    if raw_mask.any():
+        img[raw_mask] = (img[raw_mask] * 0.45 + TINT * 0.55).astype(np.uint8)
     h = img.shape[0]
-    cols = geometry.column_sector
+    cols = mf.raw_column_sector(geometry.column_sector)
     for s, sector in enumerate(alert.sectors):
         xs = np.nonzero(cols == s)[0]
         if not len(xs):
@@ -39,16 +43,28 @@ def draw(frame: np.ndarray, mask: np.ndarray, alert: AlertFrame, geometry: Secto
 
 
 class OverlayWriter:
-    def __init__(self, path: str | Path, size: tuple[int, int], fps: float) -> None:
+    """The overlay video at the raw frame's size (opened on the first frame; frames of another
+    size are fitted to it)."""
+
+    def __init__(self, path: str | Path, fps: float) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        h, w = size
-        self.writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
-        if not self.writer.isOpened():
-            raise OSError(f"OpenCV cannot write {self.path}")
+        self.fps = fps
+        self.writer: cv2.VideoWriter | None = None
+        self.size: tuple[int, int] | None = None
 
     def write(self, img: np.ndarray) -> None:
+        h, w = img.shape[:2]
+        if self.writer is None:
+            self.size = (w, h)
+            self.writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
+            if not self.writer.isOpened():
+                raise OSError(f"OpenCV cannot write {self.path}")
+        if (w, h) != self.size:
+            img = cv2.resize(img, self.size, interpolation=cv2.INTER_AREA)
         self.writer.write(img)
 
     def close(self) -> None:
-        self.writer.release()
+        if self.writer is not None:
+            self.writer.release()
+            self.writer = None

@@ -27,6 +27,7 @@ class Captured:
     frame: np.ndarray | None
     index: int
     decode_s: float = 0.0
+    name: str = ""               # what saved maps are named after: an image's stem, else the frame number
 
 
 class Source:
@@ -124,7 +125,7 @@ class ImageFolderSource(Source):
                 return
             t0 = time.perf_counter()
             frame = cv2.imread(str(p), cv2.IMREAD_COLOR)
-            yield Captured(i / self.fps, frame, i, time.perf_counter() - t0)
+            yield Captured(i / self.fps, frame, i, time.perf_counter() - t0, p.stem)
 
 
 @dataclass(frozen=True)

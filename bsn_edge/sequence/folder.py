@@ -3,7 +3,7 @@ a frame pattern.
 
 ::
 
-    SEQ/meta.json  poses.txt  video.mp4  synth_config.json
+    SEQ/meta.json  poses.txt  video.mp4  synth_config.json  calibration.json (the camera file)
     SEQ/rgb/NNNNNN.png (or .jpg)   depth/NNNNNN.png   semantic/NNNNNN.png
     SEQ/bsgt/NNNNNN.png   boxes/NNNNNN.npy                       (synthetic only)
     SEQ/labels/T5s/blindspot/NNNNNN.png  visibility/NNNNNN.png  report.json  params.json
@@ -72,10 +72,11 @@ class SequenceFolder:
     """Where every file of one clip lives."""
 
     META, POSES, VIDEO, SYNTH_CONFIG = "meta.json", "poses.txt", "video.mp4", "synth_config.json"
+    CALIBRATION = "calibration.json"
     RGB, DEPTH, SEMANTIC, BSGT, BOXES, LABELS = "rgb", "depth", "semantic", "bsgt", "boxes", "labels"
     FRAME_DIRS = (RGB, DEPTH, SEMANTIC, BSGT, BOXES)
     # everything bsn-synth writes (what its --force replaces)
-    SYNTH_OUTPUTS = (*FRAME_DIRS, META, POSES, VIDEO, SYNTH_CONFIG)
+    SYNTH_OUTPUTS = (*FRAME_DIRS, META, POSES, VIDEO, SYNTH_CONFIG, CALIBRATION)
 
     def __init__(self, path: str | os.PathLike) -> None:
         self.path = Path(path)
@@ -101,6 +102,11 @@ class SequenceFolder:
     @property
     def synth_config_path(self) -> Path:
         return self.path / self.SYNTH_CONFIG
+
+    @property
+    def calibration_path(self) -> Path:
+        """The clip's camera file (intrinsics, distortion, mounting), when its camera is known."""
+        return self.path / self.CALIBRATION
 
     def dir(self, kind: str) -> Path:
         """One of the per-frame folders (``rgb``, ``depth``, ``semantic``, ``bsgt``, ``boxes``)."""

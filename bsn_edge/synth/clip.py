@@ -13,6 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bsn_edge import semantics as sm
 from bsn_edge.camera import Intrinsics, look_pose
 from bsn_edge.sequence import SequenceMeta, write_depth, write_image, write_kitti_poses, write_mask
 from bsn_edge.sequence.folder import SequenceFolder
@@ -20,8 +21,9 @@ from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.synth.config import SynthConfig
 from bsn_edge.synth.populate import Scenario, build_scenario
 from bsn_edge.synth.render import Frame, Renderer
+from bsn_edge.synth.rig import Lens, Rig, hood_mask, paint_hood
 
-PITCH_DEG = (0.0, 3.0)   # camera tilt range, degrees down
+PITCH_DEG = (0.0, 3.0)   # tilt range of "fixed" cameras, degrees down
 
 
 @dataclass(frozen=True)
@@ -30,9 +32,14 @@ class Clip:
 
     config: SynthConfig
     scenario: Scenario
-    intrinsics: Intrinsics
-    poses: np.ndarray   # [N, 4, 4] T_wc
-    pitch: float
+    intrinsics: Intrinsics   # the output frames' (with ``lens``'s distortion)
+    poses: np.ndarray        # [N, 4, 4] T_wc
+    rig: Rig
+    lens: Lens
+
+    @property
+    def pitch(self) -> float:
+        return float(np.radians(self.rig.pitch_deg))
 
     @property
     def times(self) -> np.ndarray:
@@ -42,21 +49,40 @@ class Clip:
 def make_clip(cfg: SynthConfig) -> Clip:
     """Build the world, the route and the camera poses of a clip (no rendering yet)."""
     sc = build_scenario(cfg)
-    rng = np.random.default_rng([cfg.seed, 0x706F7365])
-    pitch = float(np.radians(rng.uniform(*PITCH_DEG)))
+    if cfg.camera == "vary":
+        rig = Rig.draw(cfg.seed)
+    else:
+        rng = np.random.default_rng([cfg.seed, 0x706F7365])
+        rig = Rig(cfg.hfov_deg, cfg.camera_height, float(rng.uniform(*PITCH_DEG)))
     times = np.arange(cfg.frames) / cfg.fps
     xy, yaw = sc.route.at(sc.start_s + times * sc.speed)
-    poses = np.stack([look_pose(np.array([x, y, cfg.camera_height]), a, pitch)
+    # the car's level camera, turned by the mounting: x_cam = R x_level, so R_wc = R_w,level R^T
+    turn = np.eye(4)
+    turn[:3, :3] = rig.mounting.rotation().T
+    poses = np.stack([look_pose(np.array([x, y, rig.height_m]), a, 0.0) @ turn
                       for (x, y), a in zip(xy, yaw, strict=True)])
-    intr = Intrinsics.from_fov(cfg.width, cfg.height, cfg.hfov_deg)
-    return Clip(cfg, sc, intr, poses, pitch)
+    intr = rig.intrinsics(cfg.width, cfg.height)
+    return Clip(cfg, sc, intr, poses, rig, Lens(intr, rig.dist))
 
 
 def render_frames(clip: Clip, renderer: Renderer | None = None) -> Iterator[Frame]:
     """Render the clip's frames in order."""
-    r = renderer or Renderer(clip.intrinsics, far=clip.config.far, bs_range=clip.config.bs_range)
+    r = renderer or Renderer(clip.lens.canvas, far=clip.config.far, bs_range=clip.config.bs_range)
+    hood = hood_mask(clip.intrinsics.width, clip.intrinsics.height, clip.rig.hood)
+    lens = clip.lens
     for i, (T, t) in enumerate(zip(clip.poses, clip.times, strict=True)):
-        yield r.render(clip.scenario.world, T, float(t), frame_index=i)
+        fr = r.render(clip.scenario.world, T, float(t), frame_index=i)
+        if lens.maps is None and not hood.any():
+            yield fr
+            continue
+        rgb = lens.apply(fr.rgb)
+        depth, semantic, bsgt = (lens.apply(fr.depth, nearest=True), lens.apply(fr.semantic, nearest=True),
+                                 lens.apply(fr.bsgt, nearest=True))
+        if hood.any():
+            # the car's own hood: neither road nor a blind spot, no depth the model should learn
+            paint_hood(rgb, hood, clip.config.seed)
+            depth[hood], semantic[hood], bsgt[hood] = 0.0, sm.IGNORE, False
+        yield Frame(rgb, depth, semantic, bsgt, fr.boxes)
 
 
 def prepare_output(out: Path, force: bool) -> None:
@@ -120,14 +146,15 @@ def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bo
     write_kitti_poses(seq.poses_path, clip.poses)
     sc = clip.scenario
     atomic_write_bytes(seq.synth_config_path, (json.dumps({
-        "config": cfg.to_dict(), "speed_mps": sc.speed, "pitch_deg": float(np.degrees(clip.pitch)),
+        "config": cfg.to_dict(), "rig": clip.rig.to_dict(), "speed_mps": sc.speed, "pitch_deg": clip.rig.pitch_deg,
         "turns": sc.route.turns, "static_boxes": len(sc.world.static), "agents": len(sc.world.agents),
     }, indent=2) + "\n").encode())
     k = clip.intrinsics
     SequenceMeta(fps=cfg.fps, width=cfg.width, height=cfg.height, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy,
                  source="synth", frames=cfg.frames, seed=cfg.seed,
                  extra={"style": cfg.style, "video": SequenceFolder.VIDEO if video else None,
-                        "camera_height": cfg.camera_height, "bs_range": cfg.bs_range}).write(out)
+                        "camera_height": clip.rig.height_m, "bs_range": cfg.bs_range}).write(out)
+    clip.rig.calibration(cfg.width, cfg.height).write(seq.calibration_path)
     return out
 
 

@@ -6,6 +6,8 @@ from dataclasses import asdict, dataclass
 
 from bsn_edge.synth.style import get_style
 
+CAMERAS = ("vary", "fixed")
+
 
 @dataclass(frozen=True)
 class SynthConfig:
@@ -20,7 +22,8 @@ class SynthConfig:
     fps: float = 10.0
     style: str = "town"
     seed: int = 0
-    hfov_deg: float = 80.0
+    camera: str = "vary"           # "vary": each clip draws its own camera from its seed (synth.rig)
+    hfov_deg: float = 80.0         # the camera of "fixed" clips
     camera_height: float = 1.5
     bs_range: float = 50.0        # R: blind spots count within this ground distance, metres
     far: float = 250.0            # nothing is rendered beyond this depth
@@ -30,6 +33,8 @@ class SynthConfig:
 
     def __post_init__(self) -> None:
         get_style(self.style)
+        if self.camera not in CAMERAS:
+            raise ValueError(f"camera must be one of {CAMERAS}, got {self.camera!r}")
         if self.frames < 1:
             raise ValueError(f"frames must be >= 1, got {self.frames}")
         if self.height < 16 or self.width < 16:

@@ -10,7 +10,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bsn_edge.camera import Intrinsics
 from bsn_edge.models import get_spec
+from bsn_edge.mounting import Mounting
 
 
 @dataclass(frozen=True)
@@ -31,12 +33,23 @@ class DataConfig:
     train_styles: tuple[str, ...] = ()       # empty: all styles
     fraction: float = 1.0                    # share of the training clips used (fine-tuning: 0.2)
     workers: int = 0
+    # the model camera every clip is warped into (written on the model card): horizontal field of
+    # view at ``size``, reference height above the road and pitch (down positive)
+    camera_hfov_deg: float = 80.0
+    camera_height_m: float = 1.5
+    camera_pitch_deg: float = 1.5
 
     def __post_init__(self) -> None:
         if len(self.size) != 2 or min(self.size) < 32 or any(s % 32 for s in self.size):
             raise ValueError(f"data.size must be two multiples of 32 (H, W), got {self.size}")
         if not 0 < self.fraction <= 1:
             raise ValueError(f"data.fraction must be in (0, 1], got {self.fraction}")
+        self.model_camera()   # validates the camera
+
+    def model_camera(self) -> tuple[Intrinsics, Mounting]:
+        """The model camera: intrinsics at ``size`` and its mounting."""
+        h, w = self.size
+        return Intrinsics.from_fov(w, h, self.camera_hfov_deg), Mounting(self.camera_height_m, self.camera_pitch_deg)
 
 
 @dataclass(frozen=True)

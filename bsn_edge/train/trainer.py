@@ -109,10 +109,13 @@ def datasets(cfg: Config, data_dir: str | Path) -> dict[str, Any]:
     if not train:
         raise ValueError(f"no training clips (styles {styles or 'any'}) in {data_dir}")
     val = [c for c in split["val"] if not styles or c.style in styles]
+    camera, mounting = cfg.data.model_camera()
     return {"clips": split, "train": train, "val": val, "skipped": skipped,
             "train_ds": BlindSpotDataset(train, cfg.data.size, augment=True, label_name=cfg.data.label,
+                                         camera=camera, mounting=mounting,
                                          seed=cfg.train.seed),
-            "val_ds": BlindSpotDataset(val, cfg.data.size, label_name=cfg.data.label) if val else None}
+            "val_ds": BlindSpotDataset(val, cfg.data.size, label_name=cfg.data.label, camera=camera,
+                                       mounting=mounting) if val else None}
 
 
 def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool) -> torch.nn.Module:
@@ -276,6 +279,7 @@ def _save(run: Run, model, cfg: Config, data, step: int, threshold: float | None
     first = data["train"][0].path
     # the labels' camera (bsn-label --calib's calibration when one was given), else the clip's
     camera = label_camera(SequenceFolder(first).labels(cfg.data.label)) or SequenceMeta.read(first).intrinsics
+    model_camera, model_mounting = cfg.data.model_camera()
     h, w = cfg.data.size
     prev: dict[str, Any] = {}
     if run.checkpoint_path.is_file():
@@ -284,7 +288,7 @@ def _save(run: Run, model, cfg: Config, data, step: int, threshold: float | None
     card_fields = {
         "variant": cfg.model.name, "spec": get_spec(cfg.model.name).to_dict(), "input_size": (h, w),
         "threshold": threshold if threshold is not None else prev.get("threshold"),
-        "camera": camera.scaled(w, h), "depth_range": (MIN_DEPTH_M, MAX_DEPTH_M),
+        "camera": model_camera, "mounting": model_mounting, "depth_range": (MIN_DEPTH_M, MAX_DEPTH_M),
         "config_digest": cfg.digest(), "train_camera": camera,
     }
     info = {

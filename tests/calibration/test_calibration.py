@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from bsn_edge.calibration import Calibration, calibrate
+from bsn_edge.camera import Intrinsics
 from bsn_edge.cli import calibrate as calib_cli
+from bsn_edge.mounting import Mounting
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "camera_cal"
 K_TRUE = np.array([[520.0, 0, 322.0], [0, 515.0, 236.0], [0, 0, 1]])
@@ -65,7 +67,8 @@ def test_cli_writes_a_file_the_runtime_reads(boards, tmp_path, capsys):
     cal = Calibration.read(out)
     assert cal.intrinsics.width == W and json.loads(out.read_text())["rms_px"] == cal.rms_px
     img = cv2.imread(str(boards / "view00.png"))
-    assert cal.undistorter(W, H)(img).shape == img.shape
+    mf = cal.model_frame(W, H, Intrinsics.from_fov(256, 128, 80.0), Mounting(1.5, 1.5))
+    assert mf.to_model(img).shape == (128, 256, 3)
     # rescaling to a model's size happens in one place
     assert cal.intrinsics.scaled(320, 240).fx == pytest.approx(cal.fx / 2)
 

@@ -25,7 +25,7 @@ def encoded(tmp_path_factory):
     """A clip whose blue channel carries 2 / depth (an 'inverse depth' a model can read back)."""
     root = tmp_path_factory.mktemp("onnx")
     seq = root / "seq"
-    write_clip(SynthConfig(frames=30, height=96, width=192, fps=10.0, seed=3), seq, video=False)
+    write_clip(SynthConfig(frames=30, height=96, width=192, fps=10.0, camera="fixed", seed=3), seq, video=False)
     for i in range(30):
         p = seq / "rgb" / f"{i:06d}.png"
         img = cv2.imread(str(p))
@@ -38,7 +38,7 @@ def encoded(tmp_path_factory):
 def test_relative_depth_is_aligned_to_metres_by_landmarks(tmp_path):
     """An affine-distorted inverse depth (as a MiDaS-like network gives) comes back in metres."""
     seq = tmp_path / "plain"
-    write_clip(SynthConfig(frames=30, height=256, width=512, fps=10.0, seed=3), seq, video=False)
+    write_clip(SynthConfig(frames=30, height=256, width=512, fps=10.0, camera="fixed", seed=3), seq, video=False)
     meta = SequenceMeta.read(seq)
     clip = ClipData(seq, meta, frame_count(seq))
     poses = read_kitti_poses(seq / "poses.txt")
@@ -112,7 +112,7 @@ def test_monocular_pipeline_without_poses_or_metric_depth(tmp_path):
     """Relative inverse depth + segmentation + video: seed VO, windowed alignment, metres from
     the camera height, PnP VO. Its labels must agree with those from exact sources."""
     seq = tmp_path / "mono"
-    write_clip(SynthConfig(frames=40, height=256, width=512, fps=10.0, seed=5), seq, video=False)
+    write_clip(SynthConfig(frames=40, height=256, width=512, fps=10.0, camera="fixed", seed=5), seq, video=False)
     (seq / "rel").mkdir()
     for i in range(40):
         d = read_depth(seq / "depth" / f"{i:06d}.png")

@@ -23,7 +23,7 @@ def umeyama(src, dst, with_scale):
 
 @pytest.fixture(scope="module")
 def rendered():
-    cfg = SynthConfig(frames=80, height=256, width=512, fps=10.0, style="town", seed=1)
+    cfg = SynthConfig(frames=80, height=256, width=512, fps=10.0, camera="fixed", style="town", seed=1)
     clip = make_clip(cfg)
     frames = list(render_frames(clip))
     return clip, frames

@@ -3,6 +3,7 @@
 import pytest
 import torch
 
+from bsn_edge.calibration import Calibration
 from bsn_edge.export import to_onnx
 from bsn_edge.models import create_model
 from bsn_edge.synth import SynthConfig, write_clip
@@ -21,3 +22,10 @@ def setup(tmp_path_factory):
     clip = root / "clip"
     write_clip(SynthConfig(frames=15, height=96, width=192, seed=2), clip)
     return model, clip
+
+
+def mounted(engine, clip):
+    """The runtime's camera for the clip's own camera file (mounting known: no online calibration)."""
+    from bsn_edge.runtime.camera_state import CameraState
+
+    return CameraState(engine.card, Calibration.read(clip / "calibration.json"))

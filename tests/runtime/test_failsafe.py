@@ -27,6 +27,7 @@ from bsn_edge.export.seal import set_metadata
 from bsn_edge.runtime import Engine, ModelError, Reconnect, RuntimeConfig, open_source, run
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.sources import LiveSource
+from tests.runtime.conftest import mounted
 
 SHIPPED = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
 
@@ -168,7 +169,8 @@ def test_a_video_damaged_in_the_middle_keeps_the_frames_after_the_damage(setup, 
     bad = tmp_path / "bad.mp4"
     damage(video, bad, 0.35, 0.2)
     with can.Bus(interface="virtual", channel="bsn-fs-dmg") as rx, CanSender("virtual", "bsn-fs-dmg") as tx:
-        summary = run(Engine(model), open_source(str(bad)), [tx], log=tmp_path / "l.jsonl")
+        engine = Engine(model)
+        summary = run(engine, open_source(str(bad)), [tx], log=tmp_path / "l.jsonl", camera=mounted(engine, clip))
         got = statuses(rx)
     lines = [json.loads(x) for x in (tmp_path / "l.jsonl").read_text().splitlines()]
     broken = [x["frame"] for x in lines if x.get("fault") == "decode_error"]
@@ -225,13 +227,14 @@ class FlakyCamera:
 
 
 def test_a_stalled_stream_reconnects_and_the_bus_shows_it(setup):
-    model, _ = setup
+    model, clip = setup
     FlakyCamera.opened = 0
     policy = Reconnect(stall_s=0.5, first_s=0.4, max_s=0.8, give_up_s=5.0, max_tries=3)
     src = LiveSource("rtsp://camera", policy, opener=lambda t: FlakyCamera(t, frames=12, stall_s=0.3))
     cfg = RuntimeConfig(cycle_s=0.05)
     with can.Bus(interface="virtual", channel="bsn-fs-live") as rx, CanSender("virtual", "bsn-fs-live") as tx:
-        summary = run(Engine(model), src, [tx], cfg)
+        engine = Engine(model)
+        summary = run(engine, src, [tx], cfg, camera=mounted(engine, clip))
         got = statuses(rx)
     src.close()
     assert FlakyCamera.opened >= 3 and summary["faults"]["source_reconnects"] >= 2

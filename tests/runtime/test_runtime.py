@@ -23,9 +23,10 @@ from tests.fakes import FullBus, GonePort
 def test_video_to_can_log_that_both_decoders_read(setup, tmp_path, capsys):
     model, clip = setup
     log, asc = tmp_path / "frames.jsonl", tmp_path / "alerts.log"
+    # the clip's own camera file (it carries the mounting): no online calibration, OK from the start
     assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--can-log", str(asc),
                          "--log", str(log), "--overlay", str(tmp_path / "ov.mp4"), "--summary",
-                         str(tmp_path / "s.json")]) == 0
+                         str(tmp_path / "s.json"), "--calib", str(clip / "calibration.json")]) == 0
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["frames"] == summary["valid_frames"] == 15
     assert summary["fps"] == pytest.approx(15 / summary["seconds"], rel=0.02)
@@ -125,14 +126,66 @@ def test_bad_inputs_are_explained(setup, tmp_path, capsys):
     assert "not a bsn-export model" in capsys.readouterr().err
 
 
-def test_calibration_file_is_used(setup, tmp_path):
+def decode_log(path) -> list[SystemState]:
+    """Every status frame of a CAN log, decoded by the DBC (CRC checked), in order."""
+    out = []
+    with can.LogReader(str(path)) as reader:
+        for m in reader:
+            d = decode(m.arbitration_id, m.data)
+            if d is not None and d.name == "BSN_Status":
+                assert d.crc_ok
+                out.append(SystemState(int(d.signals["System_State"])))
+    return out
+
+
+def test_camera_file_with_a_mounting_is_used_from_the_first_frame(setup, tmp_path):
     from bsn_edge.calibration import Calibration
+    from bsn_edge.mounting import Mounting
     model, clip = setup
-    cal = Calibration(300.0, 300.0, 96.0, 48.0, 192, 96, dist=(-0.2, 0.05, 0.0, 0.0, 0.0))
+    cal = Calibration(300.0, 300.0, 96.0, 48.0, 192, 96, dist=(-0.2, 0.05, 0.0, 0.0, 0.0),
+                      mounting=Mounting(1.2, -1.5, 2.0, 0.5))
     cal.write(tmp_path / "c.json")
+    log = tmp_path / "a.log"
     assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
-                         str(tmp_path / "c.json"), "--max-frames", "3", "--summary", str(tmp_path / "s.json")]) == 0
-    assert json.loads((tmp_path / "s.json").read_text())["valid_frames"] == 3
+                         str(tmp_path / "c.json"), "--max-frames", "3", "--summary", str(tmp_path / "s.json"),
+                         "--can-log", str(log)]) == 0
+    s = json.loads((tmp_path / "s.json").read_text())
+    assert s["valid_frames"] == 3 and s["camera"]["calibrating"] is False
+    assert s["camera"]["mounting"]["height_m"] == 1.2
+    assert SystemState.CALIBRATING not in decode_log(log)
+
+
+def test_without_a_mounting_the_bus_says_calibrating(setup, tmp_path):
+    model, clip = setup
+    log = tmp_path / "a.log"
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--can-log", str(log),
+                         "--summary", str(tmp_path / "s.json")]) == 0
+    s = json.loads((tmp_path / "s.json").read_text())
+    assert s["camera"]["calibrating"] is True and "assumed" in s["camera"]["intrinsics"]
+    states = decode_log(log)
+    # while calibrating, never OK; and the last word is UNAVAILABLE as always
+    assert set(states) <= {SystemState.CALIBRATING, SystemState.UNAVAILABLE}
+    assert SystemState.CALIBRATING in states and states[-1] == SystemState.UNAVAILABLE
+
+
+def test_saved_maps_and_overlay_are_in_the_raw_frames_pixels(setup, tmp_path):
+    from bsn_edge.runtime.maps import read_depth_map
+    model, clip = setup
+    maps = tmp_path / "maps"
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--max-frames", "2",
+                         "--save-maps", str(maps), "--overlay", str(tmp_path / "o.mp4")]) == 0
+    first = sorted((clip / "rgb").iterdir())[0].stem
+    prob = cv2.imread(str(maps / f"{first}_blindspot.png"), cv2.IMREAD_UNCHANGED)
+    depth = read_depth_map(maps / f"{first}_depth.png")
+    assert prob.dtype == np.uint8 and prob.shape == (96, 192)
+    assert depth.shape == (96, 192) and depth.max() > 0
+    cap = cv2.VideoCapture(str(tmp_path / "o.mp4"))
+    ok, frame = cap.read()
+    assert ok and frame.shape[:2] == (96, 192)
+    # the user's files are never silently replaced
+    (tmp_path / "cal.json").write_text("{}")
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--save-calib",
+                         str(tmp_path / "cal.json")]) == 2
 
 
 REAL_CLIP = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "dashcam_highway.mp4"

@@ -46,11 +46,13 @@ def test_poses_follow_the_route(rendered):
     cfg, sc = clip.config, clip.scenario
     xy, yaw = sc.route.at(sc.speed * clip.times)
     np.testing.assert_allclose(clip.poses[:, :2, 3], xy, atol=1e-9)
-    np.testing.assert_allclose(clip.poses[:, 2, 3], cfg.camera_height)
-    fwd = clip.poses[:, :3, 2]  # optical axis in the world
-    heading = np.stack([np.cos(yaw), np.sin(yaw)], 1) * np.cos(clip.pitch)[..., None]
-    np.testing.assert_allclose(fwd[:, :2], heading, atol=1e-9)
-    np.testing.assert_allclose(fwd[:, 2], -np.sin(clip.pitch), atol=1e-12)
+    np.testing.assert_allclose(clip.poses[:, 2, 3], clip.rig.height_m)
+    # undo the mounting: the car's level camera looks along the heading, parallel to the road
+    level = clip.poses[:, :3, :3] @ clip.rig.mounting.rotation()
+    heading = np.stack([np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)], 1)
+    np.testing.assert_allclose(level[:, :, 2], heading, atol=1e-9)
+    # and the optical axis itself dips by the pitch
+    np.testing.assert_allclose(clip.poses[:, 2, 2], -np.sin(clip.pitch), atol=1e-9)
     # the camera moves forward along its heading by speed / fps each frame (chords of arcs are shorter)
     step = np.linalg.norm(np.diff(clip.poses[:, :2, 3], axis=0), axis=1)
     assert np.all(step <= sc.speed / cfg.fps + 1e-6)

@@ -1,0 +1,268 @@
+"""Depth on real cameras, before (frames resized into the model) and after (warped into the model camera).
+
+    python -m benchmarks.bench_realcam --out benchmarks/results [--model A.onnx --model B.onnx]
+
+Real data from ``../shared/data/real/`` (skipped, with a note, when absent):
+
+- DDAD (``ddad_dgp`` scenes, 3 frames each, and ``ddad_camviz_eval.npz``): LiDAR depth. The mounting
+  comes from the calibration's camera-to-vehicle extrinsics and the road plane fitted to the LiDAR
+  (height above it, pitch and roll against it, yaw against the vehicle's x axis). Road points lie
+  within 0.15 m of the plane; object points 0.3-2.5 m above it, within 8 m of the car's axis (on the
+  road: cars and people, the "car distance" figure).
+- ``udacity_test_video.mp4``: intrinsics and distortion from ``camera_cal`` (the product's chessboard
+  step), mounting from the product's own ``--mount`` step (lane width 3.7 m, a US highway lane);
+  truth is the flat road's geometry in the ego lane (within 1.2 m of the car's axis) where no car is.
+
+Per model: AbsRel, median ratio (prediction / truth) and delta < 1.25 in 5-10, 10-20, 20-40 and
+5-40 m, for road points and for object points, with the old resize and with the model camera.
+Overlay pictures (blind spots tinted, depth coloured) go beside the results.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from benchmarks.common import write_result
+from bsn_edge.calibration import Calibration, calibrate
+from bsn_edge.calibration.mount_fit import MountFitConfig
+from bsn_edge.calibration.mounting_step import calibrate_mounting
+from bsn_edge.camera import Intrinsics
+from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.mounting import Mounting
+from bsn_edge.runtime.engine import Engine
+from bsn_edge.synth.sheet import tint
+
+REAL = CHECKOUT.parent / "shared" / "data" / "real"
+BINS = ((5, 10), (10, 20), (20, 40), (5, 40))
+ROAD_TOL_M = 0.15
+OBJECT_M = (0.3, 2.5)
+CORRIDOR_M = 8.0
+LANE_HALF_M = 1.2
+US_LANE_M = 3.7
+
+
+# -- samples -----------------------------------------------------------------------------------
+
+class Sample:
+    """One real frame with its camera and sparse truth: pixels ``uv``, z-depth ``z``, ``kind`` road/object."""
+
+    def __init__(self, name: str, image: np.ndarray, camera: Calibration, uv: np.ndarray, z: np.ndarray,
+                 kind: np.ndarray) -> None:
+        self.name, self.image, self.camera, self.uv, self.z, self.kind = name, image, camera, uv, z, kind
+
+
+def _quat(q: dict) -> np.ndarray:
+    w, x, y, z = q["qw"], q["qx"], q["qy"], q["qz"]
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def _ground(points_v: np.ndarray) -> tuple[np.ndarray, float]:
+    """Road plane ``n . X = c`` (n up, vehicle frame) from points 4-25 m ahead within 4 m of the axis."""
+    sel = points_v[(points_v[:, 0] > 4) & (points_v[:, 0] < 25) & (np.abs(points_v[:, 1]) < 4)]
+    low = sel[sel[:, 2] < np.percentile(sel[:, 2], 30) + 0.2]
+    for _ in range(3):
+        A = np.c_[low[:, 0], low[:, 1], np.ones(len(low))]
+        a, b, c = np.linalg.lstsq(A, low[:, 2], rcond=None)[0]
+        res = low[:, 2] - (a * low[:, 0] + b * low[:, 1] + c)
+        low = low[np.abs(res) < max(0.05, 2.5 * np.median(np.abs(res)))]
+    n = np.array([-a, -b, 1.0])
+    return n / np.linalg.norm(n), c / np.linalg.norm([-a, -b, 1.0])
+
+
+def _ddad_sample(name: str, image: np.ndarray, K: Intrinsics, R_vc: np.ndarray, t_vc: np.ndarray,
+                 points_v: np.ndarray) -> Sample:
+    n, c = _ground(points_v)
+    height = float(n @ t_vc - c)
+    fwd = np.array([1.0, 0.0, 0.0]) - n[0] * n
+    fwd /= np.linalg.norm(fwd)
+    down = -n
+    level = np.stack([np.cross(down, fwd), down, fwd], 1)        # level axes in the vehicle frame
+    mounting = Mounting.from_axes(level.T @ R_vc, height)
+    above = points_v @ n - c
+    pc = (points_v - t_vc) @ R_vc                                # vehicle -> camera
+    ok = pc[:, 2] > 1.0
+    uv = pc[:, :2] / np.where(ok, pc[:, 2], 1.0)[:, None] * [K.fx, K.fy] + [K.cx, K.cy]
+    ok &= (uv[:, 0] >= 0) & (uv[:, 0] < K.width - 0.5) & (uv[:, 1] >= 0) & (uv[:, 1] < K.height - 0.5)
+    lateral = np.abs(points_v @ np.cross(n, fwd))
+    kind = np.where(np.abs(above) < ROAD_TOL_M, "road",
+                    np.where((above > OBJECT_M[0]) & (above < OBJECT_M[1]) & (lateral < CORRIDOR_M), "object", ""))
+    keep = ok & (kind != "")
+    return Sample(name, image, Calibration.of(K, (), mounting, method="extrinsics and LiDAR road plane"),
+                  uv[keep], pc[keep, 2], kind[keep])
+
+
+def ddad_samples() -> list[Sample]:
+    out = []
+    for scene in sorted(glob.glob(str(REAL / "ddad_dgp" / "scene_*"))):
+        cal = json.loads(Path(glob.glob(f"{scene}/calibration/*.json")[0]).read_text())
+        i = cal["names"].index("CAMERA_01")
+        ext, k = cal["extrinsics"][i], cal["intrinsics"][i]
+        R_vc = _quat(ext["rotation"])
+        t_vc = np.array([ext["translation"][a] for a in "xyz"])
+        lidar = cal["extrinsics"][cal["names"].index("LIDAR")]
+        R_vl, t_vl = _quat(lidar["rotation"]), np.array([lidar["translation"][a] for a in "xyz"])
+        images = sorted(glob.glob(f"{scene}/rgb/CAMERA_01/*.jpg"))
+        clouds = sorted(glob.glob(f"{scene}/point_cloud/LIDAR/*.npz"))
+        for img_p, pc_p in zip(images, clouds, strict=True):
+            img = cv2.imread(img_p)
+            K = Intrinsics(k["fx"], k["fy"], k["cx"], k["cy"], img.shape[1], img.shape[0])
+            pts = np.load(pc_p)["data"][:, :3] @ R_vl.T + t_vl
+            out.append(_ddad_sample(f"ddad {Path(scene).name} {Path(img_p).stem}", img, K, R_vc, t_vc, pts))
+    npz = REAL / "ddad_camviz_eval.npz"
+    if npz.is_file():
+        d = np.load(npz)
+        gt = d["gt_depth"]
+        kf = d["intrinsics_full"]
+        K = Intrinsics(kf[0, 0], kf[1, 1], kf[0, 2], kf[1, 2], gt.shape[1], gt.shape[0])
+        img = cv2.resize((d["rgb"][..., ::-1] * 255).round().astype(np.uint8), (K.width, K.height),
+                         interpolation=cv2.INTER_CUBIC)
+        v, u = np.nonzero(gt > 0)
+        z = gt[v, u]
+        pc = np.stack([(u - K.cx) / K.fx * z, (v - K.cy) / K.fy * z, z], 1)
+        E = d["extrinsics"]
+        out.append(_ddad_sample("ddad camviz", img, K, E[:3, :3], E[:3, 3], pc @ E[:3, :3].T + E[:3, 3]))
+    return out
+
+
+def udacity_samples(every: int = 6) -> tuple[list[Sample], dict[str, Any]]:
+    video = REAL / "udacity_test_video.mp4"
+    intr = calibrate(REAL / "camera_cal")
+    cam = calibrate_mounting(video, intr, lane_width_m=US_LANE_M, cfg=MountFitConfig(max_spread_deg=0.3))
+    m = cam.mounting
+    info = {"intrinsics_rms_px": intr.rms_px, "mounting": m.to_dict(), "mounting_report": cam.mounting_report}
+    cap = cv2.VideoCapture(str(video))
+    frames = []
+    while True:
+        ok, f = cap.read()
+        if not ok:
+            break
+        frames.append(f)
+    cap.release()
+    h, w = frames[0].shape[:2]
+    K = intr.intrinsics.scaled(w, h)
+    # the flat road's z-depth at every pixel of the ego lane, 5-45 m ahead
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rays = cv2.undistortPoints(np.stack([u.ravel(), v.ravel()], -1)[:, None], K.K, np.array(intr.dist))
+    rays = np.c_[rays.reshape(-1, 2), np.ones(h * w)]
+    level = rays @ m.rotation()                                  # camera -> level (R^T applied to rows)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = m.height_m / level[:, 1]                             # the road lies height_m below
+    ground = level * s[:, None]
+    lane = (level[:, 1] > 0) & (np.abs(ground[:, 0]) < LANE_HALF_M) & (ground[:, 2] > 5) & (ground[:, 2] < 45)
+    z = s                                                         # rays have unit camera z
+    idx = np.nonzero(lane)[0][::7]
+    uv = np.stack([u.ravel()[idx], v.ravel()[idx]], 1)
+    samples = [Sample(f"udacity frame {i}", f, cam, uv, z[idx], np.full(len(idx), "road"))
+               for i, f in enumerate(frames) if i % every == 0]
+    return samples, info
+
+
+# -- prediction --------------------------------------------------------------------------------
+
+def predict(engine: Engine, sample: Sample, way: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Depth (raw camera z, metres) at the sample's truth pixels, the raw-grid depth and probability."""
+    img = sample.image
+    h, w = img.shape[:2]
+    if way == "resize":
+        # what bsn-run did before the model camera: resize, read depth as it comes
+        mh, mw = engine.size
+        prob, depth = engine.infer(cv2.resize(img, (mw, mh), interpolation=cv2.INTER_AREA)[None])
+        raw_depth = cv2.resize(depth, (w, h), interpolation=cv2.INTER_NEAREST)
+        raw_prob = cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
+    else:
+        mf = sample.camera.model_frame(w, h, engine.card.camera, engine.card.mounting)
+        prob, depth = engine.infer(mf.to_model(img)[None])
+        raw_depth, raw_prob = mf.depth_to_raw(depth), mf.to_raw(prob)
+    u = np.clip(np.rint(sample.uv[:, 0]).astype(int), 0, w - 1)
+    v = np.clip(np.rint(sample.uv[:, 1]).astype(int), 0, h - 1)
+    return raw_depth[v, u], raw_depth, raw_prob
+
+
+def metrics(pred: np.ndarray, truth: np.ndarray) -> dict[str, dict[str, float]]:
+    out = {}
+    for lo, hi in BINS:
+        m = (truth >= lo) & (truth < hi) & (pred > 0)
+        if m.sum() < 5:
+            continue
+        r = pred[m] / truth[m]
+        out[f"{lo}-{hi}"] = {"n": int(m.sum()), "abs_rel": float(np.mean(np.abs(r - 1))),
+                             "median_ratio": float(np.median(r)),
+                             "delta_1.25": float(np.mean(np.maximum(r, 1 / r) < 1.25))}
+    return out
+
+
+def picture(sample: Sample, depth: np.ndarray, prob: np.ndarray, threshold: float) -> np.ndarray:
+    scale = 480.0 / sample.image.shape[1]
+    size = (480, round(sample.image.shape[0] * scale))
+    img = cv2.resize(sample.image, size, interpolation=cv2.INTER_AREA)
+    mask = cv2.resize((prob >= threshold).astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
+    d = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)
+    col = cv2.applyColorMap((255 * np.clip(10.0 / (d + 10.0), 0, 1)).astype(np.uint8), cv2.COLORMAP_MAGMA)
+    col[d <= 0] = 0
+    return np.hstack([tint(img, mask), col])
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--model", action="append", help="exported models to compare (default: the shipped one)")
+    args = p.parse_args(argv)
+    models = args.model or [str(CHECKOUT / "models" / "bsn_small_light_int8.onnx")]
+    if not REAL.is_dir():
+        print(f"no real data at {REAL}: nothing to measure")
+        return 0
+    sets = {"DDAD (LiDAR)": ddad_samples()}
+    uda, uda_info = udacity_samples()
+    sets["Udacity (lane geometry)"] = uda
+    out = Path(args.out)
+    results: dict[str, Any] = {"models": {}, "udacity_camera": uda_info}
+    lines = ["# Real cameras: depth before and after the model camera", "",
+             "Before: the frame resized into the model (what bsn-run did). After: warped into the model camera "
+             "with the camera's calibration (`ModelFrame`), depth brought back by the height ratio. "
+             f"Udacity camera from the product's own steps: {uda_info['mounting']}.", ""]
+    for mp in models:
+        engine = Engine(mp)
+        name = Path(mp).stem
+        res: dict[str, Any] = {}
+        lines += [f"## {name}", "", "| data | points | way | " + " | ".join(f"{lo}-{hi} m AbsRel / median / d1"
+                                                                         for lo, hi in BINS) + " |",
+                  "|---|---|---|" + "---|" * len(BINS)]
+        for set_name, samples in sets.items():
+            for kind in ("road", "object"):
+                for way in ("resize", "model camera"):
+                    preds, truths = [], []
+                    for s in samples:
+                        sel = s.kind == kind
+                        if not sel.any():
+                            continue
+                        pr, raw_depth, raw_prob = predict(engine, s, way)
+                        preds.append(pr[sel])
+                        truths.append(s.z[sel])
+                        if way == "model camera" and kind == "road" and s is samples[0]:
+                            cv2.imwrite(str(out / f"realcam_{name}_{set_name.split()[0].lower()}.png"),
+                                        picture(s, raw_depth, raw_prob, engine.card.threshold))
+                    if not preds:
+                        continue
+                    m = metrics(np.concatenate(preds), np.concatenate(truths))
+                    res[f"{set_name} / {kind} / {way}"] = m
+                    cells = [f"{m[b]['abs_rel']:.3f} / {m[b]['median_ratio']:.2f} / {m[b]['delta_1.25']:.2f}"
+                             if (b := f"{lo}-{hi}") in m else "-" for lo, hi in BINS]
+                    lines.append(f"| {set_name} | {kind} | {way} | " + " | ".join(cells) + " |")
+        results["models"][name] = res
+        lines += ["", f"![{name} DDAD](realcam_{name}_ddad.png) ![{name} Udacity](realcam_{name}_udacity.png)", ""]
+    write_result(out, "realcam", results, "\n".join(lines))
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,110 @@
+"""The model frame: every camera's frames warped into the one camera the model knows.
+
+A user's camera (intrinsics, lens distortion, mounting) and the model camera (the card's
+intrinsics at the input size and its mounting: a reference height and a pitch, no yaw or roll)
+sit at the same place in the car. One ``cv2.remap`` takes a raw frame straight to the model's
+input (undistortion, rotation and scale in one step); the inverse map brings outputs back onto
+the raw frame. ``bsn-run``, ``bsn-label`` and the training data loader all use this class, so
+every stage sees the same geometry.
+
+Depth, honestly: the model frame's picture of a road seen from height ``h`` is exactly the
+picture of the same world scaled by ``h_ref / h`` seen from the reference height, so a model
+that learned the reference camera reads depths ``h_ref / h`` times the truth. Depth therefore
+goes to the user's camera as ``z_model * h / h_ref`` (exact for the road plane; for everything
+else as right as the model's use of the road as its scale), then from the model camera's axis
+to the raw camera's (``z_raw = z_model * (R r)_z`` for the model ray ``r`` with unit z).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from bsn_edge.camera import Intrinsics
+from bsn_edge.mounting import Mounting, inverse_maps, warp_maps
+
+
+class ModelFrame:
+    """The warp between one raw camera at one frame size and the model camera.
+
+    raw, dist, mounting:          the user's camera at the raw frame's size
+    model, model_mounting:        the model camera (intrinsics at the model's input size)
+    """
+
+    def __init__(self, raw: Intrinsics, dist: tuple[float, ...], mounting: Mounting, model: Intrinsics,
+                 model_mounting: Mounting) -> None:
+        self.raw, self.dist, self.mounting = raw, tuple(float(d) for d in dist), mounting
+        self.model, self.model_mounting = model, model_mounting
+        mx, my = warp_maps(raw, self.dist, mounting, model, model_mounting)
+        # model pixels whose ray falls outside the raw picture see nothing
+        self.seen = (mx >= -0.5) & (mx <= raw.width - 0.5) & (my >= -0.5) & (my <= raw.height - 0.5)
+        self._fwd = cv2.convertMaps(mx, my, cv2.CV_16SC2)   # fixed point: the fast path of remap
+        self._fwd_float = (mx, my)
+        ix, iy = inverse_maps(raw, self.dist, mounting, model, model_mounting)
+        self._inv = (ix, iy)
+        self.height_ratio = mounting.height_m / model_mounting.height_m
+        # raw-camera z of the point at unit model-camera z along each model pixel's ray
+        r_raw_from_model = mounting.rotation() @ model_mounting.rotation().T
+        z_raw_per_model = (model.rays().reshape(-1, 3) @ r_raw_from_model[2]).reshape(model.height, model.width)
+        self._to_model_depth = (1.0 / (self.height_ratio * z_raw_per_model)).astype(np.float32)
+        self._to_raw_depth = (self.height_ratio * self.to_raw(z_raw_per_model.astype(np.float32))).astype(np.float32)
+
+    @classmethod
+    def resize_only(cls, model: Intrinsics, model_mounting: Mounting, width: int, height: int) -> ModelFrame:
+        """A camera that is the model camera at another size: the warp is a plain resize."""
+        return cls(model.scaled(width, height), (), model_mounting, model, model_mounting)
+
+    @property
+    def raw_size(self) -> tuple[int, int]:
+        return self.raw.height, self.raw.width
+
+    # -- raw -> model --------------------------------------------------------------------------
+
+    def to_model(self, frame: np.ndarray, dst: np.ndarray | None = None,
+                 interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
+        """A raw frame (any channels) in the model camera. Where the raw camera sees nothing the
+        picture is mirrored from its edge (training and the runtime alike; ``seen`` says where):
+        a frame in a black border is a look no model has learned."""
+        self._check(frame)
+        return cv2.remap(frame, *self._fwd, interpolation, dst=dst, borderMode=cv2.BORDER_REFLECT)
+
+    def labels_to_model(self, labels: np.ndarray) -> np.ndarray:
+        """Masks and class ids: nearest neighbour, 0 where the raw camera sees nothing."""
+        self._check(labels)
+        return cv2.remap(labels, *self._fwd_float, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT)
+
+    def depth_to_model(self, depth: np.ndarray) -> np.ndarray:
+        """A raw camera's z-depth (metres, 0 = none) as the model camera at its reference height
+        would read it: nearest neighbour, converted along the model's rays, scaled by ``h_ref / h``."""
+        self._check(depth)
+        d = cv2.remap(depth.astype(np.float32), *self._fwd_float, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT)
+        return np.where(d > 0, d * self._to_model_depth, 0.0).astype(np.float32)
+
+    # -- model -> raw --------------------------------------------------------------------------
+
+    def to_raw(self, arr: np.ndarray, interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
+        """A model-frame image or map back on the raw frame's pixels; 0 where the model frame does not reach."""
+        if arr.shape[:2] != (self.model.height, self.model.width):
+            raise ValueError(f"expected a {self.model.height}x{self.model.width} model-frame array, got "
+                             f"{arr.shape[0]}x{arr.shape[1]}")
+        return cv2.remap(arr, *self._inv, interpolation, borderMode=cv2.BORDER_CONSTANT)
+
+    def depth_to_raw(self, depth: np.ndarray) -> np.ndarray:
+        """The model's depth (model camera, reference height) as the raw camera's z-depth in metres,
+        on the raw frame's pixels; 0 where the model frame does not reach."""
+        return self.to_raw(depth.astype(np.float32), cv2.INTER_NEAREST) * self._to_raw_depth
+
+    def depth_to_metres(self, depth: np.ndarray) -> np.ndarray:
+        """The model's depth in the model camera's own axes at the user's true scale (forward distance)."""
+        return depth * np.float32(self.height_ratio)
+
+    def raw_column_sector(self, column_sector: np.ndarray) -> np.ndarray:
+        """Per raw-frame column, the sector of the model column it meets on the raw frame's middle row."""
+        x = self._inv[0][self.raw.height // 2]
+        idx = np.clip(np.rint(x), 0, self.model.width - 1).astype(np.intp)
+        return column_sector[idx]
+
+    def _check(self, frame: np.ndarray) -> None:
+        if frame.shape[:2] != (self.raw.height, self.raw.width):
+            raise ValueError(f"frame is {frame.shape[0]}x{frame.shape[1]}, this camera's warp was built for "
+                             f"{self.raw.height}x{self.raw.width}")

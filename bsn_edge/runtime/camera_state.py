@@ -1,0 +1,102 @@
+"""The runtime's camera: the warp of each frame into the model camera, and online calibration.
+
+With a camera file that carries a mounting, that mounting is used from the first frame. Without
+one, the camera is calibrated online as openpilot's calibration daemon does: frames are warped as
+if the camera sat like the model camera while pitch and yaw are estimated from the focus of
+expansion of forward driving (:mod:`bsn_edge.calibration.mount_fit`); the status on the bus says
+CALIBRATING until the estimate has converged, then the estimate is used (and saved, when asked).
+Without a camera file at all the intrinsics are taken as the model camera's, rescaled to the
+frame (the picture is only resized): the overlay and summary say so.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.calibration.mount_fit import MountFit
+from bsn_edge.card import ModelCard
+from bsn_edge.model_frame import ModelFrame
+from bsn_edge.mounting import Mounting
+
+
+class CameraState:
+    """Owns the model frame of the current frame size; refits online while calibrating.
+
+    ``calibrate_every``: online, a frame in this many is fed to the estimator (it tracks at
+    640 pixels wide; every frame would cost more than the model)."""
+
+    def __init__(self, card: ModelCard, calibration: Calibration | None = None, height_m: float | None = None,
+                 save_to: str | Path | None = None, calibrate_every: int = 2) -> None:
+        self.card = card
+        self.calibration = calibration
+        self.save_to = Path(save_to) if save_to else None
+        self.assumed_intrinsics = calibration is None
+        self.height_m = height_m or (calibration.mounting.height_m if calibration and calibration.mounting
+                                     else card.mounting.height_m)
+        self.mounting: Mounting | None = calibration.mounting if calibration is not None else None
+        if self.mounting is not None and height_m:
+            self.mounting = Mounting(height_m, self.mounting.pitch_deg, self.mounting.yaw_deg, self.mounting.roll_deg)
+        self.calibrate_every = max(1, int(calibrate_every))
+        self.report: dict[str, Any] = {"source": "camera file" if self.mounting else "online"}
+        self._fit: MountFit | None = None
+        self._frames: dict[tuple[int, int], ModelFrame] = {}
+        self._seen = 0
+        self._lock = threading.Lock()
+
+    @property
+    def calibrating(self) -> bool:
+        return self.mounting is None
+
+    def camera_file(self, width: int, height: int) -> Calibration:
+        if self.calibration is not None:
+            return self.calibration
+        return Calibration.of(self.card.camera.scaled(width, height), (), None)
+
+    def frame_for(self, frame: np.ndarray) -> ModelFrame:
+        """The model frame for this raw frame (built once per size and mounting); while calibrating,
+        the frame also feeds the estimator."""
+        h, w = frame.shape[:2]
+        if self.calibrating:
+            self._calibrate(frame)
+        key = (h, w)
+        mf = self._frames.get(key)
+        if mf is None or mf.mounting != (self.mounting or self._guess):
+            mf = self.camera_file(w, h).model_frame(w, h, self.card.camera, self.card.mounting,
+                                                    mounting=self.mounting or self._guess)
+            self._frames[key] = mf
+        return mf
+
+    @property
+    def _guess(self) -> Mounting:
+        m = self.card.mounting
+        return Mounting(self.height_m, m.pitch_deg, m.yaw_deg, m.roll_deg)
+
+    def _calibrate(self, frame: np.ndarray) -> None:
+        h, w = frame.shape[:2]
+        cam = self.camera_file(w, h)
+        if self._fit is None:
+            self._fit = MountFit(cam.intrinsics, cam.dist)
+        self._seen += 1
+        if self._seen % self.calibrate_every:
+            return
+        if not self._fit.add(frame):
+            return
+        m, report = self._fit.estimate(self.height_m)
+        self.report = {"source": "online", **report}
+        if m is not None and report["converged"]:
+            with self._lock:
+                self.mounting = m
+            if self.save_to is not None:
+                cam.with_mounting(m, **report).write(self.save_to)
+                self.report["saved"] = str(self.save_to)
+
+    def summary(self) -> dict[str, Any]:
+        m = self.mounting
+        return {"intrinsics": "assumed: the model camera's, rescaled (no camera file)" if self.assumed_intrinsics
+                else "camera file", "mounting": None if m is None else m.to_dict(),
+                "calibrating": self.calibrating, "calibration": self.report}

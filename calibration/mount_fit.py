@@ -1,0 +1,213 @@
+"""The camera's mounting from driving video.
+
+Pitch and yaw come from the focus of expansion of straight driving: frame to frame, the
+essential matrix of tracked corners gives the camera's direction of travel in its own frame,
+which on a straight road is the car's forward axis. This is preferred over the vanishing point
+of lane lines because it needs no lane markings (towns, car parks, snow) and uses hundreds of
+corners per frame instead of two lines. Roll comes from the road plane: corners on the road
+below the horizon move by a homography whose plane normal, given the motion, is the road's
+"down" seen from the camera. Pairs where the car turns (rotation above ``max_turn_deg``),
+stands still (too little flow) or the geometry is weak are not used, and a clip that leaves too
+few usable pairs is refused with the reasons counted.
+
+The same estimator serves ``bsn-calibrate --mount`` (a whole clip, offline) and ``bsn-run``'s
+online calibration (until the estimate has converged).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from bsn_edge.camera import Intrinsics
+from bsn_edge.labels.tracks import detect, track
+from bsn_edge.mounting import Mounting, angles_of
+
+MAX_ROLL_DEG = 15.0        # a camera rolled further is not mounted for driving
+WORK_WIDTH = 640           # frames are tracked at about this width (speed; the angles do not need more)
+
+
+@dataclass(frozen=True)
+class MountFitConfig:
+    """When a frame pair counts, and when the estimate is good enough.
+
+    min_flow_px:    median corner motion below this (at the working width): standing still
+    max_turn_deg:   rotation between the two frames above this: turning
+    min_inliers:    essential-matrix inliers a pair needs
+    min_pairs:      usable pairs an estimate needs
+    gap:            a pair is a frame and the one ``gap`` frames before it (more parallax than
+                    neighbours give, so a steadier direction of travel)
+    max_spread_deg: the estimate has converged when the robust spread (1.4826 MAD) of pitch and
+                    yaw over the pairs, divided by sqrt(pairs), is below this
+    """
+
+    min_flow_px: float = 1.0
+    max_turn_deg: float = 0.6
+    min_inliers: int = 40
+    min_pairs: int = 20
+    max_spread_deg: float = 0.15
+    gap: int = 3
+
+    def __post_init__(self) -> None:
+        if self.min_flow_px <= 0 or self.max_turn_deg <= 0 or self.min_inliers < 8 or self.min_pairs < 3:
+            raise ValueError("min_flow_px and max_turn_deg must be positive, min_inliers >= 8, min_pairs >= 3")
+
+
+@dataclass
+class MountFit:
+    """Accumulates frame pairs of one camera; ask :meth:`estimate` at any time."""
+
+    intrinsics: Intrinsics
+    dist: tuple[float, ...] = ()
+    cfg: MountFitConfig = field(default_factory=MountFitConfig)
+    forward: list[np.ndarray] = field(default_factory=list)      # unit travel directions, camera frame
+    down: list[np.ndarray] = field(default_factory=list)         # unit road normals (down), camera frame
+    rejected: dict[str, int] = field(default_factory=dict)
+    pairs: int = 0
+    _prev: list[np.ndarray] = field(default_factory=list)
+    _scale: float = 1.0
+    _K: np.ndarray | None = None
+
+    def add(self, frame: np.ndarray) -> bool:
+        """Feed the next frame (BGR or gray, the calibration's camera at any size); True when the
+        pair it closes was used."""
+        gray = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        h, w = gray.shape
+        if self._K is None:
+            self._scale = min(1.0, WORK_WIDTH / w)
+            k = self.intrinsics.scaled(round(w * self._scale), round(h * self._scale))
+            self._K = k.K
+        if self._scale < 1.0:
+            gray = cv2.resize(gray, (round(w * self._scale), round(h * self._scale)), interpolation=cv2.INTER_AREA)
+        if self._prev and self._prev[-1].shape != gray.shape:
+            self._prev.clear()
+        self._prev.append(gray)
+        if len(self._prev) <= self.cfg.gap:
+            return False
+        prev = self._prev.pop(0)
+        self.pairs += 1
+        why = self._pair(prev, gray)
+        if why:
+            self.rejected[why] = self.rejected.get(why, 0) + 1
+            return False
+        return True
+
+    def _pair(self, g0: np.ndarray, g1: np.ndarray) -> str:
+        p0 = detect(g0)
+        if len(p0) < self.cfg.min_inliers:
+            return "too few corners"
+        p1, ok = track(g0, g1, p0)
+        p0, p1 = p0[ok], p1[ok]
+        if len(p0) < self.cfg.min_inliers:
+            return "too few tracked corners"
+        if np.median(np.linalg.norm(p1 - p0, axis=1)) < self.cfg.min_flow_px:
+            return "standing still"
+        d = np.asarray(self.dist, np.float64) if self.dist else None
+        n0 = cv2.undistortPoints(p0[:, None].astype(np.float64), self._K, d).reshape(-1, 2)
+        n1 = cv2.undistortPoints(p1[:, None].astype(np.float64), self._K, d).reshape(-1, 2)
+        E, mask = cv2.findEssentialMat(n0, n1, np.eye(3), cv2.RANSAC, 0.999, 1.0 / self._K[0, 0])
+        if E is None or E.shape != (3, 3):
+            return "no essential matrix"
+        n, R, t, mask = cv2.recoverPose(E, n0, n1, np.eye(3), mask=mask)
+        if n < self.cfg.min_inliers:
+            return "too few inliers"
+        if math.degrees(np.linalg.norm(cv2.Rodrigues(R)[0])) > self.cfg.max_turn_deg:
+            return "turning"
+        # X1 = R X0 + t: the camera moves by c = -R^T t (in frame 0's axes)
+        c = -R.T @ t.ravel()
+        c /= np.linalg.norm(c)
+        if c[2] < 0.9:
+            return "not driving forward"
+        self.forward.append(c)
+        # the road plane from the corners that fit the motion (the car's own hood does not move)
+        inl = mask.ravel() > 0
+        nd = _road_normal(n0[inl], n1[inl], R, t.ravel() / np.linalg.norm(t), c)
+        if nd is not None:
+            self.down.append(nd)
+        return ""
+
+    def estimate(self, height_m: float) -> tuple[Mounting | None, dict[str, Any]]:
+        """The mounting from the pairs so far (``None`` when there are too few) and a report:
+        pairs used, rejected by reason, spread of each angle, converged or not."""
+        used = len(self.forward)
+        report: dict[str, Any] = {"method": "focus of expansion (essential matrix) for pitch and yaw, road-plane "
+                                            "homography for roll", "pairs": self.pairs, "used": used,
+                                  "rejected": dict(self.rejected), "converged": False}
+        if used < 3:
+            return None, report
+        fwd = np.array(self.forward)
+        angles = np.array([_pitch_yaw(f) for f in fwd])
+        pitch, yaw = np.median(angles, axis=0)
+        spread = 1.4826 * np.median(np.abs(angles - [pitch, yaw]), axis=0)
+        roll, roll_spread = 0.0, None
+        if len(self.down) >= 3:
+            f = _unit(np.median(fwd, axis=0))
+            rolls = np.array([_roll(f, d) for d in self.down])
+            rolls = rolls[np.abs(rolls) <= MAX_ROLL_DEG]     # a road-plane fit that failed
+        if len(self.down) >= 3 and len(rolls) >= 3:
+            roll = float(np.median(rolls))
+            roll_spread = float(1.4826 * np.median(np.abs(rolls - roll)))
+        m = Mounting.from_forward(_forward_of(pitch, yaw), height_m, roll)
+        se = spread / math.sqrt(used)
+        report.update(pitch_deg=m.pitch_deg, yaw_deg=m.yaw_deg, roll_deg=m.roll_deg,
+                      spread_deg={"pitch": float(spread[0]), "yaw": float(spread[1]), "roll": roll_spread},
+                      standard_error_deg={"pitch": float(se[0]), "yaw": float(se[1])},
+                      road_plane_pairs=len(self.down),
+                      converged=bool(used >= self.cfg.min_pairs and max(se) <= self.cfg.max_spread_deg))
+        return m, report
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def _pitch_yaw(forward: np.ndarray) -> tuple[float, float]:
+    """Pitch and yaw (degrees, zero roll) of a camera that sees the car's forward axis as ``forward``."""
+    m = Mounting.from_forward(forward, 1.0)
+    return m.pitch_deg, m.yaw_deg
+
+
+def _forward_of(pitch_deg: float, yaw_deg: float) -> np.ndarray:
+    return Mounting(1.0, float(pitch_deg), float(yaw_deg)).rotation() @ np.array([0.0, 0.0, 1.0])
+
+
+def _roll(forward: np.ndarray, down: np.ndarray) -> float:
+    """Roll (degrees) of the camera whose view of the car's forward axis and of the road's down
+    direction are these."""
+    z = _unit(forward - (forward @ down) * down)
+    x = np.cross(down, z)
+    axes_cam_from_level = np.stack([x, down, z], axis=1)   # columns: level x, y, z in camera axes
+    return angles_of(axes_cam_from_level.T)[2]
+
+
+def _road_normal(n0: np.ndarray, n1: np.ndarray, R: np.ndarray, t: np.ndarray, forward: np.ndarray
+                 ) -> np.ndarray | None:
+    """The road's down direction from corners low in the picture: for the plane ``m . X0 = 1``
+    (``m = n / d``), ``X1 = (R + t m^T) X0``; solved for ``m`` by least squares, robustly."""
+    # corners well below the horizon and near the middle: mostly road
+    fy = forward[1] / forward[2]
+    low = (n0[:, 1] > fy + 0.12) & (np.abs(n0[:, 0] - forward[0] / forward[2]) < 0.6)
+    if low.sum() < 15:
+        return None
+    x0 = np.c_[n0[low], np.ones(low.sum())]
+    x1 = np.c_[n1[low], np.ones(low.sum())]
+    keep = np.ones(len(x0), bool)
+    m = None
+    for _ in range(3):
+        rows, rhs = [], []
+        for a, b in zip(x0[keep], x1[keep], strict=True):
+            bx = np.array([[0, -b[2], b[1]], [b[2], 0, -b[0]], [-b[1], b[0], 0]])
+            rows.append(bx @ np.outer(t, a))
+            rhs.append(-bx @ (R @ a))
+        m = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+        pred = x0 @ (R + np.outer(t, m)).T
+        err = np.linalg.norm(pred[:, :2] / pred[:, 2:] - x1[:, :2], axis=1)
+        keep = err < max(3.0 * np.median(err), 1e-4)
+        if keep.sum() < 10:
+            return None
+    nd = _unit(m)
+    return nd if nd[1] > 0.8 else None

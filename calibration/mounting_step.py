@@ -1,0 +1,83 @@
+"""``bsn-calibrate --mount``: a camera file's mounting from a short straight drive."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+
+from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.calibration.lane_height import LaneHeight
+from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
+
+
+class MountingRefusedError(ValueError):
+    """The clip does not allow the estimate; the message says why, with the counts."""
+
+
+def calibrate_mounting(video: str | os.PathLike, camera: Calibration, height_m: float | None = None,
+                       lane_width_m: float | None = None, cfg: MountFitConfig | None = None,
+                       max_frames: int | None = None,
+                       progress: Callable[[int], None] | None = None) -> Calibration:
+    """``camera`` with its mounting from ``video``: pitch, yaw and roll from the drive, the height
+    measured (``height_m``) or from the lane width. Raises :class:`MountingRefusedError`."""
+    if (height_m is None) == (lane_width_m is None):
+        raise ValueError("give the camera's height (--height) or the lane width (--lane-width), one of them")
+    path = Path(video)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found")
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise ValueError(f"{path}: OpenCV cannot open this video")
+    frames = []
+    try:
+        while max_frames is None or len(frames) < max_frames:
+            ok, frame = cap.read()
+            if not ok:
+                break
+            frames.append(frame)
+            if progress:
+                progress(1)
+    finally:
+        cap.release()
+    # the intrinsics are rescaled to the video's size, but another aspect ratio is another camera
+    if frames and abs(frames[0].shape[1] / frames[0].shape[0] - camera.width / camera.height) > 0.01:
+        raise ValueError(f"{path} is {frames[0].shape[1]}x{frames[0].shape[0]} but the camera file is for "
+                             f"{camera.width}x{camera.height}: another aspect ratio is another camera")
+    h, w = (frames[0].shape[:2]) if frames else (camera.height, camera.width)
+    intr = camera.intrinsics.scaled(w, h)
+    fit = MountFit(intr, camera.dist, cfg or MountFitConfig())
+    for f in frames:
+        fit.add(f)
+    m, report = fit.estimate(height_m or 1.5)
+    report["frames"] = len(frames)
+    if m is None or not report["converged"]:
+        raise MountingRefusedError(_why(report, fit.cfg))
+    if lane_width_m is not None:
+        lanes = LaneHeight(intr, camera.dist, m)
+        for f in frames:
+            lanes.add(f)
+        hm, lane_report = lanes.estimate(lane_width_m)
+        report["height"] = lane_report
+        if hm is None:
+            raise MountingRefusedError(f"the lane markings were clear in {lane_report['frames_used']} of {len(frames)} "
+                                  f"frames (need 5): measure the height and give --height")
+        m = type(m)(hm, m.pitch_deg, m.yaw_deg, m.roll_deg)
+    else:
+        report["height"] = {"method": "measured", "height_m": height_m}
+    return camera.with_mounting(m, **report)
+
+
+def _why(report: dict, cfg: MountFitConfig) -> str:
+    rejected = ", ".join(f"{k}: {v}" for k, v in sorted(report["rejected"].items())) or "none"
+    head = (f"{report['used']} of {report['pairs']} frame pairs were usable (need {cfg.min_pairs}; "
+            f"rejected: {rejected})")
+    if report["frames"] <= cfg.gap + cfg.min_pairs:
+        return f"the clip is too short ({report['frames']} frames): {head}; record at least 10 s of straight driving"
+    if report["used"] < cfg.min_pairs:
+        return f"{head}; drive straight ahead at a steady speed (not turning, not standing still)"
+    se = report.get("standard_error_deg", {})
+    return (f"{head}, but the estimate has not settled (standard error pitch {se.get('pitch', 0):.2f}, yaw "
+            f"{se.get('yaw', 0):.2f} degrees, need <= {cfg.max_spread_deg}); record a longer straight drive")

@@ -1,0 +1,97 @@
+"""The mounting step against synthetic drives whose camera is known exactly (the clip's rig)."""
+
+import cv2
+import numpy as np
+import pytest
+
+from bsn_edge.calibration import Calibration
+from bsn_edge.calibration.lane_height import LaneHeight
+from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
+from bsn_edge.calibration.mounting_step import MountingRefusedError, calibrate_mounting
+from bsn_edge.cli import calibrate as calib_cli
+from bsn_edge.synth import SynthConfig, write_clip
+
+LANE_M = 3.2   # the synthetic world's lanes
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    """A 60-frame drive with a drawn camera (rig seed 3: 80-degree lens with barrel distortion,
+    pitched, yawed and rolled about a degree)."""
+    out = tmp_path_factory.mktemp("drive") / "clip"
+    write_clip(SynthConfig(frames=60, seed=3, parked=0.3, traffic=0.3), out, video=True)
+    return out
+
+
+def frames(clip):
+    return [cv2.imread(str(p)) for p in sorted((clip / "rgb").glob("*.png"))]
+
+
+def test_pitch_and_yaw_from_the_focus_of_expansion(drive):
+    truth = Calibration.read(drive / "calibration.json")
+    fit = MountFit(truth.intrinsics, truth.dist)
+    for f in frames(drive):
+        fit.add(f)
+    m, report = fit.estimate(truth.mounting.height_m)
+    assert report["used"] >= 40
+    assert m.pitch_deg == pytest.approx(truth.mounting.pitch_deg, abs=0.4)
+    assert m.yaw_deg == pytest.approx(truth.mounting.yaw_deg, abs=0.6)
+    assert abs(m.roll_deg - truth.mounting.roll_deg) < 1.5
+    assert set(report["spread_deg"]) == {"pitch", "yaw", "roll"}
+
+
+def test_height_from_the_lane_width(drive):
+    truth = Calibration.read(drive / "calibration.json")
+    lanes = LaneHeight(truth.intrinsics, truth.dist, truth.mounting)
+    for f in frames(drive):
+        lanes.add(f)
+    h, report = lanes.estimate(LANE_M)
+    assert report["frames_used"] >= 30
+    assert h == pytest.approx(truth.mounting.height_m, rel=0.1)
+
+
+def test_standing_still_and_short_clips_are_refused_with_reasons(tmp_path, drive):
+    truth = Calibration.read(drive / "calibration.json")
+    still = tmp_path / "still.mp4"
+    f = frames(drive)[0]
+    w = cv2.VideoWriter(str(still), cv2.VideoWriter_fourcc(*"mp4v"), 10, (f.shape[1], f.shape[0]))
+    for _ in range(40):
+        w.write(f)
+    w.release()
+    with pytest.raises(MountingRefusedError, match="standing still"):
+        calibrate_mounting(still, truth, height_m=1.4)
+    with pytest.raises(MountingRefusedError, match="too short"):
+        calibrate_mounting(drive / "video.mp4", truth, height_m=1.4, max_frames=12)
+    with pytest.raises(ValueError, match="one of them"):
+        calibrate_mounting(drive / "video.mp4", truth)
+
+
+def test_cli_writes_the_camera_file_run_and_label_read(tmp_path, drive, capsys):
+    truth = Calibration.read(drive / "calibration.json")
+    intr = tmp_path / "intr.json"
+    Calibration.of(truth.intrinsics, truth.dist).write(intr)
+    out = tmp_path / "cam.json"
+    argv = [str(drive / "video.mp4"), "--mount", "--calib", str(intr), "--height", "1.4", "--out", str(out),
+            "--max-error", "0.3"]
+    assert calib_cli.main(argv) == 0
+    cam = Calibration.read(out)
+    assert cam.mounting.height_m == 1.4 and cam.dist == truth.dist
+    assert cam.mounting_report["used"] > 0 and "spread_deg" in cam.mounting_report
+    assert "pitch" in capsys.readouterr().out
+    # the user's work is not overwritten without --force
+    assert calib_cli.main(argv) == 2
+    assert "exists" in capsys.readouterr().err
+    assert calib_cli.main([*argv, "--force"]) == 0
+
+
+def test_online_estimate_converges_on_a_steady_drive(drive):
+    truth = Calibration.read(drive / "calibration.json")
+    fit = MountFit(truth.intrinsics, truth.dist, MountFitConfig(max_spread_deg=0.3))
+    converged_at = None
+    for i, f in enumerate(frames(drive)):
+        fit.add(f)
+        m, report = fit.estimate(1.5)
+        if report["converged"] and converged_at is None:
+            converged_at = i
+    assert converged_at is not None and converged_at < 60
+    assert np.isfinite(m.pitch_deg)

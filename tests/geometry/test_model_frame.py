@@ -1,0 +1,85 @@
+"""The model frame against analytic geometry: a flat road seen from two heights, and straight ahead."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from bsn_edge.camera import Intrinsics
+from bsn_edge.model_frame import ModelFrame
+from bsn_edge.mounting import Mounting
+
+RAW = Intrinsics(1000.0, 1000.0, 640.0, 360.0, 1280, 720)
+DIST = (-0.2, 0.04, 0.0, 0.0, 0.0)
+MODEL = Intrinsics.from_fov(256, 128, 80.0)
+REF = Mounting(1.5, pitch_deg=1.5)
+USER = Mounting(1.2, pitch_deg=-1.5, yaw_deg=2.0, roll_deg=1.0)
+
+
+def road_z(K: Intrinsics, m: Mounting, dist=()) -> np.ndarray:
+    """z-depth of the flat road at every pixel of a camera ``m.height_m`` above it (0 = no road),
+    by intersecting each pixel's ray with the plane: no code under test involved."""
+    u, v = np.meshgrid(np.arange(K.width, dtype=np.float64), np.arange(K.height, dtype=np.float64))
+    n = cv2.undistortPoints(np.stack([u.ravel(), v.ravel()], -1)[:, None], K.K, np.asarray(dist, float))
+    rays = np.c_[n.reshape(-1, 2), np.ones(u.size)]           # camera frame, unit z
+    # the level frame's "down" seen from the camera is R @ (0, 1, 0)
+    down = m.rotation() @ np.array([0.0, 1.0, 0.0])
+    along = rays @ down
+    z = np.where(along > 1e-6, m.height_m / np.maximum(along, 1e-6), 0.0)
+    return z.reshape(K.height, K.width).astype(np.float32)
+
+
+def test_depth_goes_to_the_user_camera_by_the_height_ratio_and_its_own_axis():
+    # a fine model grid, so that nearest-neighbour sampling (a row of the map) stays small next to
+    # what is tested: the height ratio and the change of axis
+    big = Intrinsics.from_fov(1024, 512, 80.0)
+    mf = ModelFrame(RAW, DIST, USER, big, REF)
+    # an ideal model reads the road as the reference camera at the reference height would
+    got = mf.depth_to_raw(road_z(big, REF))
+    truth = road_z(RAW, USER, DIST)
+    sel = (truth > 5) & (truth < 30) & (got > 0)
+    assert sel.sum() > 50000
+    rel = np.abs(got[sel] - truth[sel]) / truth[sel]
+    assert np.median(rel) < 0.005 and np.percentile(rel, 95) < 0.02
+    # the height ratio is what makes it right: reading the model's depth as metres is 1.5 / 1.2 off
+    plain = ModelFrame(RAW, DIST, Mounting(1.5, USER.pitch_deg, USER.yaw_deg, USER.roll_deg), big, REF)
+    off = plain.depth_to_raw(road_z(big, REF))[sel] / truth[sel]
+    assert np.median(off) == pytest.approx(1.5 / 1.2, rel=0.01)
+
+
+def test_a_user_cameras_depth_reads_as_the_reference_camera_would():
+    mf = ModelFrame(RAW, DIST, USER, MODEL, REF)
+    got = mf.depth_to_model(road_z(RAW, USER, DIST))
+    want = road_z(MODEL, REF)
+    sel = (want > 5) & (want < 40) & (got > 0) & mf.seen
+    rel = np.abs(got[sel] - want[sel]) / want[sel]
+    assert sel.sum() > 2000 and np.median(rel) < 0.01 and np.percentile(rel, 95) < 0.04
+
+
+def test_straight_ahead_of_the_car_is_the_model_cameras_centre_column_whatever_the_yaw():
+    for yaw in (-8.0, 0.0, 6.0):
+        user = Mounting(1.3, pitch_deg=2.0, yaw_deg=yaw, roll_deg=0.0)
+        mf = ModelFrame(RAW, (), user, MODEL, REF)
+        # the car's axis, far away, seen by the yawed camera: left of its centre when yawed right
+        d = user.rotation() @ np.array([0.0, 0.0, 1.0])
+        u = RAW.cx + RAW.fx * d[0] / d[2]
+        p, y = math.radians(2.0), math.radians(yaw)
+        assert u == pytest.approx(RAW.cx - RAW.fx * math.tan(y) / math.cos(p), abs=1e-6)
+        frame = np.zeros((RAW.height, RAW.width), np.uint8)
+        c = round(u)
+        frame[:, c - 2:c + 3] = 255
+        col = mf.to_model(frame)[64].astype(float)
+        centre = (col * np.arange(MODEL.width)).sum() / col.sum()
+        assert centre == pytest.approx(MODEL.cx, abs=0.6)
+
+
+def test_outputs_come_back_on_the_raw_pixels_and_outside_the_view_is_marked():
+    mf = ModelFrame(RAW, DIST, USER, MODEL, REF)
+    ramp = np.tile(np.arange(MODEL.width, dtype=np.float32), (MODEL.height, 1))
+    back = mf.to_raw(ramp)
+    assert back.shape == (RAW.height, RAW.width)
+    # the raw camera sees 65 degrees across, the model camera 80: the model frame's sides are unseen
+    assert not mf.seen[:, 0].any() and mf.seen[MODEL.height // 2, 40:-40].all()
+    with pytest.raises(ValueError, match="built for"):
+        mf.to_model(np.zeros((100, 100, 3), np.uint8))
