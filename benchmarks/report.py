@@ -17,7 +17,7 @@ from matplotlib.ticker import NullFormatter, ScalarFormatter
 
 from benchmarks.common import machine
 
-ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "runtime", "footprint")
+ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "runtime", "footprint", "realcam")
 
 
 def _load(results: Path, name: str) -> dict | None:

@@ -11,7 +11,7 @@ from pathlib import Path
 from bsn_edge.cli.common import CHECKOUT, fail
 
 PROG = "bsn-bench"
-NAMES = ("synth", "labels", "train_step", "arch", "quant", "runtime", "accuracy", "footprint")
+NAMES = ("synth", "labels", "train_step", "arch", "quant", "runtime", "accuracy", "footprint", "realcam")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -80,6 +80,8 @@ def main(argv: list[str] | None = None) -> int:
             if "arch" in names:
                 _py("-m", "benchmarks.bench_arch", "--out", out, "--runs", f"small-light={run}", "--data", str(data),
                     "--train-steps", "300", "--work", str(work / "arch"))
+        if "realcam" in names:
+            _py("-m", "benchmarks.bench_realcam", "--out", out)
         if "footprint" in names:
             _py("-m", "benchmarks.bench_footprint", "--out", out)
         if "accuracy" in names:

@@ -1,0 +1,108 @@
+"""bsn-run end to end with the model camera's remap, against a reference build that resized.
+
+    python -m benchmarks.bench_remap --out benchmarks/results --ref-python OLD/bin/python
+
+``--ref-python`` is an interpreter whose ``bsn_edge`` is the reference (e.g. the release before
+the model camera, installed in its own environment). Both run the same model on the same real
+clips (``../shared/data/real``: the 1280x720 Udacity clip looped to 190 frames, with its camera
+file; the 960x540 highway clip, model camera assumed), alternating, ``--repeats`` times each; the
+median frame rate of each is compared. The current build runs with a camera file that carries a
+mounting (the steady state: no online calibration), and, separately, while calibrating online.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import cv2
+
+from benchmarks.common import write_result
+from bsn_edge.calibration import Calibration, calibrate
+from bsn_edge.camera import Intrinsics
+from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.mounting import Mounting
+
+REAL = CHECKOUT.parent / "shared" / "data" / "real"
+MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
+GOAL = 0.95
+
+
+def loop_video(src: Path, out: Path, times: int) -> Path:
+    cap = cv2.VideoCapture(str(src))
+    frames = []
+    while True:
+        ok, f = cap.read()
+        if not ok:
+            break
+        frames.append(f)
+    cap.release()
+    h, w = frames[0].shape[:2]
+    vw = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), 25, (w, h))
+    for _ in range(times):
+        for f in frames:
+            vw.write(f)
+    vw.release()
+    return out
+
+
+def fps(python: str, model: Path, source: Path, work: Path, extra: list[str]) -> float:
+    summary = work / "s.json"
+    cmd = [python, "-m", "bsn_edge.cli.run", "--model", str(model), "--source", str(source), "--summary",
+           str(summary), *extra]
+    subprocess.run(cmd, check=True, capture_output=True, cwd=work)
+    return float(json.loads(summary.read_text())["fps"])
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--ref-python", required=True, help="interpreter of the reference build")
+    p.add_argument("--model", default=str(MODEL))
+    p.add_argument("--repeats", type=int, default=5)
+    args = p.parse_args(argv)
+    if not REAL.is_dir():
+        print(f"no real data at {REAL}: nothing to measure")
+        return 0
+    rows, result = [], {}
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        uda = loop_video(REAL / "udacity_test_video.mp4", work / "udacity.mp4", 5)
+        cam = calibrate(REAL / "camera_cal").with_mounting(Mounting(1.2, -1.8, 0.8), method="benchmark")
+        cam_path = work / "camera.json"
+        cam.write(cam_path)
+        # the highway clip's intrinsics are unknown: the model camera's 80 degrees, rescaled
+        hw = Calibration.of(Intrinsics.from_fov(960, 540, 80.0), (), Mounting(1.3, 0.0))
+        hw_path = work / "highway.json"
+        hw.write(hw_path)
+        cases = {"udacity 1280x720": (uda, ["--calib", str(cam_path)]),
+                 "highway 960x540": (REAL / "dashcam_highway.mp4", ["--calib", str(hw_path)])}
+        for name, (src, extra) in cases.items():
+            ref, cur, cal = [], [], []
+            for _ in range(args.repeats):
+                ref.append(fps(args.ref_python, Path(args.model), src, work, []))
+                cur.append(fps(sys.executable, Path(args.model), src, work, extra))
+                cal.append(fps(sys.executable, Path(args.model), src, work, []))
+            r, c, o = statistics.median(ref), statistics.median(cur), statistics.median(cal)
+            result[name] = {"reference_fps": ref, "model_camera_fps": cur, "calibrating_fps": cal,
+                            "ratio": c / r, "calibrating_ratio": o / r}
+            rows.append(f"| {name} | {r:.1f} | {c:.1f} ({c / r:.0%}) | {o:.1f} ({o / r:.0%}) |")
+    ok = all(v["ratio"] >= GOAL for v in result.values())
+    md = "\n".join(["# bsn-run end to end: the model camera's remap against the resize", "",
+                    f"Median of {args.repeats} alternating runs each, frames/s through `bsn-run` (decode, warp, model, "
+                    "sectors, senders), the shipped int8 model, 2 threads.", "",
+                    "| clip | reference (resize) | model camera, camera file with mounting | calibrating online |",
+                    "|---|---|---|---|", *rows, "",
+                    f"Goal: the model camera within 5 % of the resize: {'met' if ok else 'not met'}."])
+    write_result(args.out, "remap", result, md)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
