@@ -37,6 +37,7 @@ from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import CHECKOUT
 from bsn_edge.mounting import Mounting
 from bsn_edge.runtime.engine import Engine
+from bsn_edge.sequence.media import read_video
 from bsn_edge.synth.sheet import tint
 
 REAL = CHECKOUT.parent / "shared" / "data" / "real"
@@ -139,14 +140,7 @@ def udacity_samples(every: int = 6) -> tuple[list[Sample], dict[str, Any]]:
     cam = calibrate_mounting(video, intr, lane_width_m=US_LANE_M, cfg=MountFitConfig(max_spread_deg=0.3))
     m = cam.mounting
     info = {"intrinsics_rms_px": intr.rms_px, "mounting": m.to_dict(), "mounting_report": cam.mounting_report}
-    cap = cv2.VideoCapture(str(video))
-    frames = []
-    while True:
-        ok, f = cap.read()
-        if not ok:
-            break
-        frames.append(f)
-    cap.release()
+    frames = read_video(video)
     h, w = frames[0].shape[:2]
     K = intr.intrinsics.scaled(w, h)
     # the flat road's z-depth at every pixel of the ego lane, 5-45 m ahead

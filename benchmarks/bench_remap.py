@@ -27,6 +27,7 @@ from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import CHECKOUT
 from bsn_edge.mounting import Mounting
+from bsn_edge.sequence.media import read_video
 
 REAL = CHECKOUT.parent / "shared" / "data" / "real"
 MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
@@ -34,14 +35,7 @@ GOAL = 0.95
 
 
 def loop_video(src: Path, out: Path, times: int) -> Path:
-    cap = cv2.VideoCapture(str(src))
-    frames = []
-    while True:
-        ok, f = cap.read()
-        if not ok:
-            break
-        frames.append(f)
-    cap.release()
+    frames = read_video(src)
     h, w = frames[0].shape[:2]
     vw = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), 25, (w, h))
     for _ in range(times):

@@ -6,11 +6,10 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
-import cv2
-
 from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.calibration.lane_height import LaneHeight
 from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
+from bsn_edge.sequence.media import read_video
 
 
 class MountingRefusedError(ValueError):
@@ -28,20 +27,7 @@ def calibrate_mounting(video: str | os.PathLike, camera: Calibration, height_m: 
     path = Path(video)
     if not path.is_file():
         raise FileNotFoundError(f"{path} not found")
-    cap = cv2.VideoCapture(str(path))
-    if not cap.isOpened():
-        raise ValueError(f"{path}: OpenCV cannot open this video")
-    frames = []
-    try:
-        while max_frames is None or len(frames) < max_frames:
-            ok, frame = cap.read()
-            if not ok:
-                break
-            frames.append(frame)
-            if progress:
-                progress(1)
-    finally:
-        cap.release()
+    frames = read_video(path, max_frames, progress)
     # the intrinsics are rescaled to the video's size, but another aspect ratio is another camera
     if frames and abs(frames[0].shape[1] / frames[0].shape[0] - camera.width / camera.height) > 0.01:
         raise ValueError(f"{path} is {frames[0].shape[1]}x{frames[0].shape[0]} but the camera file is for "

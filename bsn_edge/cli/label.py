@@ -41,8 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-corr", type=float, default=0.7,
                    help="reject clips whose depth/landmark alignment correlation is below this (default 0.7)")
     p.add_argument("--calib", default="", metavar="CALIB.json",
-                   help="camera calibration from bsn-calibrate; its intrinsics (rescaled to the clip) replace "
-                        "meta.json's (frames are expected undistorted)")
+                   help="camera file from bsn-calibrate (default: the clip's own calibration.json, if any): its "
+                        "intrinsics, rescaled to the clip, replace meta.json's; with lens distortion, depth and "
+                        "segmentation are undistorted first and the labels are made in the undistorted camera")
     p.add_argument("--camera-height", type=float, default=None,
                    help="camera height above the road, metres, for monocular VO's scale (default: "
                         "meta.json's camera_height, else 1.5)")

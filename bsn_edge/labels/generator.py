@@ -129,6 +129,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     meta = SequenceMeta.read(seq)
     cam_path = Path(sources.calib) if sources.calib else SequenceFolder(seq).calibration_path
     lens = None
+    cal = None
     if sources.calib or cam_path.is_file():
         # a camera file replaces the clip's intrinsics, rescaled to the clip's frame size; with lens
         # distortion, depth and segmentation are undistorted first, so the labels are made in the
@@ -158,7 +159,8 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
             # no metric depth to anchor VO: seed poses, align, ground-scale, re-solve (monocular.py)
             seed, pose_info = seed_poses(clip)
             aligned = make_depth(sources.depth, clip, seed, cfg, [int(i) for i in idx], window=SEED_WINDOW)
-            height = cfg.camera_height or clip.meta.extra.get("camera_height") or DEFAULT_CAMERA_HEIGHT
+            height = (cfg.camera_height or (cal.mounting.height_m if cal is not None and cal.mounting else None)
+                      or clip.meta.extra.get("camera_height") or DEFAULT_CAMERA_HEIGHT)
             depth, poses, more = metric_depth_and_poses(clip, aligned, seg, idx, float(height))
             pose_info = {"kind": "vo", "metric": True, **pose_info, **more}
         else:
