@@ -2,32 +2,31 @@
 
     python -m benchmarks.bench_runtime --model MODEL.onnx --source VIDEO --out benchmarks/results
 
-End to end: ``bsn-run``'s loop on the clip (decode, resize, inference, sectors, smoothing,
-alert state, CAN encoding and sending on a virtual bus), 2 intra-op threads. Model only: the
+End to end: ``bsn-run``'s loop on the clip (decode, warp into the model camera, inference,
+sectors, smoothing, alert state, CAN encoding and sending on a virtual bus), 2 intra-op threads,
+with the clip's camera file (``--calib``; a synthetic clip's own ``calibration.json`` when the
+video sits in its sequence folder). Model only: the
 same session on the same frames, back to back. Bar: end to end >= 80 % of model-only frames/s.
 """
 
 from __future__ import annotations
 
 import argparse
-
-import cv2
+from pathlib import Path
 
 from benchmarks.common import summary, time_calls, write_result
 from bsn_edge.alerts.senders import CanSender
+from bsn_edge.calibration import Calibration
 from bsn_edge.runtime import Engine, open_source, run
+from bsn_edge.runtime.camera_state import CameraState
+from bsn_edge.sequence.folder import SequenceFolder
+from bsn_edge.sequence.media import read_video
 
 BAR_SHARE = 0.8
 
 
-def model_only(engine: Engine, source: str, frames: int) -> float:
-    cap = cv2.VideoCapture(source)
-    batches = []
-    while len(batches) < frames:
-        ok, f = cap.read()
-        if not ok:
-            break
-        batches.append(engine.preprocess(f).copy())
+def model_only(engine: Engine, source: str, frames: int, camera: CameraState) -> float:
+    batches = [camera.frame_for(f).to_model(f)[None] for f in read_video(source, frames)]
     return summary(time_calls(lambda i: engine.infer(batches[i]), len(batches), warmup=5))["per_second"]
 
 
@@ -37,11 +36,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--source", required=True, help="a video file")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--frames", type=int, default=200)
+    p.add_argument("--calib", help="the clip's camera file (default: calibration.json beside the video, if any)")
     args = p.parse_args(argv)
     engine = Engine(args.model, threads=2)
+    cam_file = Path(args.calib) if args.calib else Path(args.source).parent / SequenceFolder.CALIBRATION
+    calibration = Calibration.read(cam_file) if cam_file.is_file() else None
     with CanSender("virtual", "bsn-bench") as tx:
-        summary = run(engine, open_source(args.source), [tx], max_frames=args.frames)
-    mo = model_only(engine, args.source, args.frames)
+        summary = run(engine, open_source(args.source), [tx], max_frames=args.frames,
+                      camera=CameraState(engine.card, calibration))
+    mo = model_only(engine, args.source, args.frames, CameraState(engine.card, calibration))
     share = summary["fps"] / mo
     res = {"model": summary["model"], "frames": summary["frames"], "e2e_fps": summary["fps"],
            "p50_ms": summary["p50_ms"], "p95_ms": summary["p95_ms"], "p99_ms": summary["p99_ms"],

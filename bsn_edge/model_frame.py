@@ -3,7 +3,8 @@
 A user's camera (intrinsics, lens distortion, mounting) and the model camera (the card's
 intrinsics at the input size and its mounting: a reference height and a pitch, no yaw or roll)
 sit at the same place in the car. One ``cv2.remap`` takes a raw frame straight to the model's
-input (undistortion, rotation and scale in one step); the inverse map brings outputs back onto
+input (undistortion, rotation and scale in one step; a frame more than 1.5x finer than the model
+camera is area-shrunk first, as a resize did before); the inverse map brings outputs back onto
 the raw frame. ``bsn-run``, ``bsn-label`` and the training data loader all use this class, so
 every stage sees the same geometry.
 
@@ -23,6 +24,8 @@ import numpy as np
 from bsn_edge.camera import Intrinsics
 from bsn_edge.mounting import Mounting, inverse_maps, warp_maps
 
+SHRINK_ABOVE = 1.5   # raw-to-model pixel ratio above which pictures are area-shrunk before the remap
+
 
 class ModelFrame:
     """The warp between one raw camera at one frame size and the model camera.
@@ -38,8 +41,19 @@ class ModelFrame:
         mx, my = warp_maps(raw, self.dist, mounting, model, model_mounting)
         # model pixels whose ray falls outside the raw picture see nothing
         self.seen = (mx >= -0.5) & (mx <= raw.width - 0.5) & (my >= -0.5) & (my <= raw.height - 0.5)
-        self._fwd = cv2.convertMaps(mx, my, cv2.CV_16SC2)   # fixed point: the fast path of remap
-        self._fwd_float = (mx, my)
+        self._fwd_float = (mx, my)     # masks and depth: nearest, at the raw frame's full size
+        # Pictures: a raw frame much finer than the model camera is first shrunk with area averaging
+        # (a bilinear remap alone would alias: every model pixel would sample one raw pixel of many),
+        # so the remap itself scales by at most SHRINK_ABOVE.
+        factor = min(raw.fx / model.fx, raw.fy / model.fy)
+        self.pre_size: tuple[int, int] | None = None
+        if factor > SHRINK_ABOVE:
+            pw, ph = round(raw.width / factor), round(raw.height / factor)
+            self.pre_size = (pw, ph)
+            px, py = warp_maps(raw.scaled(pw, ph), self.dist, mounting, model, model_mounting)
+            self._fwd = cv2.convertMaps(px, py, cv2.CV_16SC2)   # fixed point: the fast path of remap
+        else:
+            self._fwd = cv2.convertMaps(mx, my, cv2.CV_16SC2)
         ix, iy = inverse_maps(raw, self.dist, mounting, model, model_mounting)
         self._inv = (ix, iy)
         self.height_ratio = mounting.height_m / model_mounting.height_m
@@ -66,6 +80,8 @@ class ModelFrame:
         picture is mirrored from its edge (training and the runtime alike; ``seen`` says where):
         a frame in a black border is a look no model has learned."""
         self._check(frame)
+        if self.pre_size is not None:
+            frame = cv2.resize(frame, self.pre_size, interpolation=cv2.INTER_AREA)
         return cv2.remap(frame, *self._fwd, interpolation, dst=dst, borderMode=cv2.BORDER_REFLECT)
 
     def labels_to_model(self, labels: np.ndarray) -> np.ndarray:

@@ -1,5 +1,6 @@
 """Quantization calibration sets: frames sampled evenly from a folder of images or a video,
-resized to the model's input size, cached as a ``.npz`` beside nothing the user owns."""
+brought to the model's input (warped into the model camera when a camera file is known, else
+resized), cached as a ``.npz`` beside nothing the user owns."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.card import ModelCard
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS
 
@@ -42,12 +45,14 @@ def _video_frames(path: Path, count: int) -> Iterator[np.ndarray]:
 
 
 def load_frames(source: str | os.PathLike, size: tuple[int, int], count: int = 64,
-                cache_dir: str | os.PathLike | None = None) -> np.ndarray:
+                cache_dir: str | os.PathLike | None = None, card: ModelCard | None = None) -> np.ndarray:
     """``[N, H, W, 3]`` uint8 BGR frames for calibration (``N <= count``), sampled evenly.
 
     ``source`` is a folder of images (a sequence folder's ``rgb/`` is preferred) or a video file.
-    Raises ``ValueError`` when no frame can be read. With ``cache_dir`` the resized set is cached,
-    keyed by the source's path, modification time, size and count.
+    With ``card`` and a sequence folder that has a camera file, frames are warped into the card's
+    model camera as the runtime warps them; otherwise they are resized. Raises ``ValueError`` when
+    no frame can be read. With ``cache_dir`` the set is cached, keyed by the source's path,
+    modification time, size and count.
     """
     src = Path(source)
     if not src.exists():
@@ -55,7 +60,7 @@ def load_frames(source: str | os.PathLike, size: tuple[int, int], count: int = 6
     h, w = size
     key = None
     if cache_dir is not None:
-        stamp = f"{src.resolve()}|{src.stat().st_mtime_ns}|{h}x{w}|{count}"
+        stamp = f"{src.resolve()}|{src.stat().st_mtime_ns}|{h}x{w}|{count}|{card.camera if card else ''}"
         key = Path(cache_dir) / f"calib-{hashlib.sha256(stamp.encode()).hexdigest()[:16]}.npz"
         if key.is_file():
             return np.load(key)["frames"]
@@ -74,7 +79,14 @@ def load_frames(source: str | os.PathLike, size: tuple[int, int], count: int = 6
                          f"({', '.join(VIDEO_EXTS)})")
     if not frames:
         raise ValueError(f"{src}: no readable frames for calibration")
-    out = np.stack([cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in frames[:count]])
+    cam_file = SequenceFolder(src).calibration_path if src.is_dir() else None
+    if card is not None and cam_file is not None and cam_file.is_file():
+        cam, at = Calibration.read(cam_file), card.at_size(h, w)
+        fh, fw = frames[0].shape[:2]
+        mf = cam.model_frame(fw, fh, at.camera, at.mounting)
+        out = np.stack([mf.to_model(f) for f in frames[:count] if f.shape[:2] == (fh, fw)])
+    else:
+        out = np.stack([cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in frames[:count]])
     if key is not None:
         key.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(key, frames=out)

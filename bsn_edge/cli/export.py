@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         h, w = args.size or card.input_size
         card = card.at_size(h, w)
         qcfg = QuantConfig(args.method, args.activations, args.weights, not args.per_tensor, not args.quantize_heads)
-        frames = load_frames(args.calib, (h, w), args.calib_frames) if args.calib else None
+        frames = load_frames(args.calib, (h, w), args.calib_frames, card=card) if args.calib else None
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     out.parent.mkdir(parents=True, exist_ok=True)

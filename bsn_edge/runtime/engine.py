@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from bsn_edge.card import ModelCard
@@ -24,7 +23,7 @@ class ModelError(ValueError):
 
 
 class Engine:
-    """Resizes frames into a preallocated input buffer and runs the model."""
+    """Runs the model on its preallocated input buffer ``buf`` (the loop warps frames into it)."""
 
     def __init__(self, model: str | Path, threads: int = 2, spinning: bool = True) -> None:
         self.path = Path(model)
@@ -68,15 +67,6 @@ class Engine:
     def size(self) -> tuple[int, int]:
         """(H, W) the model runs at."""
         return self.card.input_size
-
-    def preprocess(self, frame: np.ndarray) -> np.ndarray:
-        """Resize once, straight into the input buffer (no copy when the size already fits)."""
-        h, w = self.card.input_size
-        if frame.shape[:2] == (h, w):
-            self.buf[0] = frame
-        else:
-            cv2.resize(frame, (w, h), dst=self.buf[0], interpolation=cv2.INTER_AREA)
-        return self.buf
 
     def infer(self, batch: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         prob, depth = self.sess.run(None, {"frame": batch})
