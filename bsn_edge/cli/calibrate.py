@@ -68,7 +68,9 @@ def mount(args) -> int:
                                      MountFitConfig(max_spread_deg=args.max_error), max_frames=args.max_frames,
                                      progress=bar.update)
     except MountingRefusedError as e:
-        return fail(PROG, f"cannot estimate the mounting from {args.source}: {e}")
+        hint = (f"; or accept a looser estimate with --max-error {2 * args.max_error:g}"
+                if "not settled" in str(e) else "")
+        return fail(PROG, f"cannot estimate the mounting from {args.source}: {e}{hint}")
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     cal.write(args.out)
