@@ -11,6 +11,8 @@ from pathlib import Path
 from bsn_edge.cli.common import CHECKOUT, fail
 
 PROG = "bsn-bench"
+DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
+DEFAULT_SEEDS = 5
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "runtime", "accuracy", "footprint", "realcam")
 
 
@@ -24,6 +26,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--only", nargs="*", choices=NAMES, default=None, help="run only these (default: all)")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--work", default="benchmarks/scratch", help="clips, runs and models made for the benchmarks")
+    p.add_argument("--synth-frames", type=int, default=100, metavar="N",
+                   help="frames per style timed by 'synth' (default 100; fewer only to check the plumbing)")
     return p
 
 
@@ -36,11 +40,12 @@ def _py(*args: str) -> None:
 def _prepare(work: Path) -> tuple[Path, Path, Path]:
     """Labelled clips, a trained run and its int8 export, made once and reused."""
     data, run, model = work / "data", work / "run_quick", work / "bsn_int8.onnx"
-    if not (data / "town_7" / "labels").is_dir():
-        for style in ("town", "suburb"):
-            for s in range(8):
+    # the shipped default's recipe (models/README.md): every style, seeds apart per style
+    if not (data / f"{DEFAULT_STYLES[-1]}_{DEFAULT_SEEDS - 1}" / "labels").is_dir():
+        for k, style in enumerate(DEFAULT_STYLES):
+            for s in range(DEFAULT_SEEDS):
                 _py("-m", "bsn_edge.cli.synth", str(data / f"{style}_{s}"), "--frames", "200", "--style", style,
-                    "--seed", str(s), "--force")
+                    "--seed", str(s + 100 * k), "--no-video", "--force")
         _py("-m", "bsn_edge.cli.label", *[str(p) for p in sorted(data.iterdir())])
     from bsn_edge.train.run import Run
 
@@ -61,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     try:
         if "synth" in names:
-            _py("-m", "benchmarks.bench_synth", "--out", out)
+            _py("-m", "benchmarks.bench_synth", "--out", out, "--frames", str(args.synth_frames))
         if "labels" in names:
             _py("-m", "benchmarks.bench_labels", "--out", out)
         if "train_step" in names:

@@ -9,6 +9,7 @@ from pathlib import Path
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli import sheet, synth
 from bsn_edge.cli.common import CHECKOUT, fail
+from bsn_edge.synth.style import STYLES
 
 PROG = "bsn-demo"
 DEFAULT_MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
@@ -23,7 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="demo", help="output folder (default ./demo)")
     p.add_argument("--frames", type=int, default=150, help="frames of the clip (default 150, 15 s)")
     p.add_argument("--seed", type=int, default=7, help="random seed of the clip (default 7)")
-    p.add_argument("--style", default="town", choices=("town", "suburb"),
+    p.add_argument("--style", default="town", choices=tuple(sorted(STYLES)),
                    help="synthetic world style of the clip (default town)")
     p.add_argument("--model", default=str(DEFAULT_MODEL), help="fused ONNX model (default: the shipped one)")
     return p

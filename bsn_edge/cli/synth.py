@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 from tqdm import tqdm
@@ -26,7 +27,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="image size, height x width (default 256x512)")
     p.add_argument("--fps", type=float, default=10.0, help="frame rate (default 10)")
     p.add_argument("--style", choices=sorted(STYLES), default="town",
-                   help="scene style: town (dense, narrow) or suburb (open, wide); default town")
+                   help="scene style: town (dense, narrow), suburb (open, wide, hedges and fences), highway "
+                        "(multi-lane, barriers, few buildings, 20-28 m/s) or urban (tall blocks, parked cars on "
+                        "both curbs, narrow lanes, crowds); default town")
     p.add_argument("--seed", type=int, default=0, help="random seed; same seed, same bytes (default 0)")
     p.add_argument("--parked", type=float, default=1.0, help="parked-vehicle density multiplier")
     p.add_argument("--traffic", type=float, default=1.0, help="moving-traffic density multiplier")
@@ -38,6 +41,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "degrees, height 1.1-1.9 m, a few degrees of pitch, yaw and roll, barrel distortion on "
                         "some, the car's hood on some (written to calibration.json). fixed: the 80-degree, 1.5 m "
                         "camera of earlier versions")
+    p.add_argument("--no-sensor-effects", action="store_true",
+                   help="plain 8-bit frames: no motion blur, defocus, noise, tone curve, vignetting or JPEG")
+    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
+                   help="processes that render (default: up to 2); the bytes do not depend on it")
     p.add_argument("--no-video", action="store_true", help="skip writing video.mp4")
     p.add_argument("--force", action="store_true", help="overwrite an existing sequence folder")
     return p
@@ -49,13 +56,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = SynthConfig(frames=args.frames, height=h, width=w, fps=args.fps, style=args.style,
                           seed=args.seed, camera=args.camera, parked=args.parked, traffic=args.traffic,
-                          pedestrians=args.pedestrians, bs_range=args.bs_range)
+                          pedestrians=args.pedestrians, bs_range=args.bs_range,
+                          sensor_effects=not args.no_sensor_effects)
     except ValueError as e:
         return fail(PROG, str(e))
     t0 = time.perf_counter()
     try:
         with tqdm(total=cfg.frames, desc=f"render {args.out}", unit="frame", disable=None) as bar:
-            out = write_clip(cfg, args.out, force=args.force, video=not args.no_video, progress=bar.update)
+            out = write_clip(cfg, args.out, force=args.force, video=not args.no_video, progress=bar.update,
+                             workers=max(1, args.workers))
     except (FileExistsError, OSError, ValueError) as e:
         return fail(PROG, str(e))
     dt = time.perf_counter() - t0

@@ -18,6 +18,20 @@ KIND_PERSON = 2
 KIND_POLE = 3
 KIND_TRUNK = 4
 KIND_CROWN = 5
+KIND_CABIN = 6      # a vehicle's glasshouse
+KIND_WHEEL = 7      # a vehicle's axle with its two wheels
+KIND_LEGS = 8
+KIND_HEAD = 9
+KIND_HEDGE = 10
+KIND_FENCE = 11
+KIND_WALL = 12
+KIND_HILL = 13      # far hills and tree lines on the horizon
+KIND_RIDER = 14
+KIND_BARRIER = 15   # concrete road barrier
+
+# ``facing``: the way the front of a vehicle points (lights, plates), 0 where it has none.
+FACING_NONE = 0
+FACING_AXES = {1: (0, 1.0), -1: (0, -1.0), 2: (1, 1.0), -2: (1, -1.0)}  # code -> (axis, sign)
 
 
 @dataclass(frozen=True)
@@ -29,7 +43,9 @@ class Boxes:
     kind:     ``[N]`` appearance kind (``KIND_*``).
     color:    ``[N, 3]`` float32 base colour, BGR in [0, 1].
     grounded: ``[N]`` the box stands on the ground, so the ground under it is never visible.
-    track:    ``[N]`` stable id of the object across frames.
+    track:    ``[N]`` stable id of the object across frames (all parts of one vehicle or person
+              share it).
+    facing:   ``[N]`` int8, where the object's front points (``FACING_AXES``); 0 = no front.
     """
 
     lo: np.ndarray
@@ -39,10 +55,13 @@ class Boxes:
     color: np.ndarray
     grounded: np.ndarray
     track: np.ndarray
+    facing: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.lo)
-        for name in ("hi", "cls", "kind", "color", "grounded", "track"):
+        if self.facing is None:
+            object.__setattr__(self, "facing", np.zeros(n, np.int8))
+        for name in ("hi", "cls", "kind", "color", "grounded", "track", "facing"):
             if len(getattr(self, name)) != n:
                 raise ValueError(f"Boxes.{name} has {len(getattr(self, name))} rows, expected {n}")
         if n and not np.all(self.hi > self.lo):
@@ -57,7 +76,7 @@ class Boxes:
                    np.zeros((0, 3), np.float32), np.zeros(0, bool), np.zeros(0, np.int32))
 
     @classmethod
-    def make(cls, lo, hi, sem_cls, kind, color, grounded=True, track=None) -> Boxes:
+    def make(cls, lo, hi, sem_cls, kind, color, grounded=True, track=None, facing=0) -> Boxes:
         """Build from per-box values; scalars broadcast over all boxes."""
         lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
         hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
@@ -68,19 +87,24 @@ class Boxes:
                    np.broadcast_to(np.asarray(sem_cls, np.uint8), (n,)).copy(),
                    np.broadcast_to(np.asarray(kind, np.uint8), (n,)).copy(),
                    color, np.broadcast_to(np.asarray(grounded, bool), (n,)).copy(),
-                   np.broadcast_to(track, (n,)).copy())
+                   np.broadcast_to(track, (n,)).copy(),
+                   np.broadcast_to(np.asarray(facing, np.int8), (n,)).copy())
+
+    FIELDS = ("lo", "hi", "cls", "kind", "color", "grounded", "track", "facing")
+
+    def replace(self, **changes) -> Boxes:
+        """A copy with some columns replaced."""
+        return Boxes(**{f: changes.get(f, getattr(self, f)) for f in Boxes.FIELDS})
 
     @staticmethod
     def concat(parts: list[Boxes]) -> Boxes:
         parts = [p for p in parts if len(p)]
         if not parts:
             return Boxes.empty()
-        return Boxes(*(np.concatenate([getattr(p, f) for p in parts]) for f in
-                       ("lo", "hi", "cls", "kind", "color", "grounded", "track")))
+        return Boxes(*(np.concatenate([getattr(p, f) for p in parts]) for f in Boxes.FIELDS))
 
     def take(self, idx: np.ndarray) -> Boxes:
-        return Boxes(self.lo[idx], self.hi[idx], self.cls[idx], self.kind[idx], self.color[idx],
-                     self.grounded[idx], self.track[idx])
+        return Boxes(*(getattr(self, f)[idx] for f in Boxes.FIELDS))
 
     def corners(self) -> np.ndarray:
         """``[N, 8, 3]`` world corners."""
@@ -99,13 +123,19 @@ class Agents:
 
     ``boxes`` holds their pose at t = 0; ``velocity`` is ``[N, 2]`` m/s in x and y (one of the
     two is zero); positions wrap inside ``[wrap_lo, wrap_hi]`` along the axis of motion so the
-    traffic density stays constant for any clip length.
+    traffic density stays constant for any clip length. ``anchor`` ``[N, 2]`` is the x-y centre
+    of the object each box belongs to: the object wraps as one, so its parts never separate.
     """
 
     boxes: Boxes
     velocity: np.ndarray
     wrap_lo: np.ndarray
     wrap_hi: np.ndarray
+    anchor: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.anchor is None:
+            object.__setattr__(self, "anchor", 0.5 * (self.boxes.lo[:, :2] + self.boxes.hi[:, :2]))
 
     def __len__(self) -> int:
         return len(self.boxes)
@@ -114,17 +144,21 @@ class Agents:
     def empty(cls) -> Agents:
         return cls(Boxes.empty(), np.zeros((0, 2)), np.zeros(0), np.zeros(0))
 
+    def take(self, idx: np.ndarray) -> Agents:
+        return Agents(self.boxes.take(idx), self.velocity[idx], self.wrap_lo[idx], self.wrap_hi[idx],
+                      self.anchor[idx])
+
     def centres_at(self, t: np.ndarray | float) -> np.ndarray:
-        """``[N, T, 2]`` x-y centres at the times ``t`` (seconds)."""
+        """``[N, T, 2]`` x-y centres of the boxes at the times ``t`` (seconds)."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         c0 = 0.5 * (self.boxes.lo[:, :2] + self.boxes.hi[:, :2])
-        c = c0[:, None, :] + self.velocity[:, None, :] * t[None, :, None]
+        a = self.anchor[:, None, :] + self.velocity[:, None, :] * t[None, :, None]
         axis = np.abs(self.velocity).argmax(axis=1)
         span = (self.wrap_hi - self.wrap_lo)[:, None]
         rows = np.arange(len(self))
-        along = c[rows, :, axis]
-        c[rows, :, axis] = self.wrap_lo[:, None] + np.mod(along - self.wrap_lo[:, None], span)
-        return c
+        along = a[rows, :, axis]
+        a[rows, :, axis] = self.wrap_lo[:, None] + np.mod(along - self.wrap_lo[:, None], span)
+        return a + (c0 - self.anchor)[:, None, :]
 
     def at(self, t: float) -> Boxes:
         """Their boxes at time ``t``."""
@@ -136,5 +170,4 @@ class Agents:
         hi = self.boxes.hi.copy()
         lo[:, :2] += shift
         hi[:, :2] += shift
-        b = self.boxes
-        return Boxes(lo, hi, b.cls, b.kind, b.color, b.grounded, b.track)
+        return self.boxes.replace(lo=lo, hi=hi)

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import io
 import json
+import multiprocessing
 import shutil
 from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from bsn_edge.synth.config import SynthConfig
 from bsn_edge.synth.populate import Scenario, build_scenario
 from bsn_edge.synth.render import Frame, Renderer
 from bsn_edge.synth.rig import Lens, Rig, hood_mask, paint_hood
+from bsn_edge.synth.sensor import Sensor, SensorModel
 
 PITCH_DEG = (0.0, 3.0)   # tilt range of "fixed" cameras, degrees down
 
@@ -36,6 +38,7 @@ class Clip:
     poses: np.ndarray        # [N, 4, 4] T_wc
     rig: Rig
     lens: Lens
+    sensor: Sensor
 
     @property
     def pitch(self) -> float:
@@ -62,27 +65,70 @@ def make_clip(cfg: SynthConfig) -> Clip:
     poses = np.stack([look_pose(np.array([x, y, rig.height_m]), a, 0.0) @ turn
                       for (x, y), a in zip(xy, yaw, strict=True)])
     intr = rig.intrinsics(cfg.width, cfg.height)
-    return Clip(cfg, sc, intr, poses, rig, Lens(intr, rig.dist))
+    look = sc.world.look
+    sensor = (Sensor.draw(np.random.default_rng([cfg.seed, 0x73656E73]), dark=look.light in ("night", "dusk"))
+              if cfg.sensor_effects else Sensor())
+    return Clip(cfg, sc, intr, poses, rig, Lens(intr, rig.dist), sensor)
 
 
-def render_frames(clip: Clip, renderer: Renderer | None = None) -> Iterator[Frame]:
-    """Render the clip's frames in order."""
-    r = renderer or Renderer(clip.lens.canvas, far=clip.config.far, bs_range=clip.config.bs_range)
-    hood = hood_mask(clip.intrinsics.width, clip.intrinsics.height, clip.rig.hood)
-    lens = clip.lens
-    for i, (T, t) in enumerate(zip(clip.poses, clip.times, strict=True)):
-        fr = r.render(clip.scenario.world, T, float(t), frame_index=i)
+def sensor_model(clip: Clip) -> SensorModel:
+    """The clip's sensor on its output frames; motion comes from the car's forward axis."""
+    k = clip.intrinsics
+    fwd = clip.rig.mounting.rotation() @ np.array([0.0, 0.0, 1.0])
+    foe = (k.fx * fwd[0] / fwd[2] + k.cx, k.fy * fwd[1] / fwd[2] + k.cy)
+    return SensorModel(clip.sensor, k.width, k.height, foe, k.fx, seed=clip.config.seed)
+
+
+class _Pipeline:
+    """Renders frame ``i`` of a clip: ray casting, lens, sensor, hood."""
+
+    def __init__(self, clip: Clip, renderer: Renderer | None = None) -> None:
+        self.clip = clip
+        self.r = renderer or Renderer(clip.lens.canvas, far=clip.config.far, bs_range=clip.config.bs_range)
+        self.hood = hood_mask(clip.intrinsics.width, clip.intrinsics.height, clip.rig.hood)
+        self.develop = sensor_model(clip)
+
+    def frame(self, i: int) -> Frame:
+        clip, lens, hood = self.clip, self.clip.lens, self.hood
+        fr = self.r.render(clip.scenario.world, clip.poses[i], float(clip.times[i]), frame_index=i, radiance=True)
+        rgb = self.develop.develop(lens.apply(fr.rgb), i, clip.scenario.speed)
         if lens.maps is None and not hood.any():
-            yield fr
-            continue
-        rgb = lens.apply(fr.rgb)
+            return Frame(rgb, fr.depth, fr.semantic, fr.bsgt, fr.boxes)
         depth, semantic, bsgt = (lens.apply(fr.depth, nearest=True), lens.apply(fr.semantic, nearest=True),
                                  lens.apply(fr.bsgt, nearest=True))
         if hood.any():
             # the car's own hood: neither road nor a blind spot, no depth the model should learn
             paint_hood(rgb, hood, clip.config.seed)
             depth[hood], semantic[hood], bsgt[hood] = 0.0, sm.IGNORE, False
-        yield Frame(rgb, depth, semantic, bsgt, fr.boxes)
+        return Frame(rgb, depth, semantic, bsgt, fr.boxes)
+
+
+_WORKER: _Pipeline | None = None
+CHUNK = 10   # frames per task when rendering in several processes
+
+
+def _init_worker(clip: Clip) -> None:
+    global _WORKER
+    _WORKER = _Pipeline(clip)
+
+
+def _render_range(a: int, b: int) -> list[Frame]:
+    return [_WORKER.frame(i) for i in range(a, b)]
+
+
+def render_frames(clip: Clip, renderer: Renderer | None = None, workers: int = 1) -> Iterator[Frame]:
+    """Render the clip's frames in order, in ``workers`` processes (frames are independent)."""
+    n = clip.config.frames
+    if workers <= 1 or n < 2 * CHUNK:
+        pipe = _Pipeline(clip, renderer)
+        for i in range(n):
+            yield pipe.frame(i)
+        return
+    starts = list(range(0, n, CHUNK))
+    ctx = multiprocessing.get_context("fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker, initargs=(clip,)) as pool:
+        for frames in pool.map(_render_range, starts, [min(a + CHUNK, n) for a in starts]):
+            yield from frames
 
 
 def prepare_output(out: Path, force: bool) -> None:
@@ -102,12 +148,13 @@ def prepare_output(out: Path, force: bool) -> None:
 
 
 def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bool = True,
-               progress: Callable[[int], None] | None = None) -> Path:
+               progress: Callable[[int], None] | None = None, workers: int = 1) -> Path:
     """Render ``cfg`` into the sequence folder ``out`` and return its path.
 
     Writes meta.json, poses.txt (KITTI), rgb/, depth/, semantic/, bsgt/, boxes/ (per-frame
     ``[N, 8]`` float32 .npy: trainId, xmin, ymin, zmin, xmax, ymax, zmax, track), video.mp4
-    and synth_config.json. ``progress`` is called with 1 after each frame.
+    and synth_config.json. ``progress`` is called with 1 after each frame. ``workers`` processes
+    render (the bytes do not depend on it).
     """
     out = Path(out)
     prepare_output(out, force)
@@ -123,7 +170,7 @@ def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bo
             raise OSError(f"OpenCV cannot write {seq.video_path} (no mp4v encoder?)")
     with ThreadPoolExecutor(max_workers=2) as pool:
         pending = []
-        for i, fr in enumerate(render_frames(clip)):
+        for i, fr in enumerate(render_frames(clip, workers=workers)):
             pending += [
                 pool.submit(write_image, seq.rgb(i), fr.rgb),
                 pool.submit(write_depth, seq.depth(i), fr.depth),
@@ -146,7 +193,8 @@ def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bo
     write_kitti_poses(seq.poses_path, clip.poses)
     sc = clip.scenario
     atomic_write_bytes(seq.synth_config_path, (json.dumps({
-        "config": cfg.to_dict(), "rig": clip.rig.to_dict(), "speed_mps": sc.speed, "pitch_deg": clip.rig.pitch_deg,
+        "config": cfg.to_dict(), "rig": clip.rig.to_dict(), "sensor": clip.sensor.to_dict(),
+        "light": sc.world.look.light, "speed_mps": sc.speed, "pitch_deg": clip.rig.pitch_deg,
         "turns": sc.route.turns, "static_boxes": len(sc.world.static), "agents": len(sc.world.agents),
     }, indent=2) + "\n").encode())
     k = clip.intrinsics

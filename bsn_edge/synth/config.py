@@ -30,6 +30,7 @@ class SynthConfig:
     parked: float = 1.0
     traffic: float = 1.0
     pedestrians: float = 1.0
+    sensor_effects: bool = True   # blur, noise, tone curve, vignetting, JPEG (synth.sensor)
 
     def __post_init__(self) -> None:
         get_style(self.style)

@@ -23,6 +23,7 @@ class RoadLayout:
     lane_width: float = 3.2
     parking_width: float = 2.2
     sidewalk_width: float = 2.5
+    verge: bool = False     # the strip beside the carriageway is grass (terrain), not sidewalk
 
     def __post_init__(self) -> None:
         for a, b, name in ((self.xs, self.lanes_x, "x"), (self.ys, self.lanes_y, "y")):
@@ -77,9 +78,10 @@ class RoadLayout:
         edge = np.minimum(ax - hwx, ay - hwy)  # distance past the nearest carriageway edge
         side = ~road & (edge < self.sidewalk_width)
         cls = np.full(gx.shape, sm.TERRAIN, np.uint8)
-        cls[side] = sm.SIDEWALK
+        if not self.verge:
+            cls[side] = sm.SIDEWALK
         cls[road] = sm.ROAD
-        curb = side & (edge < 0.25)
+        curb = side & (edge < 0.25) & (not self.verge)
 
         lw = self.lane_width
         mark = np.zeros(gx.shape, bool)

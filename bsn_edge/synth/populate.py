@@ -8,19 +8,24 @@ import numpy as np
 
 from bsn_edge import semantics as sm
 from bsn_edge.synth.boxes import (
+    KIND_BARRIER,
     KIND_BUILDING,
     KIND_CROWN,
-    KIND_PERSON,
+    KIND_FENCE,
+    KIND_HEDGE,
+    KIND_HILL,
     KIND_POLE,
     KIND_TRUNK,
-    KIND_VEHICLE,
+    KIND_WALL,
     Agents,
     Boxes,
 )
 from bsn_edge.synth.config import SynthConfig
 from bsn_edge.synth.layout import RoadLayout
+from bsn_edge.synth.people import person_parts
 from bsn_edge.synth.route import Route, build_route
 from bsn_edge.synth.style import Style, get_style
+from bsn_edge.synth.vehicles import PARKED_MIX, TRAFFIC_MIX, Placed, draw_size, draw_types, vehicle_parts
 from bsn_edge.synth.world import Look, World
 
 MARGIN = 160.0          # objects exist this far around the route
@@ -28,11 +33,12 @@ INTERSECTION_CLEAR = 6.0  # no parked vehicle this close to a crossing's carriag
 EGO_CLEARANCE = 3.0     # moving objects keep this far from the ego footprint, metres
 
 FACADES = np.array([(0.55, 0.62, 0.70), (0.45, 0.50, 0.62), (0.62, 0.66, 0.68), (0.40, 0.42, 0.48),
-                    (0.70, 0.74, 0.78), (0.38, 0.45, 0.55), (0.55, 0.55, 0.52), (0.30, 0.35, 0.50)])
-CAR_PAINT = np.array([(0.85, 0.85, 0.85), (0.12, 0.12, 0.12), (0.55, 0.55, 0.55), (0.15, 0.15, 0.65),
-                      (0.60, 0.25, 0.10), (0.20, 0.50, 0.20), (0.10, 0.60, 0.85), (0.70, 0.70, 0.65)])
-CLOTHES = np.array([(0.20, 0.15, 0.12), (0.55, 0.30, 0.20), (0.15, 0.15, 0.55), (0.70, 0.70, 0.70),
-                    (0.20, 0.45, 0.20), (0.10, 0.10, 0.10)])
+                    (0.70, 0.74, 0.78), (0.38, 0.45, 0.55), (0.55, 0.55, 0.52), (0.30, 0.35, 0.50),
+                    (0.25, 0.32, 0.55), (0.80, 0.82, 0.84), (0.50, 0.45, 0.40), (0.35, 0.38, 0.40)])
+HEDGE = (0.12, 0.32, 0.16)
+FENCE = ((0.55, 0.58, 0.60), (0.25, 0.35, 0.45), (0.15, 0.15, 0.15))
+WALL = ((0.60, 0.62, 0.62), (0.35, 0.40, 0.55), (0.72, 0.75, 0.78))
+HILL_GREEN = (0.18, 0.36, 0.22)
 
 
 @dataclass(frozen=True)
@@ -84,6 +90,9 @@ def _buildings(rng, style: Style, layout: RoadLayout, bounds) -> Boxes:
                 cur = a0 + (rng.uniform(*style.gap_small) if style.setback[0] > 0 else 0.0)
                 while cur < a1 - 4.0:
                     w = min(rng.uniform(*style.building_width), a1 - cur)
+                    if rng.random() >= style.building_prob:
+                        cur += w + rng.uniform(*style.gap_large)
+                        continue
                     d = min(rng.uniform(*style.building_depth), (b1 - b0) / 2)
                     h = rng.uniform(*style.building_height)
                     c0, c1 = (b1 - d, b1) if flip else (b0, b0 + d)
@@ -120,85 +129,167 @@ def _segments(layout: RoadLayout, bounds):
     return out
 
 
-def _vehicle_dims(rng, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Length, width, height, trainId of n vehicles (mostly cars, some vans and trucks)."""
-    big = rng.random(n) < 0.15
-    length = np.where(big, rng.uniform(5.5, 7.5, n), rng.uniform(3.9, 4.9, n))
-    width = np.where(big, rng.uniform(2.0, 2.4, n), rng.uniform(1.7, 1.9, n))
-    height = np.where(big, rng.uniform(2.2, 3.2, n), rng.uniform(1.4, 1.65, n))
-    return length, width, height, np.where(big, sm.TRUCK, sm.CAR).astype(np.uint8)
+def _parked(rng, style: Style, layout: RoadLayout, bounds, density: float) -> Boxes:
+    parts = []
+    for axis, c, lanes, a0, a1 in _segments(layout, bounds):
+        off = lanes * layout.lane_width + layout.parking_width / 2
+        for side in (-1.0, 1.0):
+            cur = a0 + INTERSECTION_CLEAR
+            # right-hand traffic: cars at the curb face the way their side's lanes run
+            sign = side if axis == 1 else -side
+            while cur < a1 - INTERSECTION_CLEAR - 5.0:
+                if rng.random() < style.parked_density * density:
+                    vt = draw_types(rng, 1, PARKED_MIX)[0]
+                    size = draw_size(rng, vt)
+                    if cur + size[0] > a1 - INTERSECTION_CLEAR:
+                        break
+                    across = c + side * (off + rng.uniform(-0.15, 0.15))
+                    at = Placed(axis, across, cur + size[0] / 2, sign)
+                    parts.append(vehicle_parts(rng, vt, at, size, len(parts)))
+                    cur += size[0] + rng.uniform(0.6, 2.5)
+                else:
+                    cur += rng.uniform(3.0, 8.0)
+    return Boxes.concat(parts)
 
 
 def _oriented(axis: int, across: float, along: float, length, width, height):
-    """Box corners of a vehicle or person centred at (across, along) on a road along ``axis``."""
+    """Box corners of a thing centred at (across, along) on a road along ``axis``."""
     if axis == 1:
         return (across - width / 2, along - length / 2, 0.0), (across + width / 2, along + length / 2, height)
     return (along - length / 2, across - width / 2, 0.0), (along + length / 2, across + width / 2, height)
 
 
-def _parked(rng, style: Style, layout: RoadLayout, bounds, density: float) -> Boxes:
-    lo_all, hi_all, cls_all = [], [], []
-    for axis, c, lanes, a0, a1 in _segments(layout, bounds):
-        off = lanes * layout.lane_width + layout.parking_width / 2
-        for side in (-1.0, 1.0):
-            cur = a0 + INTERSECTION_CLEAR
-            while cur < a1 - INTERSECTION_CLEAR - 5.0:
-                if rng.random() < style.parked_density * density:
-                    ln, wd, ht, cl = (v[0] for v in _vehicle_dims(rng, 1))
-                    if cur + ln > a1 - INTERSECTION_CLEAR:
-                        break
-                    across = c + side * (off + rng.uniform(-0.15, 0.15))
-                    lo, hi = _oriented(axis, across, cur + ln / 2, ln, wd, ht)
-                    lo_all.append(lo)
-                    hi_all.append(hi)
-                    cls_all.append(cl)
-                    cur += ln + rng.uniform(0.8, 2.5)
-                else:
-                    cur += rng.uniform(3.0, 8.0)
-    n = len(lo_all)
-    return Boxes.make(np.reshape(lo_all, (n, 3)), np.reshape(hi_all, (n, 3)), np.array(cls_all, np.uint8),
-                      KIND_VEHICLE, _colors(rng, CAR_PAINT, n, 0.04), True)
+class _Parts:
+    """Collects boxes of objects, one track id per object."""
+
+    def __init__(self) -> None:
+        self.lo, self.hi, self.cls, self.kind, self.color, self.grounded, self.track = ([] for _ in range(7))
+        self.objects = 0
+
+    def add(self, lo, hi, cls, kind, color, grounded=True, obj=None) -> int:
+        """Add one box; a new object unless ``obj`` names one added before. Returns its id."""
+        if obj is None:
+            obj = self.objects
+            self.objects += 1
+        self.lo.append(lo)
+        self.hi.append(hi)
+        self.cls.append(cls)
+        self.kind.append(kind)
+        self.color.append(color)
+        self.grounded.append(grounded)
+        self.track.append(obj)
+        return obj
+
+    def boxes(self, rng) -> Boxes:
+        n = len(self.lo)
+        if not n:
+            return Boxes.empty()
+        col = np.clip(np.asarray(self.color, np.float64) + rng.normal(0, 0.03, (n, 3)), 0, 1).astype(np.float32)
+        return Boxes.make(np.reshape(self.lo, (n, 3)), np.reshape(self.hi, (n, 3)), np.array(self.cls, np.uint8),
+                          np.array(self.kind, np.uint8), col, np.array(self.grounded), np.array(self.track))
 
 
 def _street_furniture(rng, style: Style, layout: RoadLayout, bounds) -> Boxes:
-    """Poles at the curb and trees (trunk + crown) along the sidewalks and lawns."""
-    poles_lo, poles_hi, trunks_lo, trunks_hi, crowns_lo, crowns_hi = [], [], [], [], [], []
+    """Poles at the curb, trees (trunk and leafy clumps that let the sky through), hedges, fences and
+    walls along the lots, and concrete barriers on roads that have them."""
+    out = _Parts()
+    sw = layout.sidewalk_width
     for axis, c, lanes, a0, a1 in _segments(layout, bounds):
         hw = lanes * layout.lane_width + layout.parking_width
+        if style.barriers:
+            for a in np.arange(a0 + 2.0, a1 - 2.0, 12.0):
+                seg = min(12.0, a1 - 2.0 - a)
+                lo, hi = _oriented(axis, c, a + seg / 2, seg, 0.5, 0.85)
+                out.add(lo, hi, sm.WALL, KIND_BARRIER, (0.66, 0.68, 0.68))
+                for side in (-1.0, 1.0):
+                    lo, hi = _oriented(axis, c + side * (hw + 0.5), a + seg / 2, seg, 0.4, 0.8)
+                    out.add(lo, hi, sm.WALL, KIND_BARRIER, (0.66, 0.68, 0.68))
         for side in (-1.0, 1.0):
             cur = a0 + rng.uniform(2.0, 10.0)
             while cur < a1 - 2.0:
-                across = c + side * (hw + 0.45)
-                lo, hi = _oriented(axis, across, cur, 0.22, 0.22, rng.uniform(6.0, 8.0))
-                poles_lo.append(lo)
-                poles_hi.append(hi)
+                across = c + side * (hw + (1.2 if style.barriers else 0.45))
+                lo, hi = _oriented(axis, across, cur, 0.22, 0.22, rng.uniform(6.0, 9.0))
+                out.add(lo, hi, sm.POLE, KIND_POLE, (0.45, 0.47, 0.48))
                 cur += rng.uniform(25.0, 35.0)
             cur = a0 + rng.uniform(2.0, style.tree_spacing)
             while cur < a1 - 2.0:
                 if rng.random() < style.tree_prob:
-                    across = c + side * (hw + layout.sidewalk_width - 0.6 + rng.uniform(0, 2.0))
-                    h_trunk = rng.uniform(2.2, 3.2)
+                    across = c + side * (hw + sw - 0.6 + rng.uniform(0, 2.0 + (6.0 if style.verge else 0.0)))
+                    h_trunk = rng.uniform(2.0, 3.4)
                     lo, hi = _oriented(axis, across, cur, 0.35, 0.35, h_trunk)
-                    trunks_lo.append(lo)
-                    trunks_hi.append(hi)
-                    r = rng.uniform(1.3, 2.4)
-                    lo, hi = _oriented(axis, across, cur, 2 * r, 2 * r, h_trunk + rng.uniform(2.5, 4.5))
-                    crowns_lo.append((lo[0], lo[1], h_trunk - 0.3))
-                    crowns_hi.append(hi)
+                    tree = out.add(lo, hi, sm.VEGETATION, KIND_TRUNK, (0.12, 0.22, 0.30))
+                    r = rng.uniform(1.3, 2.6)
+                    green = np.array((0.12, 0.38, 0.2)) + rng.uniform(-0.06, 0.06, 3)
+                    for _ in range(int(rng.integers(2, 5))):
+                        dr = rng.uniform(0.55, 0.85) * r
+                        ca, cb = rng.uniform(-0.6, 0.6, 2) * r
+                        z0 = h_trunk - 0.3 + rng.uniform(0, 1.2)
+                        lo, hi = _oriented(axis, across + ca, cur + cb, 2 * dr, 2 * dr * rng.uniform(0.8, 1.2),
+                                           z0 + rng.uniform(1.5, 3.2))
+                        out.add((lo[0], lo[1], z0), hi, sm.VEGETATION, KIND_CROWN, green, False, tree)
                 cur += style.tree_spacing * rng.uniform(0.7, 1.3)
-    def mk(lo, hi, cls, kind, color, grounded):
-        n = len(lo)
-        col = np.clip(np.asarray(color) + rng.normal(0, 0.04, (n, 3)), 0, 1).astype(np.float32)
-        return Boxes.make(np.reshape(lo, (n, 3)), np.reshape(hi, (n, 3)), cls, kind, col, grounded)
-    return Boxes.concat([
-        mk(poles_lo, poles_hi, sm.POLE, KIND_POLE, (0.45, 0.47, 0.48), True),
-        mk(trunks_lo, trunks_hi, sm.VEGETATION, KIND_TRUNK, (0.12, 0.22, 0.30), True),
-        mk(crowns_lo, crowns_hi, sm.VEGETATION, KIND_CROWN, (0.15, 0.42, 0.22), False),
-    ])
+            # lot fronts: a hedge, a fence or a wall at the back of the sidewalk, with gaps for drives
+            cur = a0 + 1.0
+            edge = hw + sw + 0.35
+            while cur < a1 - 3.0:
+                run = min(rng.uniform(6.0, 25.0), a1 - 1.0 - cur)
+                if run > 1.0 and rng.random() < style.boundary:
+                    what = rng.integers(3)
+                    if what == 0:
+                        lo, hi = _oriented(axis, c + side * edge, cur + run / 2, run, 0.7, rng.uniform(0.8, 1.8))
+                        out.add(lo, hi, sm.VEGETATION, KIND_HEDGE, HEDGE)
+                    elif what == 1:
+                        lo, hi = _oriented(axis, c + side * edge, cur + run / 2, run, 0.08, rng.uniform(1.0, 1.9))
+                        out.add(lo, hi, sm.FENCE, KIND_FENCE, FENCE[rng.integers(len(FENCE))])
+                    else:
+                        lo, hi = _oriented(axis, c + side * edge, cur + run / 2, run, 0.3, rng.uniform(0.6, 2.0))
+                        out.add(lo, hi, sm.WALL, KIND_WALL, WALL[rng.integers(len(WALL))])
+                cur += run + rng.uniform(2.5, 5.0)
+    return out.boxes(rng)
+
+
+def _horizon(rng, bounds) -> Boxes:
+    """Hills and tree lines just outside the populated area, so open roads meet a horizon."""
+    out = _Parts()
+    x0, y0, x1, y1 = bounds
+    for edge in range(4):
+        span = (x0, x1) if edge < 2 else (y0, y1)
+        cur = span[0] - 60.0
+        while cur < span[1] + 60.0:
+            w = rng.uniform(40.0, 140.0)
+            depth = rng.uniform(20.0, 60.0)
+            gap = rng.uniform(5.0, 40.0)
+            far = rng.uniform(5.0, 40.0)
+            hill = rng.random() < 0.5
+            h = rng.uniform(15.0, 45.0) if hill else rng.uniform(8.0, 18.0)
+            if edge == 0:
+                lo, hi = (cur, y0 - far - depth, 0.0), (cur + w, y0 - far, h)
+            elif edge == 1:
+                lo, hi = (cur, y1 + far, 0.0), (cur + w, y1 + far + depth, h)
+            elif edge == 2:
+                lo, hi = (x0 - far - depth, cur, 0.0), (x0 - far, cur + w, h)
+            else:
+                lo, hi = (x1 + far, cur, 0.0), (x1 + far + depth, cur + w, h)
+            colour = np.array(HILL_GREEN) * rng.uniform(0.8, 1.2)
+            out.add(lo, hi, sm.TERRAIN if hill else sm.VEGETATION, KIND_HILL, tuple(colour))
+            cur += w + gap
+    return out.boxes(rng)
 
 
 def _agents(rng, style: Style, layout: RoadLayout, bounds, traffic: float, pedestrians: float) -> Agents:
-    lo_all, hi_all, cls_all, kind_all, vel, wlo, whi, colors = [], [], [], [], [], [], [], []
+    parts: list[Boxes] = []
+    vel, wlo, whi, anchor = [], [], [], []
+
+    def add(b: Boxes, v, lo, hi) -> None:
+        c = 0.5 * (b.lo[:, :2] + b.hi[:, :2]).mean(axis=0)
+        parts.append(b)
+        vel.extend([v] * len(b))
+        wlo.extend([lo] * len(b))
+        whi.extend([hi] * len(b))
+        anchor.extend([c] * len(b))
+
+    mix = TRAFFIC_MIX if style.two_wheelers else {k: v for k, v in TRAFFIC_MIX.items()
+                                                  if k not in ("motorbike", "bicycle")}
     for axis, centres, lanes_of in ((1, layout.xs, layout.lanes_x), (0, layout.ys, layout.lanes_y)):
         lo_b, hi_b = (bounds[0], bounds[2]) if axis == 1 else (bounds[1], bounds[3])
         a_lo, a_hi = (bounds[1], bounds[3]) if axis == 1 else (bounds[0], bounds[2])
@@ -214,73 +305,91 @@ def _agents(rng, style: Style, layout: RoadLayout, bounds, traffic: float, pedes
                     if not n:
                         continue
                     speed = rng.uniform(*style.traffic_speed)
-                    ln, wd, ht, cl = _vehicle_dims(rng, n)
                     along = a_lo + (np.sort(rng.random(n)) + rng.random()) % 1.0 * span
                     across = c + side * (lane + 0.5) * layout.lane_width
-                    for k in range(n):
-                        lo, hi = _oriented(axis, across, along[k], ln[k], wd[k], ht[k])
-                        lo_all.append(lo)
-                        hi_all.append(hi)
-                        cls_all.append(cl[k])
-                        kind_all.append(KIND_VEHICLE)
+                    for k, vt in enumerate(draw_types(rng, n, mix)):
+                        at = Placed(axis, across, float(along[k]), direction)
                         v = [0.0, 0.0]
                         v[axis] = direction * speed
-                        vel.append(v)
-                        wlo.append(a_lo)
-                        whi.append(a_hi)
-                    colors.append(_colors(rng, CAR_PAINT, n, 0.04))
+                        add(vehicle_parts(rng, vt, at, draw_size(rng, vt), len(parts)), v, a_lo, a_hi)
                 hw = lanes * layout.lane_width + layout.parking_width
-                n = rng.poisson(style.pedestrians_per_100m * pedestrians * span / 100.0)
+                n = rng.poisson(style.pedestrians_per_100m * pedestrians * span / 100.0 / np.mean(style.group))
                 for _ in range(n):
-                    across = c + side * (hw + layout.sidewalk_width * rng.uniform(0.3, 0.75))
-                    along = rng.uniform(a_lo, a_hi)
-                    h = rng.uniform(1.55, 1.9)
-                    lo, hi = _oriented(axis, across, along, 0.35, 0.5, h)
-                    lo_all.append(lo)
-                    hi_all.append(hi)
-                    cls_all.append(sm.PERSON)
-                    kind_all.append(KIND_PERSON)
+                    base = rng.uniform(a_lo, a_hi)
+                    walk = rng.choice([-1.0, 1.0])
+                    pace = rng.uniform(0.9, 1.6)
+                    offset = layout.sidewalk_width * rng.uniform(0.25, 0.7)
+                    for m in range(int(rng.integers(style.group[0], style.group[1] + 1))):
+                        across = c + side * (hw + offset + (m % 2) * 0.6 * -np.sign(offset))
+                        along = base + (m // 2) * rng.uniform(0.8, 1.4) * walk
+                        v = [0.0, 0.0]
+                        v[axis] = walk * pace
+                        add(person_parts(rng, Placed(axis, across, along, walk), len(parts)), v, a_lo, a_hi)
+            # pedestrians on the zebra crossings at this road's intersections, walking across it
+            cross_pos, cross_hw = (layout.ys, layout.hw_y) if axis == 1 else (layout.xs, layout.hw_x)
+            hw = lanes * layout.lane_width + layout.parking_width
+            for q, qhw in zip(cross_pos, cross_hw, strict=True):
+                if not a_lo <= q <= a_hi:
+                    continue
+                n = rng.poisson(style.crossings_per_100m * pedestrians * 2 * hw / 100.0 * 6)
+                for _ in range(n):
+                    at_along = q + rng.choice([-1.0, 1.0]) * (qhw + rng.uniform(1.2, 3.4))
+                    walk = rng.choice([-1.0, 1.0])
+                    across = c + rng.uniform(-hw, hw)
                     v = [0.0, 0.0]
-                    v[axis] = rng.choice([-1.0, 1.0]) * rng.uniform(0.9, 1.6)
-                    vel.append(v)
-                    wlo.append(a_lo)
-                    whi.append(a_hi)
-                    colors.append(_colors(rng, CLOTHES, 1, 0.05))
-    n = len(lo_all)
-    if not n:
+                    v[1 - axis] = walk * rng.uniform(0.9, 1.5)
+                    # walking across: the person's "road" runs along the other axis
+                    b = person_parts(rng, Placed(1 - axis, at_along, across, walk), len(parts))
+                    add(b, v, c - hw - layout.sidewalk_width, c + hw + layout.sidewalk_width)
+    if not parts:
         return Agents.empty()
-    boxes = Boxes.make(np.reshape(lo_all, (n, 3)), np.reshape(hi_all, (n, 3)), np.array(cls_all, np.uint8),
-                       np.array(kind_all, np.uint8), np.concatenate(colors), True)
-    return Agents(boxes, np.array(vel), np.array(wlo), np.array(whi))
+    boxes = Boxes.concat(parts)
+    return Agents(boxes, np.array(vel), np.array(wlo), np.array(whi), np.array(anchor))
 
 
 def _clear_of_ego(rng, agents: Agents, ego_xy: np.ndarray, times: np.ndarray, tries: int = 8) -> Agents:
-    """Re-phase agents that would touch the ego car during the clip; drop those that still do."""
+    """Re-phase objects that would touch the ego car during the clip; drop those that still do.
+
+    An object (all boxes of one track) moves and is kept or dropped as one."""
     if not len(agents):
         return agents
-    boxes = agents.boxes
-    half = 0.5 * (boxes.hi[:, :2] - boxes.lo[:, :2])
+    objs, inv = np.unique(agents.boxes.track, return_inverse=True)
+    half = 0.5 * (agents.boxes.hi[:, :2] - agents.boxes.lo[:, :2])
     radius = np.linalg.norm(half, axis=1) + EGO_CLEARANCE
-    ok = np.zeros(len(agents), bool)
-    lo, hi = boxes.lo.copy(), boxes.hi.copy()
+    ok = np.zeros(len(objs), bool)
+    cur = agents
     for _ in range(tries):
-        cur = Agents(Boxes(lo, hi, boxes.cls, boxes.kind, boxes.color, boxes.grounded, boxes.track),
-                     agents.velocity, agents.wrap_lo, agents.wrap_hi)
         c = cur.centres_at(times)
         dist = np.linalg.norm(c - ego_xy[None], axis=2).min(axis=1)
-        good = dist > radius
-        ok |= good
+        clear = np.ones(len(objs), bool)
+        np.logical_and.at(clear, inv, dist > radius)
+        ok |= clear
         bad = ~ok
         if not bad.any():
             break
-        axis = np.abs(agents.velocity[bad]).argmax(axis=1)
-        shift = rng.uniform(10.0, 60.0, bad.sum()) * rng.choice([-1.0, 1.0], bad.sum())
-        rows = np.where(bad)[0]
+        shift_obj = rng.uniform(10.0, 60.0, len(objs)) * rng.choice([-1.0, 1.0], len(objs)) * bad
+        shift = shift_obj[inv]
+        axis = np.abs(agents.velocity).argmax(axis=1)
+        rows = np.arange(len(agents))
+        lo, hi, anc = cur.boxes.lo.copy(), cur.boxes.hi.copy(), cur.anchor.copy()
         lo[rows, axis] += shift
         hi[rows, axis] += shift
-    keep = np.where(ok)[0]
-    final = Boxes(lo, hi, boxes.cls, boxes.kind, boxes.color, boxes.grounded, boxes.track).take(keep)
-    return Agents(final, agents.velocity[keep], agents.wrap_lo[keep], agents.wrap_hi[keep])
+        anc[rows, axis] += shift
+        cur = Agents(cur.boxes.replace(lo=lo, hi=hi), agents.velocity, agents.wrap_lo, agents.wrap_hi, anc)
+    return cur.take(np.flatnonzero(ok[inv]))
+
+
+def _renumber(parts: list[Boxes]) -> list[Boxes]:
+    """Give every object one track id, unique across the parts (static first)."""
+    out, base = [], 0
+    for b in parts:
+        if not len(b):
+            out.append(b)
+            continue
+        _, local = np.unique(b.track, return_inverse=True)
+        out.append(b.replace(track=(base + local).astype(np.int32)))
+        base += int(local.max()) + 1
+    return out
 
 
 def build_scenario(cfg: SynthConfig) -> Scenario:
@@ -289,29 +398,26 @@ def build_scenario(cfg: SynthConfig) -> Scenario:
     rng = np.random.default_rng([cfg.seed, 0x6273_6E])
     speed = float(rng.uniform(*style.ego_speed))
     length = cfg.frames / cfg.fps * speed + 1.0
-    extent = 2 * length + 4 * MARGIN
+    # the route starts mid-network and may go straight through two blocks before it turns, so
+    # the network reaches the route's length plus two of the longest blocks from its middle
+    extent = 2 * (length + 2 * style.block[1]) + 4 * MARGIN
     lw, pw, sw = style.lane_width, style.parking_width, style.sidewalk_width
     xs, lanes_x = _grid(rng, style, extent, lw, pw, sw)
     ys, lanes_y = _grid(rng, style, extent, lw, pw, sw)
-    layout = RoadLayout(xs, lanes_x, ys, lanes_y, lw, pw, sw)
+    layout = RoadLayout(xs, lanes_x, ys, lanes_y, lw, pw, sw, verge=style.verge)
     route = build_route(layout, length, rng)
     times = np.arange(cfg.frames) / cfg.fps
     ego_xy, _ = route.at(times * speed)
     bounds = (ego_xy[:, 0].min() - MARGIN, ego_xy[:, 1].min() - MARGIN,
               ego_xy[:, 0].max() + MARGIN, ego_xy[:, 1].max() + MARGIN)
-    static = Boxes.concat([
-        _buildings(rng, style, layout, bounds),
-        _parked(rng, style, layout, bounds, cfg.parked),
-        _street_furniture(rng, style, layout, bounds),
-    ])
+    buildings = _buildings(rng, style, layout, bounds)
+    parked = _parked(rng, style, layout, bounds, cfg.parked)
+    furniture = _street_furniture(rng, style, layout, bounds)
+    horizon = _horizon(rng, bounds) if style.horizon else Boxes.empty()
     agents = _agents(rng, style, layout, bounds, cfg.traffic, cfg.pedestrians)
     agents = _clear_of_ego(rng, agents, ego_xy, times)
-    # stable ids: static first, then agents
-    static = Boxes(static.lo, static.hi, static.cls, static.kind, static.color, static.grounded,
-                   np.arange(len(static), dtype=np.int32))
-    ab = agents.boxes
-    agents = Agents(Boxes(ab.lo, ab.hi, ab.cls, ab.kind, ab.color, ab.grounded,
-                          np.arange(len(static), len(static) + len(ab), dtype=np.int32)),
-                    agents.velocity, agents.wrap_lo, agents.wrap_hi)
+    *static_parts, moving = _renumber([buildings, parked, furniture, horizon, agents.boxes])
+    static = Boxes.concat(static_parts)
+    agents = Agents(moving, agents.velocity, agents.wrap_lo, agents.wrap_hi, agents.anchor)
     look = Look.random(rng, style.fog_distance)
     return Scenario(World(layout, static, agents, look), route, speed, 0.0)

@@ -19,6 +19,7 @@ import numpy as np
 from bsn_edge import semantics as sm
 from bsn_edge.camera import Intrinsics
 from bsn_edge.synth.boxes import Boxes
+from bsn_edge.synth.light import GroundMaps
 from bsn_edge.synth.shading import Shader
 from bsn_edge.synth.world import World
 
@@ -44,7 +45,7 @@ class Trace:
 class Frame:
     """One rendered frame."""
 
-    rgb: np.ndarray        # [H, W, 3] uint8, BGR
+    rgb: np.ndarray        # [H, W, 3] uint8 BGR, or float32 scene radiance when rendered with radiance=True
     depth: np.ndarray      # [H, W] float32 metres, 0 = sky / no depth
     semantic: np.ndarray   # [H, W] uint8 trainIds
     bsgt: np.ndarray       # [H, W] bool, true blind spots
@@ -63,8 +64,12 @@ class Renderer:
         rays = intrinsics.rays()
         self._rx = np.ascontiguousarray(rays[..., 0])
         self._ry = np.ascontiguousarray(rays[..., 1])
+        # ``far`` bounds the z-depth; the farthest point in view is that far along the widest ray
+        self._reach = self.far * float(np.sqrt(1.0 + rays[..., 0] ** 2 + rays[..., 1] ** 2).max())
         self.shader = Shader(intrinsics.height, intrinsics.width)
         self.shader.set_rays(rays)
+        self._maps: GroundMaps | None = None
+        self._maps_world: int | None = None
 
     # -- geometry ---------------------------------------------------------------------------
     def _world_dirs(self, R: np.ndarray):
@@ -79,11 +84,15 @@ class Renderer:
         C = T_wc[:3, 3]
         centre = 0.5 * (boxes.lo + boxes.hi)
         radius = 0.5 * np.linalg.norm(boxes.hi - boxes.lo, axis=1)
-        cand = np.where(np.linalg.norm(centre[:, :2] - C[:2], axis=1) - radius < self.far)[0]
+        cand = np.where(np.linalg.norm(centre[:, :2] - C[:2], axis=1) - radius < self._reach)[0]
         if not len(cand):
             return cand, np.zeros((0, 4), np.intp), np.zeros(0)
         R_cw = T_wc[:3, :3].T
-        corners = (boxes.take(cand).corners() - C) @ R_cw.T          # [n, 8, 3] camera frame
+        # a grounded box's rectangle reaches down to the ground: the ground under a raised body
+        # (a car's floor, a person's torso) is seen below the box itself
+        sel = boxes.take(cand)
+        sel = sel.replace(lo=np.where(sel.grounded[:, None] & (np.arange(3) == 2), 0.0, sel.lo))
+        corners = (sel.corners() - C) @ R_cw.T          # [n, 8, 3] camera frame
         z = corners[..., 2]
         front = z >= self.near
         in_view = front.any(axis=1)
@@ -119,7 +128,9 @@ class Renderer:
             gx = np.where(ground, np.float32(C[0]) + tg * dx, np.float32(np.nan))
             gy = np.where(ground, np.float32(C[1]) + tg * dy, np.float32(np.nan))
             inv = (np.float32(1.0) / dx, np.float32(1.0) / dy, np.float32(1.0) / dz)
-        t = np.where(ground, tg, np.float32(np.inf))
+        # nothing is seen beyond ``far`` (the depth format's range): a ray that misses the ground
+        # only takes a box nearer than that
+        t = np.where(ground, tg, np.float32(self.far))
         box = np.full(t.shape, -1, np.int32)
         under = np.zeros(t.shape, bool)
         idx, rects, zmin = self._screen_boxes(boxes, T_wc)
@@ -160,8 +171,12 @@ class Renderer:
 
     # -- frame ------------------------------------------------------------------------------
     def render(self, world: World, T_wc: np.ndarray, time_s: float = 0.0,
-               frame_index: int = 0) -> Frame:
-        """Render ``world`` at time ``time_s`` from the camera pose ``T_wc``."""
+               frame_index: int = 0, radiance: bool = False) -> Frame:
+        """Render ``world`` at time ``time_s`` from the camera pose ``T_wc``.
+
+        ``rgb`` is 8-bit (radiance x 255, no sensor effects) unless ``radiance``, when it is the
+        float scene radiance for a sensor model to develop.
+        """
         boxes = world.boxes_at(time_s)
         tr = self.trace(boxes, T_wc)
         obj = tr.box >= 0
@@ -179,5 +194,12 @@ class Renderer:
         with np.errstate(invalid="ignore"):
             in_range = dist <= self.bs_range
         bsgt = obj & g & sm.is_traversable(ground_cls) & ~tr.under & in_range
-        rgb = self.shader.shade(world, boxes, tr, ground_cls, marking, curb, obj, T_wc, frame_index)
+        if self._maps_world != id(world):
+            self._maps, self._maps_world = GroundMaps(world.look.sun, world.look.night), id(world)
+        ns = len(world.static)
+        fwd = T_wc[:2, 2] / max(float(np.linalg.norm(T_wc[:2, 2])), 1e-6)
+        self._maps.update(world.static, boxes.take(np.arange(ns, len(boxes))), C[:2], fwd)
+        rgb = self.shader.shade(world, boxes, tr, ground_cls, marking, curb, obj, T_wc, self._maps)
+        if not radiance:
+            rgb = np.clip(rgb * np.float32(255.0) + 0.5, 0, 255).astype(np.uint8)
         return Frame(rgb, depth, semantic, bsgt, boxes)

@@ -66,6 +66,7 @@ class TrainConfig:
     distill_grid: tuple[int, int] = (8, 16)
     seed: int = 0
     threads: int = 2
+    device: str = "cpu"                      # cpu, cuda or auto (cuda when torch sees a GPU)
     checkpoint_every: int = 100
     init: str = ""                           # start from this run's weights (fine-tuning)
 
@@ -74,6 +75,8 @@ class TrainConfig:
             raise ValueError("train.steps and train.batch_size must be >= 1")
         if not self.lr > 0 or self.distill_weight < 0 or self.depth_weight < 0:
             raise ValueError("train.lr must be positive, the loss weights non-negative")
+        if self.device not in ("cpu", "cuda", "auto"):
+            raise ValueError(f"train.device must be cpu, cuda or auto, got {self.device!r}")
 
 
 @dataclass(frozen=True)

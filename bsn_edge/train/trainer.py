@@ -71,10 +71,34 @@ class BatchStream:
                 k += 1
 
 
-def _loader(ds, batch: int, world: int, rank: int, seed: int, workers: int, start: int = 0) -> Iterator[dict]:
-    """Batches of ``ds`` from stream position ``start`` on (see :class:`BatchStream`)."""
-    return iter(DataLoader(ds, batch_sampler=BatchStream(len(ds), batch, seed, start, world, rank),
-                           num_workers=workers))
+def _loader(ds, batch: int, world: int, rank: int, seed: int, workers: int, start: int = 0,
+            device: torch.device | None = None) -> Iterator[dict]:
+    """Batches of ``ds`` from stream position ``start`` on (see :class:`BatchStream`), on ``device``."""
+    dl = DataLoader(ds, batch_sampler=BatchStream(len(ds), batch, seed, start, world, rank), num_workers=workers,
+                    pin_memory=device is not None and device.type == "cuda",
+                    persistent_workers=workers > 0)
+    # the iterator is made now, not at the first batch: it takes a draw from torch's generator, and a
+    # resumed run restores that generator right after this call
+    it = iter(dl)
+    return it if device is None else (_to(b, device) for b in it)
+
+
+def _to(batch: dict, device: torch.device) -> dict:
+    return {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
+
+
+def train_device(cfg: Config) -> torch.device:
+    """Where training runs: ``train.device``, with "auto" meaning CUDA when torch sees a GPU."""
+    want = cfg.train.device
+    if want == "auto":
+        want = "cuda" if torch.cuda.is_available() else "cpu"
+    if want == "cuda" and not torch.cuda.is_available():
+        raise ValueError("train.device is cuda but torch sees no GPU (a CPU build of torch, or no driver)")
+    if want == "cuda":
+        torch.backends.cuda.matmul.allow_tf32 = True
+        torch.backends.cudnn.allow_tf32 = True
+        return torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))
+    return torch.device("cpu")
 
 
 def scaled(x: torch.Tensor, scale: float, mode: str = "bilinear") -> torch.Tensor:
@@ -121,6 +145,7 @@ def datasets(cfg: Config, data_dir: str | Path) -> dict[str, Any]:
 def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool) -> torch.nn.Module:
     """The segmentation teacher, trained on the dataset's semantics (or loaded)."""
     t = cfg.teacher
+    dev = train_device(cfg)
     teacher = create_teacher(t.encoder, t.width)
     if t.checkpoint:
         src = Path(t.checkpoint)
@@ -128,15 +153,16 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         if state is None:
             raise FileNotFoundError(f"teacher.checkpoint {t.checkpoint}: no teacher/teacher.pt there")
         teacher.load_state_dict(state)
-        return teacher.eval()
+        return teacher.to(dev).eval()
     state = run.load_teacher_state()
     if state is not None:
         teacher.load_state_dict(state)
-        return teacher.eval()
+        return teacher.to(dev).eval()
+    teacher.to(dev)
     model = torch.nn.parallel.DistributedDataParallel(teacher) if world > 1 else teacher
     opt = _adam(model.parameters(), t.lr, cfg)
     sched = _poly(opt, t.steps, cfg.train.poly_power)
-    batches = _loader(ds, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers)
+    batches = _loader(ds, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers, device=dev)
     bar = tqdm(range(t.steps), desc="teacher", disable=True if (not progress or rank) else None, unit="step")
     model.train()
     for _ in bar:
@@ -159,8 +185,9 @@ def choose_threshold(model: torch.nn.Module, ds, batch: int = 8) -> tuple[float,
     """The threshold with the best IoU inside V on ``ds`` (the validation split)."""
     model.eval()
     sweep = ThresholdSweep()
+    dev = next(model.parameters()).device
     for b in DataLoader(ds, batch_size=batch):
-        prob = torch.sigmoid(model(b["image"])[0]).numpy()
+        prob = torch.sigmoid(model(b["image"].to(dev))[0]).cpu().numpy()
         sweep.add(prob, b["blindspot"].numpy() > 0.5, b["visibility"].numpy() > 0.5)
     return sweep.best()
 
@@ -212,6 +239,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             raise ValueError(f"train.init {cfg.train.init} holds a {init_card.variant!r} model, "
                              f"not {cfg.model.name!r}")
         model.load_state_dict(init.state_dict())
+    dev = train_device(cfg)
+    model.to(dev)
     start = 0
     opt = _adam(model.parameters(), cfg.train.lr, cfg)
     sched = _poly(opt, cfg.train.steps, cfg.train.poly_power)
@@ -222,7 +251,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         if "scheduler" in state:
             sched.load_state_dict(state["scheduler"])
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
-    batches = _loader(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers, start)
+    batches = _loader(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers, start,
+                      device=dev)
     if state is not None and "torch_rng" in state:
         # dropout draws go on where they stopped (after the loader, which takes a draw of its own)
         torch.set_rng_state(state["torch_rng"])
@@ -237,7 +267,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         l_bce = masked_bce(logits, b["blindspot"], b["visibility"])
         l_depth = depth_loss(depth, b["depth"], b["sky"])
         loss = l_bce + cfg.train.depth_weight * l_depth
-        l_kd = torch.zeros(())
+        l_kd = torch.zeros((), device=dev)
         if teacher is not None:
             with torch.no_grad():
                 _, t_feats = teacher(scaled(b["image"], cfg.teacher.scale))

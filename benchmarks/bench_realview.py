@@ -1,0 +1,140 @@
+"""Every real clip and image in ``../shared/data/real/``, seen by each model, side by side, for a person.
+
+    python -m benchmarks.bench_realview --out benchmarks/results [--model A.onnx --model B.onnx]
+
+Each model sees a source the way ``bsn-run`` would (its ``CameraState``): DDAD with the camera
+from its calibration and LiDAR road plane, the Udacity clip with the camera from the product's
+own calibration steps, the 960x540 highway dashcam (intrinsics unknown) with no camera file
+(online calibration over the whole clip), the city pair with its published intrinsics and the
+model camera's mounting. Blind spots at the model's own threshold are tinted red on the raw frame;
+one column per model. Nothing here is scored: the figures are for judging by eye (light and dark
+cars, parked cars along curbs, nothing on sky, trees or open road).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from benchmarks.bench_realcam import REAL, ddad_samples, udacity_samples
+from benchmarks.common import write_result
+from bsn_edge.calibration import Calibration
+from bsn_edge.camera import Intrinsics
+from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.runtime.camera_state import CameraState
+from bsn_edge.runtime.engine import Engine
+from bsn_edge.sequence.media import read_video
+from bsn_edge.synth.sheet import tint
+
+WIDTH = 480                # each panel's width in the figures
+HIGHWAY_FRAMES = (60, 140, 220)
+
+
+class Source:
+    """Frames of one real source; ``shown`` are the indices drawn; ``calibration`` None: no camera file."""
+
+    def __init__(self, name: str, frames: list[np.ndarray], shown: list[int], calibration: Calibration | None,
+                 what: str) -> None:
+        self.name, self.frames, self.shown, self.calibration, self.what = name, frames, shown, calibration, what
+
+
+def sources() -> list[Source]:
+    out = []
+    ddad = ddad_samples()
+    picks = [s for s in ddad if s.name.endswith("camviz")] + [s for s in ddad if "scene" in s.name][::3]
+    for s in picks:
+        out.append(Source(s.name, [s.image], [0], s.camera, "calibration extrinsics, LiDAR road plane"))
+    uda, _ = udacity_samples()
+    out.append(Source("udacity", [s.image for s in uda], [0, len(uda) // 2, len(uda) - 1], uda[0].camera,
+                      "bsn-calibrate chessboard + --mount"))
+    video = REAL / "dashcam_highway.mp4"
+    if video.is_file():
+        frames = read_video(video)
+        out.append(Source("dashcam_highway", frames, [i for i in HIGHWAY_FRAMES if i < len(frames)], None,
+                          "no camera file: online calibration"))
+    pair = REAL / "manydepth_pair"
+    if (pair / "target.jpg").is_file():
+        imgs = [cv2.imread(str(pair / n)) for n in ("source.jpg", "target.jpg")]
+        k = json.loads((pair / "intrinsics_normalised.json").read_text())
+        K = np.array(k["K"] if isinstance(k, dict) and "K" in k else k, dtype=float)
+        h, w = imgs[0].shape[:2]
+        intr = Intrinsics(K[0, 0] * w, K[1, 1] * h, K[0, 2] * w, K[1, 2] * h, w, h)
+        out.append(Source("city pair", imgs, [0, 1], Calibration.of(intr, (), None),
+                          "published intrinsics, model camera's mounting"))
+    return out
+
+
+def run_model(engine: Engine, src: Source) -> list[np.ndarray]:
+    """The tinted raw frames ``src.shown`` as ``bsn-run`` would see them with ``engine``."""
+    state = CameraState(engine.card, src.calibration)
+    out = {}
+    for i, frame in enumerate(src.frames):
+        mf = state.frame_for(frame)
+        if i not in src.shown:
+            continue
+        prob, _ = engine.infer(mf.to_model(frame)[None])
+        mask = mf.to_raw(prob) >= engine.card.threshold
+        scale = WIDTH / frame.shape[1]
+        size = (WIDTH, round(frame.shape[0] * scale))
+        img = cv2.resize(frame, size, interpolation=cv2.INTER_AREA)
+        m = cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
+        out[i] = tint(img, m)
+    return [out[i] for i in src.shown]
+
+
+def _label(img: np.ndarray, text: str) -> np.ndarray:
+    img = img.copy()
+    cv2.putText(img, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 3, cv2.LINE_AA)
+    cv2.putText(img, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+    return img
+
+
+def figure(columns: dict[str, list[np.ndarray]]) -> np.ndarray:
+    """Rows of frames, one column per model, a white gap between."""
+    rows = []
+    for r in range(len(next(iter(columns.values())))):
+        cells = [_label(col[r], name) for name, col in columns.items()]
+        gap = np.full((cells[0].shape[0], 6, 3), 255, np.uint8)
+        rows.append(np.hstack([c for cell in cells for c in (cell, gap)][:-1]))
+        rows.append(np.full((6, rows[-1].shape[1], 3), 255, np.uint8))
+    return np.vstack(rows[:-1])
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
+                   help="exported models, one column each (default: the shipped one)")
+    args = p.parse_args(argv)
+    if not REAL.is_dir():
+        print(f"no real data at {REAL}: nothing to show")
+        return 0
+    specs = args.model or [str(CHECKOUT / "models" / "bsn_small_light_int8.onnx")]
+    models = {}
+    for spec in specs:
+        name, _, path = spec.rpartition("=")
+        models[name or Path(path).stem] = Engine(path)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = ["# Real images by eye", "",
+             "Blind spots (red) of each model at its own threshold, on the raw frames of every real source in "
+             "`../shared/data/real/`, each seen as `bsn-run` sees it. Columns: " + ", ".join(models) + ".", ""]
+    result: dict = {"models": {n: e.card.threshold for n, e in models.items()}, "sources": {}}
+    for src in sources():
+        cols = {name: run_model(engine, src) for name, engine in models.items()}
+        fname = f"realview_{src.name.replace(' ', '_')}.png"
+        cv2.imwrite(str(out / fname), figure(cols))
+        result["sources"][src.name] = {"frames": src.shown, "camera": src.what, "figure": fname}
+        shown = ", ".join(map(str, src.shown))
+        lines += [f"## {src.name} ({src.what}; frames {shown})", "", f"![{src.name}]({fname})", ""]
+    write_result(out, "realview", result, "\n".join(lines))
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
