@@ -28,6 +28,7 @@ KIND_WALL = 12
 KIND_HILL = 13      # far hills and tree lines on the horizon
 KIND_RIDER = 14
 KIND_BARRIER = 15   # concrete road barrier
+GROUND_EPS_M = 1e-6    # a part whose bottom is this low stands on the road (its footprint hides it)
 
 # ``facing``: the way the front of a vehicle points (lights, plates), 0 where it has none.
 FACING_NONE = 0

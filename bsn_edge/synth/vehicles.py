@@ -14,6 +14,7 @@ import numpy as np
 
 from bsn_edge import semantics as sm
 from bsn_edge.synth.boxes import (
+    GROUND_EPS_M,
     KIND_CABIN,
     KIND_HEAD,
     KIND_RIDER,
@@ -165,6 +166,9 @@ def vehicle_parts(rng: np.random.Generator, vt: VehicleType, at: Placed, size: t
             parts.append((a - r, a + r, -W2, W2, 0.0, 2 * r, vt.cls, KIND_WHEEL, np.float32((0.07,) * 3)))
     los, his = zip(*(at.box(*p[:6]) for p in parts), strict=True)
     n = len(parts)
-    return Boxes.make(np.array(los), np.array(his), np.array([p[6] for p in parts], np.uint8),
+    lo = np.array(los)
+    # only the parts that touch the road stand on it: the road under a raised body is seen through
+    # the clearance, so it can be a blind spot like any other road
+    return Boxes.make(lo, np.array(his), np.array([p[6] for p in parts], np.uint8),
                       np.array([p[7] for p in parts], np.uint8), np.stack([p[8] for p in parts]),
-                      True, np.full(n, track, np.int32), at.facing)
+                      lo[:, 2] <= GROUND_EPS_M, np.full(n, track, np.int32), at.facing)
