@@ -18,7 +18,7 @@ from matplotlib.ticker import NullFormatter, ScalarFormatter
 from benchmarks.common import machine
 
 ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "runtime", "footprint", "realcam",
-         "cameras", "remap")
+         "realview", "cameras", "remap")
 
 
 def _load(results: Path, name: str) -> dict | None:

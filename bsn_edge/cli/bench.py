@@ -13,7 +13,7 @@ from bsn_edge.cli.common import CHECKOUT, fail
 PROG = "bsn-bench"
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
-NAMES = ("synth", "labels", "train_step", "arch", "quant", "runtime", "accuracy", "footprint", "realcam")
+NAMES = ("synth", "labels", "train_step", "arch", "quant", "runtime", "accuracy", "footprint", "realcam", "realview")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -87,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
                     "--train-steps", "300", "--work", str(work / "arch"))
         if "realcam" in names:
             _py("-m", "benchmarks.bench_realcam", "--out", out)
+        if "realview" in names:
+            _py("-m", "benchmarks.bench_realview", "--out", out)
         if "footprint" in names:
             _py("-m", "benchmarks.bench_footprint", "--out", out)
         if "accuracy" in names:
