@@ -7,8 +7,10 @@ from its calibration and LiDAR road plane, the Udacity clip with the camera from
 own calibration steps, the 960x540 highway dashcam (intrinsics unknown) with no camera file
 (online calibration over the whole clip), the city pair with its published intrinsics and the
 model camera's mounting. Blind spots at the model's own threshold are tinted red on the raw frame;
-one column per model. Nothing here is scored: the figures are for judging by eye (light and dark
-cars, parked cars along curbs, nothing on sky, trees or open road).
+one column per model. The pictures show third-party data that must not be redistributed: they stay
+on the machine that ran the benchmark (git ignores them). Nothing here is scored: the figures are
+for judging by eye (light and dark cars, parked cars along curbs, nothing on sky, trees or open
+road).
 """
 
 from __future__ import annotations
@@ -122,12 +124,13 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     lines = ["# Real images by eye", "",
              "Blind spots (red) of each model at its own threshold, on the raw frames of every real source in "
-             "`../shared/data/real/`, each seen as `bsn-run` sees it. Columns: " + ", ".join(models) + ".", ""]
+             "`../shared/data/real/`, each seen as `bsn-run` sees it (the pictures are written beside this report "
+             "on the machine that has the data, never committed). Columns: " + ", ".join(models) + ".", ""]
     result: dict = {"models": {n: e.card.threshold for n, e in models.items()}, "sources": {}}
     for src in sources():
         cols = {name: run_model(engine, src) for name, engine in models.items()}
-        fname = f"realview_{src.name.replace(' ', '_')}.png"
-        cv2.imwrite(str(out / fname), figure(cols))
+        fname = f"realview_{src.name.replace(' ', '_')}.jpg"
+        cv2.imwrite(str(out / fname), figure(cols), [cv2.IMWRITE_JPEG_QUALITY, 88])
         result["sources"][src.name] = {"frames": src.shown, "camera": src.what, "figure": fname}
         shown = ", ".join(map(str, src.shown))
         lines += [f"## {src.name} ({src.what}; frames {shown})", "", f"![{src.name}]({fname})", ""]
