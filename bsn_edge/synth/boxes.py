@@ -28,7 +28,7 @@ KIND_WALL = 12
 KIND_HILL = 13      # far hills and tree lines on the horizon
 KIND_RIDER = 14
 KIND_BARRIER = 15   # concrete road barrier
-GROUND_EPS_M = 1e-6    # a part whose bottom is this low stands on the road (its footprint hides it)
+GROUND_EPS_M = 1e-6    # a box whose bottom is this low stands on the road (its footprint hides it)
 
 # ``facing``: the way the front of a vehicle points (lights, plates), 0 where it has none.
 FACING_NONE = 0
@@ -77,9 +77,13 @@ class Boxes:
                    np.zeros((0, 3), np.float32), np.zeros(0, bool), np.zeros(0, np.int32))
 
     @classmethod
-    def make(cls, lo, hi, sem_cls, kind, color, grounded=True, track=None, facing=0) -> Boxes:
-        """Build from per-box values; scalars broadcast over all boxes."""
+    def make(cls, lo, hi, sem_cls, kind, color, grounded=None, track=None, facing=0) -> Boxes:
+        """Build from per-box values; scalars broadcast over all boxes. ``grounded`` defaults to the
+        boxes whose bottom is on the road: the road under a raised part (a car's body, a tree's
+        crown) is seen past it, so only what touches the road hides the road under it."""
         lo = np.atleast_2d(np.asarray(lo, dtype=np.float64))
+        if grounded is None:
+            grounded = lo[:, 2] <= GROUND_EPS_M
         hi = np.atleast_2d(np.asarray(hi, dtype=np.float64))
         n = len(lo)
         color = np.broadcast_to(np.asarray(color, np.float32), (n, 3)).copy()

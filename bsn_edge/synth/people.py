@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from bsn_edge import semantics as sm
-from bsn_edge.synth.boxes import GROUND_EPS_M, KIND_HEAD, KIND_LEGS, KIND_PERSON, Boxes
+from bsn_edge.synth.boxes import KIND_HEAD, KIND_LEGS, KIND_PERSON, Boxes
 from bsn_edge.synth.vehicles import CLOTHES, Placed
 
 TROUSERS = np.array([(0.35, 0.22, 0.12), (0.08, 0.08, 0.08), (0.35, 0.35, 0.36), (0.45, 0.55, 0.62),
@@ -34,6 +34,5 @@ def person_parts(rng: np.random.Generator, at: Placed, track: int) -> Boxes:
     if h > 1.5 and rng.random() < P_STROLLER:
         parts.append((0.35, 1.15, -0.28, 0.28, 0.12, 1.0, KIND_PERSON, STROLLER[rng.integers(len(STROLLER))]))
     los, his = zip(*(at.box(*p[:6]) for p in parts), strict=True)
-    lo = np.array(los)
-    return Boxes.make(lo, np.array(his), sm.PERSON, np.array([p[6] for p in parts], np.uint8),
-                      np.stack([p[7] for p in parts]), lo[:, 2] <= GROUND_EPS_M, np.full(len(parts), track, np.int32))
+    return Boxes.make(np.array(los), np.array(his), sm.PERSON, np.array([p[6] for p in parts], np.uint8),
+                      np.stack([p[7] for p in parts]), track=np.full(len(parts), track, np.int32))

@@ -163,10 +163,10 @@ class _Parts:
     """Collects boxes of objects, one track id per object."""
 
     def __init__(self) -> None:
-        self.lo, self.hi, self.cls, self.kind, self.color, self.grounded, self.track = ([] for _ in range(7))
+        self.lo, self.hi, self.cls, self.kind, self.color, self.track = ([] for _ in range(6))
         self.objects = 0
 
-    def add(self, lo, hi, cls, kind, color, grounded=True, obj=None) -> int:
+    def add(self, lo, hi, cls, kind, color, obj=None) -> int:
         """Add one box; a new object unless ``obj`` names one added before. Returns its id."""
         if obj is None:
             obj = self.objects
@@ -176,7 +176,6 @@ class _Parts:
         self.cls.append(cls)
         self.kind.append(kind)
         self.color.append(color)
-        self.grounded.append(grounded)
         self.track.append(obj)
         return obj
 
@@ -186,7 +185,7 @@ class _Parts:
             return Boxes.empty()
         col = np.clip(np.asarray(self.color, np.float64) + rng.normal(0, 0.03, (n, 3)), 0, 1).astype(np.float32)
         return Boxes.make(np.reshape(self.lo, (n, 3)), np.reshape(self.hi, (n, 3)), np.array(self.cls, np.uint8),
-                          np.array(self.kind, np.uint8), col, np.array(self.grounded), np.array(self.track))
+                          np.array(self.kind, np.uint8), col, track=np.array(self.track))
 
 
 def _street_furniture(rng, style: Style, layout: RoadLayout, bounds) -> Boxes:
@@ -226,7 +225,7 @@ def _street_furniture(rng, style: Style, layout: RoadLayout, bounds) -> Boxes:
                         z0 = h_trunk - 0.3 + rng.uniform(0, 1.2)
                         lo, hi = _oriented(axis, across + ca, cur + cb, 2 * dr, 2 * dr * rng.uniform(0.8, 1.2),
                                            z0 + rng.uniform(1.5, 3.2))
-                        out.add((lo[0], lo[1], z0), hi, sm.VEGETATION, KIND_CROWN, green, False, tree)
+                        out.add((lo[0], lo[1], z0), hi, sm.VEGETATION, KIND_CROWN, green, obj=tree)
                 cur += style.tree_spacing * rng.uniform(0.7, 1.3)
             # lot fronts: a hedge, a fence or a wall at the back of the sidewalk, with gaps for drives
             cur = a0 + 1.0

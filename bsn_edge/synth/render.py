@@ -69,7 +69,7 @@ class Renderer:
         self.shader = Shader(intrinsics.height, intrinsics.width)
         self.shader.set_rays(rays)
         self._maps: GroundMaps | None = None
-        self._maps_world: int | None = None
+        self._maps_world: World | None = None    # the world the maps were made for
 
     # -- geometry ---------------------------------------------------------------------------
     def _world_dirs(self, R: np.ndarray):
@@ -88,11 +88,7 @@ class Renderer:
         if not len(cand):
             return cand, np.zeros((0, 4), np.intp), np.zeros(0)
         R_cw = T_wc[:3, :3].T
-        # a grounded box's rectangle reaches down to the ground: the ground under a raised body
-        # (a car's floor, a person's torso) is seen below the box itself
-        sel = boxes.take(cand)
-        sel = sel.replace(lo=np.where(sel.grounded[:, None] & (np.arange(3) == 2), 0.0, sel.lo))
-        corners = (sel.corners() - C) @ R_cw.T          # [n, 8, 3] camera frame
+        corners = (boxes.take(cand).corners() - C) @ R_cw.T          # [n, 8, 3] camera frame
         z = corners[..., 2]
         front = z >= self.near
         in_view = front.any(axis=1)
@@ -194,8 +190,8 @@ class Renderer:
         with np.errstate(invalid="ignore"):
             in_range = dist <= self.bs_range
         bsgt = obj & g & sm.is_traversable(ground_cls) & ~tr.under & in_range
-        if self._maps_world != id(world):
-            self._maps, self._maps_world = GroundMaps(world.look.sun, world.look.night), id(world)
+        if self._maps_world is not world:
+            self._maps, self._maps_world = GroundMaps(world.look.sun, world.look.night), world
         ns = len(world.static)
         fwd = T_wc[:2, 2] / max(float(np.linalg.norm(T_wc[:2, 2])), 1e-6)
         self._maps.update(world.static, boxes.take(np.arange(ns, len(boxes))), C[:2], fwd)

@@ -114,7 +114,7 @@ class Shader:
         oi = np.flatnonzero(obj)
         if len(oi):
             out[oi] = self._objects(look, boxes, tr, T_wc, oi, sun, maps)
-        # fog over the whole frame at once: the sky (t = inf) keeps its own colour
+        # fog over the whole frame at once: the sky keeps its own colour
         fog = np.exp(np.minimum(tr.t, np.float32(1e4)) * np.float32(-1.0 / look.fog_distance))
         fog[~(obj | tr.ground)] = 1.0
         out = out.reshape(h, w, 3)

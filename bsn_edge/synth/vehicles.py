@@ -14,7 +14,6 @@ import numpy as np
 
 from bsn_edge import semantics as sm
 from bsn_edge.synth.boxes import (
-    GROUND_EPS_M,
     KIND_CABIN,
     KIND_HEAD,
     KIND_RIDER,
@@ -36,6 +35,7 @@ LIVERY_SHARE = np.array([0.45, 0.2, 0.12, 0.1, 0.08, 0.05])
 CLOTHES = np.array([(0.20, 0.15, 0.12), (0.55, 0.30, 0.20), (0.15, 0.15, 0.55), (0.70, 0.70, 0.70),
                     (0.20, 0.45, 0.20), (0.10, 0.10, 0.10), (0.30, 0.55, 0.75), (0.85, 0.85, 0.85)],
                    np.float32)
+DARK = np.array((0.07, 0.07, 0.07), np.float32)   # wheels and chassis (shading draws tyres and rims)
 HELMET = np.array([(0.08, 0.08, 0.08), (0.9, 0.9, 0.9), (0.1, 0.1, 0.7), (0.7, 0.4, 0.1)], np.float32)
 
 
@@ -133,6 +133,10 @@ def vehicle_parts(rng: np.random.Generator, vt: VehicleType, at: Placed, size: t
     parts: list[tuple] = []   # (a0, a1, c0, c1, z0, z1, cls, kind, colour)
     L2, W2 = length / 2, width / 2
     r = vt.wheel
+
+    def axles(*at_along: float) -> None:
+        for a in at_along:
+            parts.append((a - r, a + r, -W2, W2, 0.0, 2 * r, vt.cls, KIND_WHEEL, DARK))
     if vt.two_wheeler:
         frame_col = col if vt.cls == sm.MOTORCYCLE else np.float32((0.12, 0.12, 0.12))
         parts.append((-L2, L2, -W2 * 0.35, W2 * 0.35, 0.0, height * 0.85, vt.cls, KIND_VEHICLE, frame_col))
@@ -149,26 +153,19 @@ def vehicle_parts(rng: np.random.Generator, vt: VehicleType, at: Placed, size: t
         parts.append((L2 - cab, L2 - 0.1, -W2 + 0.08, W2 - 0.08, 1.9, min(2.9, height), vt.cls, KIND_CABIN,
                       cab_col))
         parts.append((-L2 + 0.5, L2 - cab, -W2 + 0.3, W2 - 0.3, vt.clearance, vt.clearance + 0.4, vt.cls,
-                      KIND_WHEEL, np.float32((0.08, 0.08, 0.08))))
-        for a in (L2 - 1.3, -L2 + 2.2, -L2 + 1.2):
-            parts.append((a - r, a + r, -W2, W2, 0.0, 2 * r, vt.cls, KIND_WHEEL, np.float32((0.07,) * 3)))
+                      KIND_WHEEL, DARK))
+        axles(L2 - 1.3, -L2 + 2.2, -L2 + 1.2)
     elif vt.name == "bus":
         parts.append((-L2, L2, -W2 + 0.03, W2 - 0.03, vt.clearance, height, vt.cls, KIND_VEHICLE, col))
-        for a in (L2 - 2.6, -L2 + 3.2):
-            parts.append((a - r, a + r, -W2, W2, 0.0, 2 * r, vt.cls, KIND_WHEEL, np.float32((0.07,) * 3)))
+        axles(L2 - 2.6, -L2 + 3.2)
     else:
         belt = height * vt.belt
         parts.append((-L2, L2, -W2 + 0.03, W2 - 0.03, vt.clearance, belt, vt.cls, KIND_VEHICLE, col))
         a0, a1 = -L2 + vt.tail * length, L2 - vt.hood * length
         parts.append((a0, a1, -W2 + 0.1, W2 - 0.1, belt, height, vt.cls, KIND_CABIN, col))
         overhang = min(0.95, 0.2 * length)
-        for a in (L2 - overhang, -L2 + overhang * 0.9):
-            parts.append((a - r, a + r, -W2, W2, 0.0, 2 * r, vt.cls, KIND_WHEEL, np.float32((0.07,) * 3)))
+        axles(L2 - overhang, -L2 + overhang * 0.9)
     los, his = zip(*(at.box(*p[:6]) for p in parts), strict=True)
-    n = len(parts)
-    lo = np.array(los)
-    # only the parts that touch the road stand on it: the road under a raised body is seen through
-    # the clearance, so it can be a blind spot like any other road
-    return Boxes.make(lo, np.array(his), np.array([p[6] for p in parts], np.uint8),
+    return Boxes.make(np.array(los), np.array(his), np.array([p[6] for p in parts], np.uint8),
                       np.array([p[7] for p in parts], np.uint8), np.stack([p[8] for p in parts]),
-                      lo[:, 2] <= GROUND_EPS_M, np.full(n, track, np.int32), at.facing)
+                      track=np.full(len(parts), track, np.int32), facing=at.facing)

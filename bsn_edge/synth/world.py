@@ -33,6 +33,10 @@ class Look:
     marking: tuple[float, float, float] = (0.88, 0.90, 0.90)
     wear: float = 0.3                                       # how worn markings and asphalt are, 0-1
 
+    def __post_init__(self) -> None:
+        if self.light not in LIGHTS:
+            raise ValueError(f"Look.light must be one of {', '.join(LIGHTS)}, got {self.light!r}")
+
     @property
     def night(self) -> bool:
         return self.light == "night"
