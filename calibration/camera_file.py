@@ -101,3 +101,17 @@ class Calibration:
             raise ValueError(f"{p}: not a calibration file: {e}") from None
         except ValueError as e:
             raise ValueError(f"{p}: {e}") from None
+
+
+def clip_camera(path: str | os.PathLike, fallback_mounting: Mounting) -> Calibration:
+    """A sequence folder's camera: its camera file (``calibration.json``), else its meta's
+    intrinsics; sitting at ``fallback_mounting`` when the file gives no mounting (clips made before
+    cameras were recorded came from the model camera)."""
+    from bsn_edge.sequence.folder import SequenceFolder
+    from bsn_edge.sequence.meta import SequenceMeta
+
+    seq = SequenceFolder(path)
+    if seq.calibration_path.is_file():
+        cal = Calibration.read(seq.calibration_path)
+        return cal if cal.mounting is not None else cal.with_mounting(fallback_mounting, method="assumed")
+    return Calibration.of(SequenceMeta.read(path).intrinsics, (), fallback_mounting, method="assumed")

@@ -3,22 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
-import sys
-import tempfile
 from pathlib import Path
 
-import numpy as np
-
 from bsn_edge.cli.common import fail, parse_size
-from bsn_edge.export.calib_frames import load_frames
-from bsn_edge.export.fused import check_parity, to_onnx
-from bsn_edge.export.quantize import METHODS, TYPES, QuantConfig, quantize
+from bsn_edge.export.pipeline import export_run
+from bsn_edge.export.quantize import METHODS, TYPES, QuantConfig
 from bsn_edge.export.seal import read_card, seal
-from bsn_edge.runtime.model_file import session
-from bsn_edge.sequence.images import atomic_write_bytes
-from bsn_edge.train.run import Run
 
 PROG = "bsn-export"
 
@@ -75,47 +65,14 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, "--checkpoint RUN is required (or --reseal MODEL.onnx)")
     if args.int8 and not args.calib:
         return fail(PROG, "--int8 needs --calib DIR_OR_VIDEO (frames to calibrate activation ranges on)")
-    if args.calib_frames < 1:
-        return fail(PROG, f"--calib-frames must be >= 1, got {args.calib_frames}")
     try:
-        model, card = Run(args.checkpoint).load_model()
-        if card.threshold is None:
-            raise ValueError(f"{args.checkpoint}: the run has no decision threshold yet (training did not finish)")
-        h, w = args.size or card.input_size
-        card = card.at_size(h, w)
         qcfg = QuantConfig(args.method, args.activations, args.weights, not args.per_tensor, not args.quantize_heads)
-        frames = load_frames(args.calib, (h, w), args.calib_frames, card=card) if args.calib else None
+        summary = export_run(args.checkpoint, out, args.size, args.int8, args.calib, args.calib_frames, qcfg)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    check_frames = list(frames[:4]) if frames is not None else \
-        [np.random.default_rng(i).integers(0, 256, (h, w, 3), dtype=np.uint8) for i in range(2)]
-    summary: dict = {"checkpoint": str(args.checkpoint), "size": [h, w]}
-    with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
-        fp32 = Path(tmp) / "fp32.onnx"
-        print(f"exporting {card.variant} at {h}x{w} ...", file=sys.stderr)
-        sealed = to_onnx(model, fp32, card)
-        try:
-            summary["parity_fp32"] = check_parity(model, fp32, check_frames)
-        except ValueError as e:
-            return fail(PROG, str(e), 1)
-        summary["fp32_bytes"] = fp32.stat().st_size
-        final = fp32
-        if args.int8:
-            print(f"quantizing on {len(frames)} calibration frames ({qcfg.scheme()}) ...", file=sys.stderr)
-            q = Path(tmp) / "int8.onnx"
-            info = quantize(fp32, q, frames, qcfg)
-            sealed = info.pop("card")
-            summary.update(int8_bytes=q.stat().st_size, quantization=info,
-                           int8_vs_fp32=compare(fp32, q, frames, sealed.threshold))
-            final = q
-        final.replace(out)
-    card_record = sealed.to_dict()
-    card_record["self_test"] = dataclasses.asdict(sealed.self_test) | {"prob": "...", "depth": "..."}
-    summary["card"] = card_record
-    atomic_write_bytes(out.with_suffix(".json"), (json.dumps(summary, indent=1) + "\n").encode())
     print(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); fp32 parity: max |dp| "
-          f"{summary['parity_fp32']['max_abs_prob']:.1e}; sealed (graph sha256 {sealed.graph_sha256[:16]}...)")
+          f"{summary['parity_fp32']['max_abs_prob']:.1e}; sealed (graph sha256 "
+          f"{summary['card']['graph_sha256'][:16]}...)")
     if args.int8:
         c = summary["int8_vs_fp32"]
         print(f"int8 vs fp32 on {c['frames']} frames: max |dp| {c['max_abs_prob']:.3f}, mask agreement "
@@ -123,20 +80,6 @@ def main(argv: list[str] | None = None) -> int:
               f"{len(summary['quantization']['float_nodes'])} nodes kept float (the frame's preparation and the "
               "output heads; reasons in the summary)")
     return 0
-
-
-def compare(fp32: Path, int8: Path, frames: np.ndarray, threshold: float) -> dict[str, float]:
-    """How far the int8 model strays from fp32 on ``frames``."""
-    a, b = session(fp32), session(int8)
-    dp, agree, rel = 0.0, [], []
-    for f in frames:
-        pa, da = a.run(None, {"frame": f[None]})
-        pb, db = b.run(None, {"frame": f[None]})
-        dp = max(dp, float(np.abs(pa - pb).max()))
-        agree.append(float(((pa >= threshold) == (pb >= threshold)).mean()))
-        rel.append(float(np.median(np.abs(da - db) / np.maximum(da, 1e-3))))
-    return {"frames": len(frames), "max_abs_prob": dp, "mask_agreement": float(np.mean(agree)),
-            "depth_median_rel": float(np.median(rel))}
 
 
 if __name__ == "__main__":

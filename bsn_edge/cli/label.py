@@ -25,7 +25,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=float, default=5.0, help="label rate, frames/s (default 5)")
     p.add_argument("--T", dest="horizon", type=float, default=5.0, help="horizon T in seconds (default 5)")
     p.add_argument("--depth", default="files",
-                   help="depth source: files | onnx:MODEL | rel:DIR[:inverse] (default files)")
+                   help="depth source: files | onnx:MODEL (a depth network) | bsn:MODEL (a bsn-edge model's depth, the "
+                        "frame warped into its camera with the clip's calibration) | rel:DIR[:inverse] (default files)")
     p.add_argument("--seg", default="files", help="segmentation source: files | onnx:MODEL (default files)")
     p.add_argument("--poses", default="files",
                    help="poses: files (poses.txt) | vo (built-in visual odometry) | TRAJ.txt (KITTI or "

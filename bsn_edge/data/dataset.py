@@ -12,7 +12,7 @@ import torch
 from torch.utils.data import Dataset
 
 from bsn_edge import semantics as sm
-from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.calibration.camera_file import clip_camera
 from bsn_edge.camera import Intrinsics
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.model_frame import ModelFrame
@@ -86,16 +86,6 @@ def split_clips(clips: list[Clip], val_fraction: float, test_fraction: float,
                 out["train"].remove(moved)
                 out["val"].append(moved)
     return out
-
-
-def clip_camera(path: Path, model_mounting: Mounting) -> Calibration:
-    """A clip's camera file (``calibration.json``), else its meta's intrinsics, sitting as the model
-    camera does (clips made before cameras were recorded came from that camera)."""
-    seq = SequenceFolder(path)
-    if seq.calibration_path.is_file():
-        cal = Calibration.read(seq.calibration_path)
-        return cal if cal.mounting is not None else cal.with_mounting(model_mounting, method="assumed")
-    return Calibration.of(SequenceMeta.read(path).intrinsics, (), model_mounting, method="assumed")
 
 
 class ClipWarps:

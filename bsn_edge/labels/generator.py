@@ -140,7 +140,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         if cal.has_distortion:
             m = cal.mounting or EARLY_MOUNTING
             lens = ModelFrame(k, cal.dist, m, k, m)
-    clip = ClipData(seq, meta, frame_count(seq))
+    clip = ClipData(seq, meta, frame_count(seq), {"calibration": cal} if cal is not None else {})
     labels = SequenceFolder(seq).labels(cfg.name)
     out = labels.root
     idx = resample(clip.frames, meta.fps, cfg.rate)

@@ -28,6 +28,7 @@ from bsn_edge.alerts import (
 )
 from bsn_edge.alerts.health import Health
 from bsn_edge.alerts.senders import Sender
+from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.engine import Engine
@@ -38,6 +39,13 @@ from bsn_edge.runtime.stats import LatencyStats
 from bsn_edge.sequence.folder import frame_name
 
 STAGES = ("decode", "preprocess", "inference", "postprocess", "send")
+
+
+def blind_spots(prob: np.ndarray, threshold: float, mf: ModelFrame) -> np.ndarray:
+    """The blind-spot mask the sectors read: above threshold and where the camera sees. Where a
+    camera narrower than the model camera sees nothing, the model's input is the frame mirrored
+    from its edge; a blind spot found in a mirrored car is not in the world."""
+    return (prob >= threshold) & mf.seen
 
 
 @dataclass(frozen=True)
@@ -116,7 +124,7 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                     health.fault("nan_outputs")
                     rec["fault"] = "nan_output"
                 else:
-                    mask = prob >= engine.card.threshold
+                    mask = blind_spots(prob, engine.card.threshold, mf)
                     readings = geometry.read(mask, mf.depth_to_metres(depth))
                     sectors = []
                     for m, r in zip(machines, readings, strict=True):

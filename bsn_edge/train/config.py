@@ -63,6 +63,8 @@ class TrainConfig:
     poly_power: float = 0.9
     distill_weight: float = 1.0              # lambda
     depth_weight: float = 1.0
+    depth_object_weight: float = 1.0         # depth loss weight of vehicle and person pixels (road: 1)
+    depth_grad_scales: int = 0               # scales of the depth gradient-matching term (0: off)
     distill_grid: tuple[int, int] = (8, 16)
     seed: int = 0
     threads: int = 2
@@ -75,6 +77,8 @@ class TrainConfig:
             raise ValueError("train.steps and train.batch_size must be >= 1")
         if not self.lr > 0 or self.distill_weight < 0 or self.depth_weight < 0:
             raise ValueError("train.lr must be positive, the loss weights non-negative")
+        if self.depth_object_weight <= 0 or not 0 <= self.depth_grad_scales <= 6:
+            raise ValueError("train.depth_object_weight must be positive, train.depth_grad_scales in 0..6")
         if self.device not in ("cpu", "cuda", "auto"):
             raise ValueError(f"train.device must be cpu, cuda or auto, got {self.device!r}")
 

@@ -31,13 +31,30 @@ def distillation_loss(student: Tensor, teacher: Tensor, grid: tuple[int, int] = 
     return F.mse_loss(pairwise_similarity(student, grid), pairwise_similarity(teacher.detach(), grid))
 
 
-def depth_loss(pred: Tensor, target: Tensor, sky: Tensor | None = None) -> Tensor:
-    """L1 on log depth over pixels with depth; sky pixels (when given) are taught as far."""
+def depth_loss(pred: Tensor, target: Tensor, sky: Tensor | None = None, weight: Tensor | None = None,
+               grad_scales: int = 0) -> Tensor:
+    """L1 on log depth over pixels with depth; sky pixels (when given) are taught as far.
+
+    ``weight`` ([N, 1, H, W], optional) weighs each pixel (e.g. more on cars and people, which
+    cover few pixels but carry the distances on the bus). ``grad_scales`` > 0 adds the
+    multi-scale gradient-matching term of Li & Snavely (MegaDepth, 2018): the L1 of the
+    horizontal and vertical differences of the log-depth error at 1, 1/2, 1/4 ... resolution,
+    which is zero for a prediction that is right up to a constant factor and large where an
+    object's edge is blurred into the road behind it."""
     t = target.clamp(MIN_DEPTH_M, MAX_DEPTH_M)
     valid = target > 0
     if sky is not None:
         t = torch.where(sky, torch.full_like(t, MAX_DEPTH_M), t)
         valid = valid | sky
-    err = (pred.clamp_min(1e-3).log() - t.log()).abs()
-    v = valid.to(err.dtype)
-    return (err * v).sum() / v.sum().clamp_min(1.0)
+    r = pred.clamp_min(1e-3).log() - t.log()
+    w = valid.to(r.dtype) if weight is None else valid.to(r.dtype) * weight
+    loss = (r.abs() * w).sum() / w.sum().clamp_min(1e-6)
+    for k in range(grad_scales):
+        s = 2 ** k
+        rs, ws = r[..., ::s, ::s], w[..., ::s, ::s]
+        for dim in (-1, -2):
+            n = rs.shape[dim] - 1
+            d = (rs.narrow(dim, 1, n) - rs.narrow(dim, 0, n)).abs()
+            pair = ws.narrow(dim, 1, n) * ws.narrow(dim, 0, n)     # both ends valid (and weighted)
+            loss = loss + (d * pair).sum() / pair.sum().clamp_min(1e-6) / grad_scales
+    return loss

@@ -71,7 +71,7 @@ class BatchStream:
                 k += 1
 
 
-def _loader(ds, batch: int, world: int, rank: int, seed: int, workers: int, start: int = 0,
+def batch_stream(ds, batch: int, world: int, rank: int, seed: int, workers: int, start: int = 0,
             device: torch.device | None = None) -> Iterator[dict]:
     """Batches of ``ds`` from stream position ``start`` on (see :class:`BatchStream`), on ``device``."""
     dl = DataLoader(ds, batch_sampler=BatchStream(len(ds), batch, seed, start, world, rank), num_workers=workers,
@@ -142,6 +142,16 @@ def datasets(cfg: Config, data_dir: str | Path) -> dict[str, Any]:
                                        mounting=mounting) if val else None}
 
 
+def _depth_weights(semantic: torch.Tensor, object_weight: float) -> torch.Tensor | None:
+    """Per-pixel depth-loss weights ``[N, 1, H, W]``: ``object_weight`` on vehicles and people, 1
+    elsewhere; None when the weight is 1 (plain mean)."""
+    if object_weight == 1.0:
+        return None
+    ids = torch.tensor(sm.VEHICLES + sm.VULNERABLE, device=semantic.device)
+    obj = torch.isin(semantic, ids)[:, None]
+    return 1.0 + (object_weight - 1.0) * obj.to(torch.float32)
+
+
 def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool) -> torch.nn.Module:
     """The segmentation teacher, trained on the dataset's semantics (or loaded)."""
     t = cfg.teacher
@@ -162,7 +172,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
     model = torch.nn.parallel.DistributedDataParallel(teacher) if world > 1 else teacher
     opt = _adam(model.parameters(), t.lr, cfg)
     sched = _poly(opt, t.steps, cfg.train.poly_power)
-    batches = _loader(ds, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers, device=dev)
+    batches = batch_stream(ds, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers, device=dev)
     bar = tqdm(range(t.steps), desc="teacher", disable=True if (not progress or rank) else None, unit="step")
     model.train()
     for _ in bar:
@@ -251,7 +261,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         if "scheduler" in state:
             sched.load_state_dict(state["scheduler"])
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
-    batches = _loader(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers, start,
+    batches = batch_stream(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers, start,
                       device=dev)
     if state is not None and "torch_rng" in state:
         # dropout draws go on where they stopped (after the loader, which takes a draw of its own)
@@ -265,7 +275,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         b = next(batches)
         logits, depth, feats = net(b["image"])
         l_bce = masked_bce(logits, b["blindspot"], b["visibility"])
-        l_depth = depth_loss(depth, b["depth"], b["sky"])
+        l_depth = depth_loss(depth, b["depth"], b["sky"], _depth_weights(b["semantic"], cfg.train.depth_object_weight),
+                             cfg.train.depth_grad_scales)
         loss = l_bce + cfg.train.depth_weight * l_depth
         l_kd = torch.zeros((), device=dev)
         if teacher is not None:

@@ -217,3 +217,19 @@ def test_live_source_keeps_the_newest_frame_and_counts_drops(setup):
     src.close()
     assert seen == sorted(seen) and len(set(seen)) == len(seen), "never a stale frame twice"
     assert src.dropped + len(seen) == 15 and src.dropped > 0
+
+
+def test_a_narrow_camera_reads_no_blind_spot_in_the_mirrored_border():
+    """A 40 degree camera fills tan(20) / tan(40) of an 80 degree model camera's width; outside it
+    the model sees the frame mirrored, and nothing found there may reach the sectors."""
+    from bsn_edge.calibration import Calibration
+    from bsn_edge.camera import Intrinsics
+    from bsn_edge.mounting import Mounting
+    from bsn_edge.runtime.loop import blind_spots
+
+    model, mount = Intrinsics.from_fov(512, 256, 80.0), Mounting(1.5, 1.5)
+    mf = Calibration.of(Intrinsics.from_fov(640, 360, 40.0), (), mount).model_frame(640, 360, model, mount)
+    mask = blind_spots(np.ones((256, 512), np.float32), 0.5, mf)
+    cols = np.nonzero(mask.any(axis=0))[0]
+    half = model.fx * np.tan(np.radians(20.0))
+    assert cols.min() == pytest.approx(256 - half, abs=1.5) and cols.max() == pytest.approx(256 + half, abs=1.5)

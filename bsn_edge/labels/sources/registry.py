@@ -12,20 +12,23 @@ from bsn_edge.labels.sources.files import FilesDepth, FilesSeg, load_poses
 if TYPE_CHECKING:
     from bsn_edge.labels.config import LabelConfig
 
-DEPTH_KINDS = ("files", "onnx:MODEL", "rel:DIR[:inverse]")
+DEPTH_KINDS = ("files", "onnx:MODEL", "bsn:MODEL", "rel:DIR[:inverse]")
 SEG_KINDS = ("files", "onnx:MODEL")
 POSE_KINDS = ("files", "vo", "TRAJ.txt")
 
 
 def make_depth(spec: str, clip: ClipData, poses: np.ndarray, cfg: LabelConfig,
                frames: list[int], window: int | None = None) -> DepthSource:
-    """The depth source; a relative one (``onnx:``, ``rel:``) is aligned to the poses on ``frames``
+    """The depth source; a model's or relative one (``onnx:``, ``bsn:``, ``rel:``) is aligned to the poses on ``frames``
     (the label-rate frames; ``window`` as in ``AlignedDepth``) and may raise ``ClipRejectedError``."""
     if spec == "files":
         return FilesDepth(clip)
     if spec.startswith("onnx:"):
         from bsn_edge.labels.sources.onnx_depth import OnnxDepth
         return OnnxDepth.for_clip(spec[5:], clip, poses, cfg, frames, window)
+    if spec.startswith("bsn:"):
+        from bsn_edge.labels.sources.bsn_depth import BsnDepth
+        return BsnDepth.for_clip(spec[4:], clip, poses, cfg, frames, window)
     if spec.startswith("rel:"):
         from bsn_edge.labels.sources.rel_depth import RelFilesDepth
         return RelFilesDepth.from_spec(spec[4:], clip, poses, cfg.min_corr, frames, window)

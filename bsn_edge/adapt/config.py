@@ -1,0 +1,54 @@
+"""What ``bsn-adapt`` does, as one validated record (written beside its results)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class AdaptConfig:
+    """Labelling, fine-tuning and threshold choice of one adaptation.
+
+    rate, horizon_s, min_corr:  the T-frame labels (as ``bsn-label --rate --T --min-corr``)
+    holdout_fraction:           share of the user's labelled frames kept out of fine-tuning to
+                                choose the threshold and measure agreement (whole clips when
+                                there are several, else the end of the one clip)
+    steps, batch_size, lr:      fine-tuning of B (D stays as it is)
+    distill_weight:             the teacher's pairwise-similarity distillation, as in training
+    max_fps:                    frames are taken at most this often (visual odometry and labels
+                                need no more; a long recording stays small)
+    min_moving_s:               the least driving (image motion) a clip must hold to be labelled
+    seed:                       data order and augmentation
+    """
+
+    rate: float = 5.0
+    horizon_s: float = 5.0
+    min_corr: float = 0.7
+    holdout_fraction: float = 0.25
+    steps: int = 300
+    batch_size: int = 8
+    lr: float = 2e-4
+    distill_weight: float = 1.0
+    max_fps: float = 10.0
+    min_moving_s: float = 2.0
+    seed: int = 0
+    threads: int = 2
+
+    def __post_init__(self) -> None:
+        if not self.rate > 0 or not self.horizon_s > 0:
+            raise ValueError(f"rate and horizon must be positive, got {self.rate}, {self.horizon_s}")
+        if not 0 < self.holdout_fraction < 1:
+            raise ValueError(f"holdout_fraction must be in (0, 1), got {self.holdout_fraction}")
+        if self.steps < 1 or self.batch_size < 1:
+            raise ValueError(f"steps and batch_size must be >= 1, got {self.steps}, {self.batch_size}")
+        if not self.lr > 0 or self.distill_weight < 0:
+            raise ValueError("lr must be positive and distill_weight non-negative")
+        if not self.max_fps > 0:
+            raise ValueError(f"max_fps must be positive, got {self.max_fps}")
+        if self.min_moving_s < 0 or self.threads < 1:
+            raise ValueError("min_moving_s must be >= 0 and threads >= 1")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)

@@ -1,0 +1,86 @@
+"""The source run's own depth head and teacher as label sources: no outside model.
+
+The fused model (exported as ``bsn-export`` would, fp32) gives depth through ``bsn:MODEL`` (the
+frame warped into its camera with the clip's calibration, then aligned to the visual odometry's
+landmarks); the segmentation teacher the run distilled from gives road, sky and objects through
+``onnx:MODEL`` (Cityscapes trainIds, ImageNet-normalised RGB in).
+"""
+
+from __future__ import annotations
+
+import io
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from bsn_edge import semantics as sm
+from bsn_edge.export.pipeline import export_run
+from bsn_edge.labels.sources.base import SegSource
+from bsn_edge.models import create_teacher
+from bsn_edge.sequence.images import atomic_write_bytes
+from bsn_edge.train.run import Run
+
+OPSET = 17
+
+
+class _Scores(nn.Module):
+    """The teacher's class scores alone (its decoder features are for distillation)."""
+
+    def __init__(self, teacher: nn.Module) -> None:
+        super().__init__()
+        self.teacher = teacher
+
+    def forward(self, x: Tensor) -> Tensor:
+        return self.teacher(x)[0]
+
+
+def load_teacher(run: Run) -> tuple[nn.Module, tuple[int, int], float]:
+    """The run's segmentation teacher (eval mode), the input size it was trained at and its scale
+    of the model's input. ``FileNotFoundError`` when the run has none."""
+    state = run.load_teacher_state()
+    if state is None:
+        raise FileNotFoundError(f"{run.path}: no teacher ({run.TEACHER}/teacher.pt); bsn-adapt labels with the "
+                                "run's own teacher (train with bsn-train, which keeps it)")
+    t = run.config().get("teacher", {})
+    teacher = create_teacher(int(t.get("encoder", 18)), int(t.get("width", 128)))
+    teacher.load_state_dict(state)
+    h, w = run.card().input_size
+    scale = float(t.get("scale", 1.0))
+    size = (max(32, round(h * scale / 32) * 32), max(32, round(w * scale / 32) * 32))
+    return teacher.eval(), size, scale
+
+
+def export_teacher(run: Run, out: Path) -> Path:
+    """The run's teacher as ONNX: float RGB ``[1, 3, H, W]`` (ImageNet-normalised) in, 19 class
+    scores out, at the size it was trained at."""
+    teacher, (h, w), _ = load_teacher(run)
+    buf = io.BytesIO()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(_Scores(teacher).eval(), (torch.zeros(1, 3, h, w),), buf, input_names=["image"],
+                          output_names=["scores"], opset_version=OPSET, dynamo=False, do_constant_folding=True)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out, buf.getvalue())
+    return out
+
+
+def prepare_labeller(run: Run, depth_out: Path, teacher_out: Path) -> dict[str, str]:
+    """Both label models, made once (kept when already there)."""
+    if not depth_out.is_file():
+        export_run(run.path, depth_out, log=io.StringIO())
+    if not teacher_out.is_file():
+        export_teacher(run, teacher_out)
+    return {"depth": f"bsn:{depth_out}", "seg": f"onnx:{teacher_out}"}
+
+
+def road_share(seg: SegSource, frames: int, samples: int = 5) -> float:
+    """Share of the lower half of ``samples`` frames (evenly over ``frames``) that ``seg`` calls
+    road or sidewalk."""
+    shares = []
+    for i in np.linspace(0, frames - 1, min(samples, frames)).round().astype(int):
+        cls = seg(int(i))
+        shares.append(float(sm.is_traversable(cls[cls.shape[0] // 2:]).mean()))
+    return float(np.mean(shares)) if shares else 0.0

@@ -1,0 +1,251 @@
+"""``bsn-adapt``'s stages: import the user's clips, label them with the run's own depth, teacher and
+visual odometry, fine-tune B on the labels, choose the threshold on held-out clips, write the run."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from bsn_edge.adapt.clips import UnusableClipError, clip_name, import_clip, moving_seconds
+from bsn_edge.adapt.config import AdaptConfig
+from bsn_edge.adapt.finetune import agreement, at_threshold, finetune_b
+from bsn_edge.adapt.labeller import load_teacher, prepare_labeller, road_share
+from bsn_edge.adapt.workspace import AdaptFolder
+from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.data.dataset import BlindSpotDataset, Clip
+from bsn_edge.labels import LabelConfig, Sources
+from bsn_edge.labels.batch import label_many
+from bsn_edge.labels.sources.base import ClipData
+from bsn_edge.labels.sources.registry import make_seg
+from bsn_edge.sequence.folder import SequenceFolder
+from bsn_edge.sequence.meta import SequenceMeta
+from bsn_edge.train.run import Run
+
+EXPORT_NAME = "model_int8.onnx"
+MIN_ROAD_SHARE = 0.02     # of the lower half of a clip's frames, by the teacher: less is "no road found"
+
+
+class AdaptError(ValueError):
+    """An adaptation that cannot be done as asked (the message says what and where)."""
+
+
+def _prepare_out(src: Run, out: Path, settings: dict[str, Any], resume: bool, force: bool) -> AdaptFolder:
+    folder = AdaptFolder(out)
+    if out.resolve() == src.path.resolve():
+        raise AdaptError(f"--out {out} is the run being adapted; give the adapted run its own folder")
+    if resume and force:
+        raise AdaptError("--resume and --force contradict each other")
+    taken = Run(out).exists() or folder.exists()
+    if taken and not (resume or force):
+        raise AdaptError(f"{out} already holds a run or an adaptation; pass --resume to continue it or --force to "
+                         "start again")
+    if taken and resume:
+        old = folder.read_config() if folder.exists() else {}
+        if old.get("labelling") != settings:
+            raise AdaptError(f"{out} was labelled from other inputs or label settings; --force starts again")
+    if force:
+        for p in (Run(out).model_path, Run(out).checkpoint_path, Run(out).state_path, Run(out).config_path):
+            p.unlink(missing_ok=True)
+        shutil.rmtree(Run(out).teacher_path.parent, ignore_errors=True)
+        shutil.rmtree(folder.root, ignore_errors=True)
+    return folder
+
+
+def _split(clips: list[Clip], fraction: float, horizon_frames: int, seed: int) -> tuple[list[Clip], list[Clip]]:
+    """Held-out part of the labelled frames: whole clips when there are several, else the end of
+    the one clip (after a gap of ``horizon_frames`` label frames when the clip affords it)."""
+    if len(clips) >= 2:
+        order = sorted(clips, key=lambda c: hashlib.sha256(f"{seed}:{c.path.name}".encode()).hexdigest())
+        k = min(max(1, round(fraction * len(clips))), len(clips) - 1)
+        return order[k:], order[:k]
+    c = clips[0]
+    n = len(c.frames)
+    cut = round(n * (1 - fraction))
+    # a gap of T keeps the training labels from looking into the held-out frames, when the clip
+    # is long enough to afford it
+    gap = horizon_frames if cut - horizon_frames >= max(4, n // 4) else 0
+    train, held = c.frames[:cut - gap], c.frames[cut:]
+    if not held or not train:
+        raise AdaptError(f"{c.path}: {n} labelled frames are too few to hold some out; record longer or add a clip")
+    return [dataclasses.replace(c, frames=train)], [dataclasses.replace(c, frames=held)]
+
+
+def _coverage(seq: Path, label: str) -> dict[str, Any]:
+    rep = json.loads(SequenceFolder(seq).labels(label).report_path.read_text())
+    pf = rep.get("per_frame", [])
+    vis = sum(f["visible_px"] for f in pf)
+    return {"label_frames": len(pf), "blind_spot_share_of_v": round(sum(f["blindspot_in_v_px"] for f in pf)
+                                                                     / max(vis, 1), 4),
+            "v_share_of_frame": round(vis / max(len(pf) * rep["size"][0] * rep["size"][1], 1), 4),
+            "depth": rep.get("sources_detail", {}).get("depth", {}).get("correlation")}
+
+
+def _labelling_settings(run_dir: str | Path, weights: str, videos: list[str | Path], calib: str | Path | None,
+                        fps: float | None, cfg: AdaptConfig) -> dict[str, Any]:
+    """What the imported clips and their labels depend on (a resumed adaptation must match it;
+    fine-tuning settings may change between resumes)."""
+    c = cfg.to_dict()
+    return {"run": str(Path(run_dir).resolve()), "weights_sha256": weights,
+            "videos": [str(Path(v).resolve()) for v in videos], "calib": str(calib or ""), "fps": fps,
+            **{k: c[k] for k in ("rate", "horizon_s", "min_corr", "max_fps", "min_moving_s")}}
+
+
+def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: AdaptConfig,
+                calib: Calibration | None, fps: float | None, report: dict[str, Any],
+                progress: bool = True) -> list[Clip]:
+    """Import ``videos`` into ``folder`` and label them with ``src``'s depth, teacher and the
+    built-in VO; clips that cannot be used go to ``report["rejected"]`` with the reason. Both steps
+    resume: a finished import and finished label frames are kept."""
+    card = src.card()
+    lcfg = LabelConfig(rate=cfg.rate, horizon_s=cfg.horizon_s, min_corr=cfg.min_corr)
+    hfov = float(np.degrees(2 * np.arctan(card.camera.width / (2 * card.camera.fx))))
+    names: set[str] = set()
+    usable = []
+    with tqdm(desc="import", unit="frame", disable=None if progress else True) as bar:
+        for v in videos:
+            name = clip_name(Path(v), names)
+            names.add(name)
+            try:
+                imp = import_clip(v, folder.clip(name), calib, hfov, fps, cfg.max_fps, progress=bar.update)
+                need = cfg.horizon_s + 1.0 / cfg.rate
+                if imp.frames / imp.fps < need:
+                    raise UnusableClipError(f"too short: {imp.frames / imp.fps:.1f} s, a label needs {need:.1f} s "
+                                            f"(T = {cfg.horizon_s:g} s)")
+                moving = moving_seconds(imp.path, imp.fps)
+                if moving < cfg.min_moving_s:
+                    raise UnusableClipError(f"standing still: the image moves in {moving:.1f} s of "
+                                            f"{imp.frames / imp.fps:.1f} s, at least {cfg.min_moving_s:g} s needed")
+            except UnusableClipError as e:
+                report["rejected"][name] = str(e)
+                continue
+            report["clips"][name] = {"source": imp.source, "frames": imp.frames, "fps": imp.fps,
+                                     "camera": imp.camera, "moving_s": round(moving, 1)}
+            usable.append(imp)
+
+    specs = prepare_labeller(src, folder.depth_model, folder.teacher_model)
+    road_ok = []
+    for imp in usable:
+        share = road_share(make_seg(specs["seg"], ClipData(imp.path, SequenceMeta.read(imp.path), imp.frames)),
+                           imp.frames)
+        report["clips"][imp.name]["road_share"] = round(share, 3)
+        if share < MIN_ROAD_SHARE:
+            report["rejected"][imp.name] = (f"no road found: the teacher sees road in {100 * share:.1f} % of the lower "
+                                            f"half of the frames (at least {100 * MIN_ROAD_SHARE:g} % needed)")
+            del report["clips"][imp.name]
+        else:
+            road_ok.append(imp)
+    sources = Sources(depth=specs["depth"], seg=specs["seg"], poses="vo")
+    with tqdm(total=0, desc="label", unit="frame", disable=None if progress else True) as bar:
+        def on_total(n: int) -> None:
+            bar.total = (bar.total or 0) + n
+            bar.refresh()
+        results = label_many([i.path for i in road_ok], lcfg, sources, jobs=1, progress=bar.update,
+                             on_total=on_total)
+    labelled = []
+    for imp, r in zip(road_ok, results, strict=True):
+        frames = tuple(SequenceFolder(imp.path).labels(lcfg.name).frames()) if r.status == "ok" else ()
+        if frames:
+            report["clips"][imp.name].update(_coverage(imp.path, lcfg.name))
+            labelled.append(Clip(imp.path, "user", frames))
+        else:
+            report["rejected"][imp.name] = f"labels {r.status}: {r.message or 'no label frame'}"
+            report["clips"].pop(imp.name, None)
+    return labelled
+
+
+def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, report: dict[str, Any],
+         export: bool = False, progress: bool = True) -> dict[str, Any]:
+    """Fine-tune ``src``'s B on the labelled clips, choose the threshold on the held-out part by
+    agreement with its labels, write the adapted run to ``out`` (and, with ``export``, its int8
+    model); fills and returns ``report``."""
+    import torch
+
+    model, card = src.load_model()
+    teacher, _, teacher_scale = load_teacher(src)
+    lcfg = LabelConfig(rate=cfg.rate, horizon_s=cfg.horizon_s, min_corr=cfg.min_corr)
+    train, held = _split(labelled, cfg.holdout_fraction, lcfg.horizon_frames, cfg.seed)
+    size = card.input_size
+    train_ds = BlindSpotDataset(train, size, augment=True, label_name=lcfg.name, seed=cfg.seed,
+                                camera=card.camera, mounting=card.mounting)
+    held_ds = BlindSpotDataset(held, size, label_name=lcfg.name, camera=card.camera, mounting=card.mounting)
+    torch.set_num_threads(cfg.threads)
+    before = agreement(model, held_ds)
+    grid = tuple(src.config().get("train", {}).get("distill_grid", (8, 16)))
+    use_teacher = bool(card.spec.get("distill", True))
+    losses = finetune_b(model, train_ds, cfg, teacher if use_teacher else None, teacher_scale, grid, progress)
+    after = agreement(model, held_ds)
+    threshold, best = after.best()
+    b_th, b_best = before.best()
+    report["split"] = {"train_frames": len(train_ds), "held_out_frames": len(held_ds),
+                       "train": [f"{c.path.name}[{c.frames[0]}..{c.frames[-1]}]" for c in train],
+                       "held_out": [f"{c.path.name}[{c.frames[0]}..{c.frames[-1]}]" for c in held]}
+    report["agreement"] = {
+        "measure": "IoU inside V against the held-out T-frame labels of the user's clips",
+        "before": at_threshold(before, card.threshold), "before_at_its_best_threshold": {"threshold": b_th, **b_best},
+        "after": {"threshold": threshold, **best}}
+    report["fine_tune"] = {"steps": cfg.steps, "seed": cfg.seed, "loss_first_last": [losses[0], losses[-1]],
+                           "trained": "B (D frozen)"}
+
+    out = Path(out)
+    dst = Run(out)
+    fields = {f.name: getattr(card, f.name) for f in dataclasses.fields(card) if f.name != "weights_sha256"}
+    fields.update(threshold=threshold, graph_sha256="", self_test=None)
+    new_card = dst.save(model, fields, {"adapted_from": str(src.path), "label": lcfg.name,
+                                        "train_clips": sorted({c.path.name for c in train}),
+                                        "val_clips": sorted({c.path.name for c in held}), "val": best})
+    dst.write_config(src.config())
+    dst.teacher_path.parent.mkdir(exist_ok=True)
+    shutil.copy2(src.teacher_path, dst.teacher_path)     # a later adaptation of this run labels with it
+    report["weights_sha256"] = new_card.weights_sha256
+    if export:
+        from bsn_edge.export.pipeline import export_run
+
+        path = out / EXPORT_NAME
+        summary = export_run(out, path, int8=True, calib=max(labelled, key=lambda c: len(c.frames)).path)
+        report["export"] = {"path": str(path), "int8_vs_fp32": summary["int8_vs_fp32"]}
+    return report
+
+
+def adapt(run_dir: str | Path, videos: list[str | Path], out: str | Path, cfg: AdaptConfig | None = None,
+          calib: str | Path | None = None, fps: float | None = None, export: bool = False,
+          resume: bool = False, force: bool = False, progress: bool = True) -> dict[str, Any]:
+    """Adapt the run ``run_dir`` to the recordings ``videos`` (videos, image folders or sequence
+    folders; only their frames and camera are read) and write the adapted run to ``out``; returns
+    the report (also ``out/adapt/report.json``). Clips that cannot be used are reported with the
+    reason; ``AdaptError`` when none can, or when ``out`` is taken (see ``resume`` / ``force``)."""
+    cfg = cfg or AdaptConfig()
+    t0 = time.perf_counter()
+    src = Run(run_dir)
+    try:
+        card = src.card()
+        src.load_model()
+        load_teacher(src)
+    except (FileNotFoundError, ValueError) as e:
+        raise AdaptError(str(e)) from None
+    if card.threshold is None:
+        raise AdaptError(f"{run_dir}: the run has no decision threshold (training did not finish)")
+    cal = Calibration.read(calib) if calib else None
+    out = Path(out)
+    labelling = _labelling_settings(run_dir, card.weights_sha256, videos, calib, fps, cfg)
+    folder = _prepare_out(src, out, labelling, resume, force)
+    folder.write_json(folder.config_path, {"labelling": labelling, "config": cfg.to_dict()})
+    report: dict[str, Any] = {"run": str(run_dir), "out": str(out), "config": cfg.to_dict(), "clips": {},
+                              "rejected": {}}
+    labelled = label_clips(src, videos, folder, cfg, cal, fps, report, progress)
+    if not labelled:
+        folder.write_json(folder.report_path, {**report, "status": "failed"})
+        why = "; ".join(f"{k}: {v}" for k, v in report["rejected"].items()) or "no clip given"
+        raise AdaptError(f"no clip could be labelled ({why})")
+    tune(src, labelled, out, cfg, report, export, progress)
+    report["seconds"] = round(time.perf_counter() - t0, 1)
+    report["status"] = "ok"
+    folder.write_json(folder.report_path, report)
+    return report

@@ -1,0 +1,84 @@
+"""A trained run -> the sealed ONNX file the runtime reads (fp32 or int8), with its summary beside it.
+
+One function for ``bsn-export`` and for anything else that ships a run (``bsn-adapt --export``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bsn_edge.export.calib_frames import load_frames
+from bsn_edge.export.fused import check_parity, to_onnx
+from bsn_edge.export.quantize import QuantConfig, quantize
+from bsn_edge.runtime.model_file import session
+from bsn_edge.sequence.images import atomic_write_bytes
+from bsn_edge.train.run import Run
+
+
+def export_run(checkpoint: str | Path, out: str | Path, size: tuple[int, int] | None = None, int8: bool = False,
+               calib: str | Path | None = None, calib_frames: int = 64, qcfg: QuantConfig | None = None,
+               log=sys.stderr) -> dict[str, Any]:
+    """Export the run ``checkpoint`` to ``out`` (and ``out`` with ``.json``: the summary, returned).
+
+    fp32 parity with torch is checked (``ValueError`` past the tolerance); with ``int8`` the graph
+    is statically quantized on ``calib_frames`` frames of ``calib`` and compared with fp32. Raises
+    ``FileNotFoundError`` / ``ValueError`` for a missing or unfinished run or unreadable frames;
+    ``out`` is replaced only when everything succeeded."""
+    out = Path(out)
+    if int8 and not calib:
+        raise ValueError("int8 export needs calibration frames (a folder of images or a video)")
+    if calib_frames < 1:
+        raise ValueError(f"calibration frames must be >= 1, got {calib_frames}")
+    qcfg = qcfg or QuantConfig()
+    model, card = Run(checkpoint).load_model()
+    if card.threshold is None:
+        raise ValueError(f"{checkpoint}: the run has no decision threshold yet (training did not finish)")
+    h, w = size or card.input_size
+    card = card.at_size(h, w)
+    frames = load_frames(calib, (h, w), calib_frames, card=card) if calib else None
+    out.parent.mkdir(parents=True, exist_ok=True)
+    check_frames = list(frames[:4]) if frames is not None else \
+        [np.random.default_rng(i).integers(0, 256, (h, w, 3), dtype=np.uint8) for i in range(2)]
+    summary: dict[str, Any] = {"checkpoint": str(checkpoint), "size": [h, w]}
+    with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
+        fp32 = Path(tmp) / "fp32.onnx"
+        print(f"exporting {card.variant} at {h}x{w} ...", file=log)
+        sealed = to_onnx(model, fp32, card)
+        summary["parity_fp32"] = check_parity(model, fp32, check_frames)
+        summary["fp32_bytes"] = fp32.stat().st_size
+        final = fp32
+        if int8:
+            print(f"quantizing on {len(frames)} calibration frames ({qcfg.scheme()}) ...", file=log)
+            q = Path(tmp) / "int8.onnx"
+            info = quantize(fp32, q, frames, qcfg)
+            sealed = info.pop("card")
+            summary.update(int8_bytes=q.stat().st_size, quantization=info,
+                           int8_vs_fp32=compare(fp32, q, frames, sealed.threshold))
+            final = q
+        final.replace(out)
+    card_record = sealed.to_dict()
+    card_record["self_test"] = dataclasses.asdict(sealed.self_test) | {"prob": "...", "depth": "..."}
+    summary["card"] = card_record
+    atomic_write_bytes(out.with_suffix(".json"), (json.dumps(summary, indent=1) + "\n").encode())
+    return summary
+
+
+def compare(fp32: Path, int8: Path, frames: np.ndarray, threshold: float) -> dict[str, float]:
+    """How far the int8 model strays from fp32 on ``frames``."""
+    a, b = session(fp32), session(int8)
+    dp, agree, rel = 0.0, [], []
+    for f in frames:
+        pa, da = a.run(None, {"frame": f[None]})
+        pb, db = b.run(None, {"frame": f[None]})
+        dp = max(dp, float(np.abs(pa - pb).max()))
+        agree.append(float(((pa >= threshold) == (pb >= threshold)).mean()))
+        rel.append(float(np.median(np.abs(da - db) / np.maximum(da, 1e-3))))
+    return {"frames": len(frames), "max_abs_prob": dp, "mask_agreement": float(np.mean(agree)),
+            "depth_median_rel": float(np.median(rel))}

@@ -1,0 +1,165 @@
+"""bsn-adapt: unlabelled clips in, an adapted run out; nothing reads a clip's ground truth."""
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from bsn_edge.adapt import clips as clips_mod
+from bsn_edge.adapt import pipeline
+from bsn_edge.adapt.labeller import export_teacher, load_teacher
+from bsn_edge.cli import adapt as adapt_cli
+from bsn_edge.cli import label as label_cli
+from bsn_edge.cli import synth as synth_cli
+from bsn_edge.cli import train as train_cli
+from bsn_edge.labels.sources.base import SegSource
+from bsn_edge.labels.sources.onnx_model import OnnxImageModel
+from bsn_edge.sequence import read_depth
+from bsn_edge.synth import SynthConfig, write_clip
+from bsn_edge.train import Run
+from tests.train.test_training import SMOKE
+
+GROUND_TRUTH = ("depth", "semantic", "poses.txt", "bsgt", "boxes")
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """A smoke-trained run (weights, threshold and teacher): enough to fine-tune, not to label."""
+    root = tmp_path_factory.mktemp("adapt_run")
+    data = root / "data"
+    assert synth_cli.main([str(data / "town_0"), "--frames", "30", "--size", "64x128", "--seed", "0",
+                           "--no-video"]) == 0
+    assert label_cli.main([str(data / "town_0"), "--T", "2", "--jobs", "1"]) == 0
+    assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(root / "run"), "--quiet",
+                           "--set", "data.label=T2s"]) == 0
+    return root / "run"
+
+
+@pytest.fixture(scope="module")
+def user_clip(tmp_path_factory):
+    """A drive as a user would bring it: frames and a camera file only. Its depth and semantics
+    are kept elsewhere (``hidden``) for the stand-in label models, then removed from the clip."""
+    root = tmp_path_factory.mktemp("adapt_clip")
+    seq, hidden = root / "drive", root / "hidden"
+    write_clip(SynthConfig(frames=40, height=256, width=512, fps=10.0, camera="fixed", seed=5), seq, video=False)
+    (hidden / "rel").mkdir(parents=True)
+    shutil.copytree(seq / "semantic", hidden / "semantic")
+    for i in range(40):
+        d = read_depth(seq / "depth" / f"{i:06d}.png")
+        np.save(hidden / "rel" / f"{i:06d}.npy", np.where(d > 0, 9.0 / np.maximum(d, 1e-3), 0) + 0.05)
+    for name in GROUND_TRUTH:
+        p = seq / name
+        shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
+    return seq, hidden
+
+
+class HiddenSeg(SegSource):
+    """Stand-in for a good segmentation teacher: the clip's own semantics, read from outside it."""
+
+    def __init__(self, folder, clip):
+        self.folder, self.clip = folder, clip
+
+    def __call__(self, i):
+        return cv2.imread(str(self.folder / f"{i:06d}.png"), cv2.IMREAD_UNCHANGED)
+
+
+@pytest.fixture
+def stand_in_labellers(monkeypatch, user_clip):
+    """The smoke run's depth and teacher cannot label anything, so these tests give bsn-adapt
+    label models that can: relative depth and semantics written outside the clip. Import, VO,
+    labelling, fine-tuning, threshold choice and writing the run are bsn-adapt's own."""
+    _, hidden = user_clip
+    real_make_seg = pipeline.make_seg
+
+    def make_seg(spec, clip):
+        return HiddenSeg(hidden / "semantic", clip) if spec == "hidden" else real_make_seg(spec, clip)
+
+    monkeypatch.setattr(pipeline, "prepare_labeller",
+                        lambda src, depth, teacher: {"depth": f"rel:{hidden / 'rel'}:inverse", "seg": "hidden"})
+    monkeypatch.setattr(pipeline, "make_seg", make_seg)
+    monkeypatch.setattr("bsn_edge.labels.generator.make_seg", make_seg)
+
+
+def test_adapt_runs_on_a_clip_without_ground_truth(run, user_clip, stand_in_labellers, tmp_path, capsys):
+    seq, _ = user_clip
+    assert not any((seq / n).exists() for n in GROUND_TRUTH)
+    out = tmp_path / "adapted"
+    assert adapt_cli.main(["--run", str(run), "--video", str(seq), "--out", str(out), "--T", "1", "--steps", "3",
+                           "--quiet"]) == 0
+    rep = json.loads((out / "adapt" / "report.json").read_text())
+    assert rep["status"] == "ok" and not rep["rejected"], rep["rejected"]
+    clip = rep["clips"]["drive"]
+    assert clip["label_frames"] > 0 and clip["camera"] == "the clip's camera file"
+    assert 0 < clip["blind_spot_share_of_v"] < 1
+    imported = out / "adapt" / "clips" / "drive"
+    assert not any((imported / n).exists() for n in GROUND_TRUTH)
+    label_report = json.loads((imported / "labels" / "T1s" / "report.json").read_text())
+    assert label_report["sources_detail"]["poses"]["kind"] == "vo"
+    a = rep["agreement"]
+    assert 0 <= a["before"]["iou"] <= 1 and 0 < a["after"]["threshold"] < 1
+    model, card = Run(out).load_model()          # a run like any other: verified weights, its threshold
+    assert card.threshold == a["after"]["threshold"] and card.variant == Run(run).card().variant
+    old, _ = Run(run).load_model()
+    same = [torch.equal(p, q) for p, q in zip(old.depth_net.parameters(), model.depth_net.parameters(), strict=True)]
+    assert all(same), "D must stay as trained"
+    assert not all(torch.equal(p, q) for p, q in zip(old.blindspot.parameters(), model.blindspot.parameters(),
+                                                      strict=True))
+    assert "agreement with held-out labels" in capsys.readouterr().out
+
+    # the same command again is refused; --resume keeps the labels and fine-tunes again
+    assert adapt_cli.main(["--run", str(run), "--video", str(seq), "--out", str(out), "--T", "1", "--quiet"]) == 2
+    assert "--resume" in capsys.readouterr().err
+    labels = imported / "labels" / "T1s" / "blindspot"
+    stamp = {p.name: p.stat().st_mtime_ns for p in labels.iterdir()}
+    assert adapt_cli.main(["--run", str(run), "--video", str(seq), "--out", str(out), "--T", "1", "--steps", "2",
+                           "--seed", "1", "--resume", "--quiet"]) == 0
+    assert {p.name: p.stat().st_mtime_ns for p in labels.iterdir()} == stamp
+    assert json.loads((out / "adapt" / "report.json").read_text())["fine_tune"]["seed"] == 1
+
+
+def test_unusable_clips_are_rejected_with_the_reason(run, stand_in_labellers, tmp_path, capsys):
+    still = tmp_path / "still"
+    still.mkdir()
+    frame = np.random.default_rng(0).integers(0, 256, (96, 192, 3), dtype=np.uint8)
+    for i in range(30):
+        cv2.imwrite(str(still / f"{i:04d}.png"), frame)
+    short = tmp_path / "short"
+    short.mkdir()
+    for i in range(4):
+        cv2.imwrite(str(short / f"{i:04d}.png"), frame)
+    code = adapt_cli.main(["--run", str(run), "--video", str(still), str(short), str(tmp_path / "nope.mp4"),
+                           "--fps", "10", "--out", str(tmp_path / "o"), "--T", "1", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "no clip could be labelled" in err
+    assert "standing still" in err and "too short" in err and "nope.mp4: not found" in err
+    rep = json.loads((tmp_path / "o" / "adapt" / "report.json").read_text())
+    assert rep["status"] == "failed" and set(rep["rejected"]) == {"still", "short", "nope"}
+    # a folder of images without a rate is refused before anything is written
+    assert adapt_cli.main(["--run", str(run), "--video", str(still), "--out", str(tmp_path / "o2"), "--quiet"]) == 2
+    assert "pass --fps" in capsys.readouterr().err
+
+
+def test_moving_seconds_sees_a_drive_and_not_a_parked_car(user_clip, tmp_path):
+    seq, _ = user_clip
+    assert clips_mod.moving_seconds(seq, 10.0) > 3.0
+    parked = tmp_path / "parked"
+    (parked / "rgb").mkdir(parents=True)
+    for i in range(20):
+        shutil.copy(seq / "rgb" / "000000.png", parked / "rgb" / f"{i:06d}.png")
+    assert clips_mod.moving_seconds(parked, 10.0) == 0.0
+
+
+def test_the_teacher_label_model_matches_the_torch_teacher(run, tmp_path):
+    """The teacher exported for labelling gives the torch teacher's classes (a second runtime)."""
+    path = export_teacher(Run(run), tmp_path / "teacher.onnx")
+    teacher, (h, w), _ = load_teacher(Run(run))
+    frame = np.random.default_rng(1).integers(0, 256, (h, w, 3), dtype=np.uint8)
+    scores = OnnxImageModel(path)(frame)
+    rgb = (frame[..., ::-1].astype(np.float32) / 255.0 - [0.485, 0.456, 0.406]) / [0.229, 0.224, 0.225]
+    with torch.no_grad():
+        ref = teacher(torch.from_numpy(rgb.transpose(2, 0, 1)[None].astype(np.float32)))[0][0].numpy()
+    assert scores.shape == (19, h, w)
+    np.testing.assert_allclose(scores, ref, atol=1e-3)
