@@ -31,6 +31,7 @@ from bsn_edge.train.run import Run
 
 EXPORT_NAME = "model_int8.onnx"
 MIN_ROAD_SHARE = 0.02     # of the lower half of a clip's frames, by the teacher: less is "no road found"
+MIN_BLIND_SPOT_SHARE = 1e-3   # of V over a clip's labels: less teaches B that nothing is ever hidden
 
 
 class AdaptError(ValueError):
@@ -152,12 +153,21 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
     labelled = []
     for imp, r in zip(road_ok, results, strict=True):
         frames = tuple(SequenceFolder(imp.path).labels(lcfg.name).frames()) if r.status == "ok" else ()
-        if frames:
-            report["clips"][imp.name].update(_coverage(imp.path, lcfg.name))
-            labelled.append(Clip(imp.path, "user", frames))
-        else:
+        if not frames:
             report["rejected"][imp.name] = f"labels {r.status}: {r.message or 'no label frame'}"
             report["clips"].pop(imp.name, None)
+            continue
+        cov = _coverage(imp.path, lcfg.name)
+        if cov["blind_spot_share_of_v"] < MIN_BLIND_SPOT_SHARE:
+            report["rejected"][imp.name] = (
+                f"no blind spot in its labels ({100 * cov['blind_spot_share_of_v']:.2f} % of V over "
+                f"{cov['label_frames']} frames, at least {100 * MIN_BLIND_SPOT_SHARE:g} % needed): nothing within "
+                f"{lcfg.vis_range:g} m hid road that came into view; fine-tuning on it would teach that nothing is "
+                "ever hidden. Record streets with parked cars, traffic or bends nearby")
+            report["clips"].pop(imp.name, None)
+            continue
+        report["clips"][imp.name].update(cov)
+        labelled.append(Clip(imp.path, "user", frames))
     return labelled
 
 
@@ -178,6 +188,9 @@ def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, repo
     held_ds = BlindSpotDataset(held, size, label_name=lcfg.name, camera=card.camera, mounting=card.mounting)
     torch.set_num_threads(cfg.threads)
     before = agreement(model, held_ds)
+    if before.counts[0].tp + before.counts[0].fn == 0:
+        raise AdaptError(f"the held-out frames ({', '.join(c.path.name for c in held)}) hold no blind spot: agreement "
+                         "cannot be measured nor a threshold chosen; add clips or hold out more (--holdout)")
     grid = tuple(src.config().get("train", {}).get("distill_grid", (8, 16)))
     use_teacher = bool(card.spec.get("distill", True))
     losses = finetune_b(model, train_ds, cfg, teacher if use_teacher else None, teacher_scale, grid, progress)
@@ -244,7 +257,11 @@ def adapt(run_dir: str | Path, videos: list[str | Path], out: str | Path, cfg: A
         folder.write_json(folder.report_path, {**report, "status": "failed"})
         why = "; ".join(f"{k}: {v}" for k, v in report["rejected"].items()) or "no clip given"
         raise AdaptError(f"no clip could be labelled ({why})")
-    tune(src, labelled, out, cfg, report, export, progress)
+    try:
+        tune(src, labelled, out, cfg, report, export, progress)
+    except AdaptError:
+        folder.write_json(folder.report_path, {**report, "status": "failed"})
+        raise
     report["seconds"] = round(time.perf_counter() - t0, 1)
     report["status"] = "ok"
     folder.write_json(folder.report_path, report)

@@ -56,7 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        cfg = AdaptConfig(rate=args.rate, horizon_s=args.horizon, min_corr=args.min_corr, holdout_fraction=args.holdout, steps=args.steps,
+        cfg = AdaptConfig(rate=args.rate, horizon_s=args.horizon, min_corr=args.min_corr,
+                          holdout_fraction=args.holdout, steps=args.steps,
                           lr=args.lr, seed=args.seed)
         rep = adapt(args.run, args.video, args.out, cfg, calib=args.calib, fps=args.fps, export=args.export,
                     resume=args.resume, force=args.force, progress=not args.quiet)

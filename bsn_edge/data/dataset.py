@@ -148,7 +148,8 @@ class BlindSpotDataset(Dataset):
         lab = seq.labels(self.label_name)
         warp = self.warps(clip)
         rgb = read_rgb(clip.path, f)
-        sem_raw = cv2.imread(str(seq.semantic(f)), cv2.IMREAD_UNCHANGED)
+        sem_p = seq.semantic(f)
+        sem_raw = cv2.imread(str(sem_p), cv2.IMREAD_UNCHANGED) if sem_p.is_file() else None   # none: a user's clip
         sem = sem_raw if sem_raw is not None else np.full(rgb.shape[:2], sm.IGNORE, np.uint8)
         dep_p = seq.depth(f)
         depth = read_depth(dep_p) if dep_p.exists() else np.zeros(rgb.shape[:2], np.float32)

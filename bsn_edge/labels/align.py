@@ -14,13 +14,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KINDS = ("depth", "inverse_depth")
+KINDS = ("depth", "inverse_depth", "metric_depth")
 MIN_POINTS = 12
+METRIC_NEAR_M = 20.0   # a metric prediction's scale is fitted on the landmarks it puts nearer than this
 
 
 @dataclass(frozen=True)
 class Alignment:
-    """``metric = scale * pred + shift`` in the prediction's space (depth or inverse depth)."""
+    """``metric = scale * pred + shift`` in the prediction's space (depth or inverse depth; for
+    ``metric_depth``, a network already in metres, the shift is 0 and only the scale is fitted)."""
 
     scale: float
     shift: float
@@ -48,6 +50,8 @@ def fit(pred: np.ndarray, target_depth: np.ndarray, kind: str = "depth", trim: f
     pred, target = pred[ok], target[ok]
     if len(pred) < MIN_POINTS:
         raise ValueError(f"too few landmarks to align depth ({len(pred)} < {MIN_POINTS})")
+    if kind == "metric_depth":
+        return _fit_scale(pred, target, trim)
     y = 1.0 / target if kind == "inverse_depth" else target
     keep = np.ones(len(y), bool)
     for _ in range(2):
@@ -67,6 +71,33 @@ def fit(pred: np.ndarray, target_depth: np.ndarray, kind: str = "depth", trim: f
     return Alignment(float(s), float(b), kind, corr, int(keep.sum()))
 
 
+def _fit_scale(pred: np.ndarray, target: np.ndarray, trim: float) -> Alignment:
+    """A metric prediction's one error that landmarks can fix, its scale (a camera it was not
+    trained for, monocular odometry's units): the robust median of ``log(target / pred)``. An
+    affine fit in depth space would let the far landmarks, where a network errs most, bend the
+    near road, where it is right."""
+    ok = pred > 0
+    pred, target = pred[ok], target[ok]
+    if len(pred) < MIN_POINTS:
+        raise ValueError(f"too few landmarks to align depth ({len(pred)} < {MIN_POINTS})")
+    near = pred < METRIC_NEAR_M      # where a metric network is most right (and labels are made)
+    if near.sum() >= MIN_POINTS:
+        pred, target = pred[near], target[near]
+    lr = np.log(target) - np.log(pred)
+    keep = np.ones(len(lr), bool)
+    for _ in range(2):
+        m = np.median(lr[keep])
+        mad = np.median(np.abs(lr[keep] - m)) * 1.4826 + 1e-12
+        keep = np.abs(lr - m) < trim * mad
+        if keep.sum() < MIN_POINTS:
+            keep = np.ones(len(lr), bool)
+            break
+    s = float(np.exp(np.median(lr[keep])))
+    fitted, yk = s * pred[keep], target[keep]
+    corr = float(np.corrcoef(fitted, yk)[0, 1]) if np.std(fitted) > 0 and np.std(yk) > 0 else 0.0
+    return Alignment(s, 0.0, "metric_depth", corr, int(keep.sum()))
+
+
 def pooled_correlation(preds: list[np.ndarray], targets: list[np.ndarray], aligns: list[Alignment]) -> float:
     """Correlation of aligned predictions with landmarks over a whole clip (in the fit's space)."""
     xs, ys = [], []
@@ -75,6 +106,8 @@ def pooled_correlation(preds: list[np.ndarray], targets: list[np.ndarray], align
         xs.append(a.scale * p + a.shift)
         ys.append(y)
     x, y = np.concatenate(xs), np.concatenate(ys)
+    ok = np.isfinite(x) & np.isfinite(y)       # pixels a prediction does not cover carry NaN
+    x, y = x[ok], y[ok]
     if len(x) < MIN_POINTS or np.std(x) == 0 or np.std(y) == 0:
         return 0.0
     return float(np.corrcoef(x, y)[0, 1])

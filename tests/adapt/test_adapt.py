@@ -163,3 +163,14 @@ def test_the_teacher_label_model_matches_the_torch_teacher(run, tmp_path):
         ref = teacher(torch.from_numpy(rgb.transpose(2, 0, 1)[None].astype(np.float32)))[0][0].numpy()
     assert scores.shape == (19, h, w)
     np.testing.assert_allclose(scores, ref, atol=1e-3)
+
+
+def test_a_clip_whose_labels_hold_no_blind_spot_is_not_trained_on(run, user_clip, stand_in_labellers, tmp_path,
+                                                                  monkeypatch, capsys):
+    """Fine-tuning on labels with no blind spot would teach B that nothing is ever hidden."""
+    seq, _ = user_clip
+    monkeypatch.setattr(pipeline, "MIN_BLIND_SPOT_SHARE", 1.01)    # no clip can have more than all of V
+    out = tmp_path / "o"
+    assert adapt_cli.main(["--run", str(run), "--video", str(seq), "--out", str(out), "--T", "1", "--quiet"]) == 2
+    assert "no blind spot in its labels" in capsys.readouterr().err
+    assert not Run(out).exists(), "no run may be written from such labels"

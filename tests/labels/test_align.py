@@ -40,3 +40,27 @@ def test_too_few_landmarks_and_unknown_kind():
         fit(np.ones(5), np.ones(5))
     with pytest.raises(ValueError, match="unknown prediction kind"):
         fit(np.ones(50), np.ones(50), "disparity")
+
+
+def test_pooled_correlation_leaves_out_pixels_the_prediction_does_not_cover():
+    rng = np.random.default_rng(3)
+    z = rng.uniform(3, 40, 400)
+    pred = 0.5 * z + 1.0
+    pred[::7] = np.nan                           # outside a narrow camera's view
+    a = fit(pred, z, "depth")
+    corr = pooled_correlation([pred], [z], [a])
+    assert np.isfinite(corr) and corr > 0.999
+
+
+def test_a_metric_prediction_is_scaled_where_it_is_near_and_far_errors_do_not_bend_it():
+    """A metric network 10 % short everywhere near, and far off beyond 20 m (where networks err
+    most): the scale-only fit recovers 1 / 0.9 from the near landmarks, with no shift."""
+    rng = np.random.default_rng(4)
+    z = np.concatenate([rng.uniform(3, 18, 300), rng.uniform(30, 80, 300)])
+    pred = np.where(z < 20, 0.9 * z, 0.5 * z) * np.exp(rng.normal(0, 0.02, len(z)))
+    a = fit(pred, z, "metric_depth")
+    assert a.shift == 0.0 and a.scale == pytest.approx(1 / 0.9, rel=0.01)
+    near = z < 18
+    assert np.median(np.abs(a.apply(pred)[near] - z[near]) / z[near]) < 0.03
+    affine = fit(pred, z, "depth")
+    assert np.median(np.abs(affine.apply(pred)[near] - z[near]) / z[near]) > 0.05, "the affine fit bends the near range"

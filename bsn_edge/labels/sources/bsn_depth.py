@@ -20,7 +20,8 @@ class BsnDepth(AlignedDepth):
     camera file, or ``--calib``; without one, the clip's intrinsics at the model's mounting), the
     model's metric depth is brought back to the clip's camera (``ModelFrame.depth_to_raw``), and,
     like any model depth, aligned to the landmarks with the same rejection rule: the alignment
-    corrects what the model's metres get wrong on this camera, and refuses a clip it cannot fit.
+    corrects the scale of the model's metres on this camera (scale only: the model is metric, and
+    an affine fit would let far landmarks bend the near road), and refuses a clip it cannot fit.
     Pixels the model camera does not see are unknown (0)."""
 
     name = "bsn"
@@ -43,7 +44,7 @@ class BsnDepth(AlignedDepth):
             raw = mf.depth_to_raw(depth)
             return np.where(raw > 0, raw, np.nan).astype(np.float32)   # unseen: left out of the fit
 
-        obj = cls(predict, "depth", clip, poses, frames, cfg.min_corr, window)
+        obj = cls(predict, "metric_depth", clip, poses, frames, cfg.min_corr, window)
         obj.model_path, obj.variant, obj.mounting = model, card.variant, cal.mounting
         return obj
 

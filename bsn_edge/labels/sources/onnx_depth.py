@@ -26,7 +26,9 @@ def locally_smooth(pred: np.ndarray) -> np.ndarray:
     k = np.ones((3, 3), np.uint8)
     p = pred.astype(np.float32)
     hi, lo = cv2.dilate(p, k), cv2.erode(p, k)
-    return (hi - lo) <= SMOOTH_REL * np.maximum(np.abs(hi), 1e-6)
+    with np.errstate(invalid="ignore", over="ignore"):   # unknown pixels (NaN) are never smooth
+        smooth = (hi - lo) <= SMOOTH_REL * np.maximum(np.abs(hi), 1e-6)
+    return smooth & np.isfinite(hi) & np.isfinite(lo)
 
 
 class AlignedDepth(DepthSource):
@@ -89,7 +91,7 @@ class AlignedDepth(DepthSource):
         else:
             self.corr = pooled_correlation([p for p, _ in samples], [z for _, z in samples],
                                            [self._align[i] for i in frames])
-        if self.corr < min_corr:
+        if not self.corr >= min_corr:      # NaN (nothing to correlate) is a rejection too
             raise ClipRejectedError(f"depth/landmark alignment correlation {self.corr:.2f} is under "
                                     f"{min_corr:.2f}")
 
