@@ -80,6 +80,14 @@ def main(argv: list[str] | None = None) -> int:
     report: dict[str, Any] = {"clips": {}, "rejected": {}}
     pseudo = label_clips(Run(src), [c.path for c in target], folder, AdaptConfig(), None, None, report)
     timing["bsn_adapt_labelling_s"] = round(time.perf_counter() - t1, 1)
+    if not pseudo:
+        why = "; ".join(f"{n}: {r}" for n, r in report["rejected"].items())
+        lines = [f"# bsn-adapt across styles: {args.source} -> {args.target}", "",
+                 f"bsn-adapt refused every {args.target} clip for the `{args.source}` model: {why}."]
+        write_result(args.out, "adapt", {"source": args.source, "target": args.target, "refused": report,
+                                         "timing": timing}, "\n".join(lines))
+        print("\n".join(lines))
+        return 1
 
     rows: dict[str, list[dict[str, float]]] = {"before": [], "bsn-adapt": [], "exact labels": []}
     rows["before"].append(evaluate(src, held, label))
