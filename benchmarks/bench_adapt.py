@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         write_result(args.out, "adapt", {"source": args.source, "target": args.target, "refused": report,
                                          "timing": timing}, "\n".join(lines))
         print("\n".join(lines))
-        return 1
+        return 0          # a refusal with its reasons is the measured result
 
     rows: dict[str, list[dict[str, float]]] = {"before": [], "bsn-adapt": [], "exact labels": []}
     rows["before"].append(evaluate(src, held, label))

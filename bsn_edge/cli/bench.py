@@ -13,7 +13,10 @@ from bsn_edge.cli.common import CHECKOUT, fail
 PROG = "bsn-bench"
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
-NAMES = ("synth", "labels", "train_step", "arch", "quant", "runtime", "accuracy", "footprint", "realcam", "realview")
+NAMES = ("synth", "labels", "train_step", "arch", "quant", "runtime", "accuracy", "footprint", "realcam", "realview",
+         "adapt")
+ADAPT_SOURCE, ADAPT_TARGET = "suburb", "urban"
+ADAPT_EVAL_SEEDS = (1300, 1301)   # held-out target clips: seeds no training clip has
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -22,7 +25,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run bsn-edge's benchmarks on this machine and write benchmarks/results/<name>.json and .md "
                     "plus REPORT.md with plots. Data and a quick.toml-trained run are made in --work when missing "
                     "(about 25 minutes on 2 cores the first time); 'arch' trains each architecture 300 steps "
-                    "at 128x256 (about 45 minutes) and 'accuracy' trains 12 more runs (about an hour).")
+                    "at 128x256 (about 45 minutes), 'accuracy' trains 12 more runs (about an hour) and 'adapt' "
+                    "trains a one-style model and adapts it with bsn-adapt (about 75 minutes).")
     p.add_argument("--only", nargs="*", choices=NAMES, default=None, help="run only these (default: all)")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--work", default="benchmarks/scratch", help="clips, runs and models made for the benchmarks")
@@ -37,9 +41,9 @@ def _py(*args: str) -> None:
     subprocess.run(cmd, cwd=CHECKOUT, check=True)
 
 
-def _prepare(work: Path) -> tuple[Path, Path, Path]:
-    """Labelled clips, a trained run and its int8 export, made once and reused."""
-    data, run, model = work / "data", work / "run_quick", work / "bsn_int8.onnx"
+def _prepare_data(work: Path) -> Path:
+    """Labelled clips of every style, made once and reused."""
+    data = work / "data"
     # the shipped default's recipe (models/README.md): every style, seeds apart per style
     if not (data / f"{DEFAULT_STYLES[-1]}_{DEFAULT_SEEDS - 1}" / "labels").is_dir():
         for k, style in enumerate(DEFAULT_STYLES):
@@ -47,6 +51,12 @@ def _prepare(work: Path) -> tuple[Path, Path, Path]:
                 _py("-m", "bsn_edge.cli.synth", str(data / f"{style}_{s}"), "--frames", "200", "--style", style,
                     "--seed", str(s + 100 * k), "--no-video", "--force")
         _py("-m", "bsn_edge.cli.label", *[str(p) for p in sorted(data.iterdir())])
+    return data
+
+
+def _prepare(work: Path) -> tuple[Path, Path, Path]:
+    """Labelled clips, a trained run and its int8 export, made once and reused."""
+    data, run, model = _prepare_data(work), work / "run_quick", work / "bsn_int8.onnx"
     from bsn_edge.train.run import Run
 
     if not Run(run).checkpoint_path.is_file():
@@ -91,6 +101,17 @@ def main(argv: list[str] | None = None) -> int:
             _py("-m", "benchmarks.bench_realview", "--out", out)
         if "footprint" in names:
             _py("-m", "benchmarks.bench_footprint", "--out", out)
+        if "adapt" in names:
+            data = _prepare_data(work)
+            held = work / "adapt_eval"
+            for seed in ADAPT_EVAL_SEEDS:
+                clip = held / f"{ADAPT_TARGET}_{seed}"
+                if not (clip / "labels").is_dir():
+                    _py("-m", "bsn_edge.cli.synth", str(clip), "--frames", "120", "--style", ADAPT_TARGET,
+                        "--seed", str(seed), "--no-video", "--force")
+                    _py("-m", "bsn_edge.cli.label", str(clip))
+            _py("-m", "benchmarks.bench_adapt", "--data", str(data), "--eval", str(held), "--source", ADAPT_SOURCE,
+                "--target", ADAPT_TARGET, "--work", str(work / "adapt"), "--out", out)
         if "accuracy" in names:
             _py("-m", "benchmarks.bench_bsn_accuracy", "--out", out, "--work", str(work / "accuracy"))
         _py("-m", "benchmarks.report", "--results", out)
