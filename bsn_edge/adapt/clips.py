@@ -18,7 +18,7 @@ import numpy as np
 from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.camera import Intrinsics
 from bsn_edge.sequence.folder import SequenceFolder, frame_name
-from bsn_edge.sequence.media import IMAGE_EXTS, is_video
+from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS, is_video
 from bsn_edge.sequence.meta import SequenceMeta
 
 JPEG_QUALITY = 95
@@ -77,8 +77,8 @@ def _frames_of(source: Path, fps: float | None, max_fps: float) -> tuple[list[Pa
         if not paths:
             raise UnusableClipError(f"{source}: no frame images found")
         return paths, rate, max(1, round(rate / max_fps))
-    raise UnusableClipError(f"{source}: not a video ({', '.join(('.mp4', '.avi', '.mkv', '.mov'))}), a folder of "
-                            "images or a sequence folder")
+    raise UnusableClipError(f"{source}: not a video ({', '.join(VIDEO_EXTS)}), a folder of images or a sequence "
+                            "folder")
 
 
 def import_clip(source: str | Path, dest: Path, calib: Calibration | None, model_hfov_deg: float,
