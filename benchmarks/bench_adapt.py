@@ -10,8 +10,9 @@ its own threshold:
 
 - before: the source-style model as trained;
 - bsn-adapt: the same model adapted with bsn-adapt's own stages on the target style's ``DATA``
-  clips, reading only their frames and camera files (labels from the model's depth, its teacher
-  and the built-in VO; threshold by agreement with those labels);
+  clips, reading only their frames and camera files (labels from the model's depth or, where it
+  does not fit, the road plane of the clip's mounting (``--label-depth``), its teacher and the
+  built-in VO; threshold by agreement with those labels);
 - exact labels (upper bound): the same fine-tuning, on the same clips, with their exact labels.
 
 The source model is trained once (its seed 0); fine-tuning runs once per seed. Gap closed =
@@ -29,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import write_result
-from bsn_edge.adapt.config import AdaptConfig
+from bsn_edge.adapt.config import LABEL_DEPTHS, AdaptConfig
 from bsn_edge.adapt.finetune import agreement, at_threshold
 from bsn_edge.adapt.pipeline import label_clips, tune
 from bsn_edge.adapt.workspace import AdaptFolder
@@ -58,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--size", default="128,256", help="training size H,W of the source model (default 128,256)")
     p.add_argument("--train-steps", type=int, default=600)
     p.add_argument("--adapt-steps", type=int, default=300)
+    p.add_argument("--label-depth", default=AdaptConfig.label_depth, choices=LABEL_DEPTHS,
+                   help="depth bsn-adapt labels with (default: %(default)s)")
     args = p.parse_args(argv)
     work = Path(args.work)
     h, w = (int(v) for v in args.size.split(","))
@@ -78,7 +81,8 @@ def main(argv: list[str] | None = None) -> int:
     t1 = time.perf_counter()
     folder = AdaptFolder(work / "adapt_labels")
     report: dict[str, Any] = {"clips": {}, "rejected": {}}
-    pseudo = label_clips(Run(src), [c.path for c in target], folder, AdaptConfig(), None, None, report)
+    pseudo = label_clips(Run(src), [c.path for c in target], folder, AdaptConfig(label_depth=args.label_depth), None,
+                         None, report)
     timing["bsn_adapt_labelling_s"] = round(time.perf_counter() - t1, 1)
     if not pseudo:
         why = "; ".join(f"{n}: {r}" for n, r in report["rejected"].items())
@@ -92,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict[str, list[dict[str, float]]] = {"before": [], "bsn-adapt": [], "exact labels": []}
     rows["before"].append(evaluate(src, held, label))
     for seed in args.seeds:
-        cfg = AdaptConfig(seed=seed, steps=args.adapt_steps)
+        cfg = AdaptConfig(seed=seed, steps=args.adapt_steps, label_depth=args.label_depth)
         tune(Run(src), pseudo, work / f"adapted_s{seed}", cfg, {}, progress=False)
         rows["bsn-adapt"].append(evaluate(work / f"adapted_s{seed}", held, label))
         tune(Run(src), target, work / f"exact_s{seed}", cfg, {}, progress=False)
@@ -122,7 +126,10 @@ def main(argv: list[str] | None = None) -> int:
     lines += ["", "Gap closed by bsn-adapt, (adapt - before) / (exact - before), per seed: "
               + ", ".join(f"{g:.2f}" for g in gaps) + f" (mean {np.nanmean(gaps):.2f}).", "",
               "bsn-adapt's labels: " + ", ".join(
-                  f"{n}: {c.get('label_frames', 0)} frames, depth/landmark correlation {c.get('depth')}"
+                  f"{n}: {c.get('label_frames', 0)} frames, depth from the {c.get('label_depth')}"
+                  + (f" (the depth head refused: {c['model_depth_rejected']})" if "model_depth_rejected" in c
+                     else "")
+                  + f", depth/landmark correlation {c.get('depth')}"
                   for n, c in report["clips"].items())
               + ("; rejected: " + "; ".join(f"{n}: {r}" for n, r in report["rejected"].items())
                  if report["rejected"] else "") + ".",

@@ -6,12 +6,19 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+LABEL_DEPTHS = ("auto", "ground", "model")
+
 
 @dataclass(frozen=True)
 class AdaptConfig:
     """Labelling, fine-tuning and threshold choice of one adaptation.
 
     rate, horizon_s, min_corr:  the T-frame labels (as ``bsn-label --rate --T --min-corr``)
+    label_depth:                depth the labels are made with: ``model`` (the run's depth head),
+                                ``ground`` (the road plane of the clip's mounting, things at their
+                                ground contact: needs a camera file with a mounting), ``auto`` (the
+                                depth head, and the road plane for a clip it does not fit when the
+                                clip's mounting is known)
     holdout_fraction:           share of the user's labelled frames kept out of fine-tuning to
                                 choose the threshold and measure agreement (whole clips when
                                 there are several, else the end of the one clip)
@@ -26,6 +33,7 @@ class AdaptConfig:
     rate: float = 5.0
     horizon_s: float = 5.0
     min_corr: float = 0.7
+    label_depth: str = "auto"
     holdout_fraction: float = 0.25
     steps: int = 300
     batch_size: int = 8
@@ -39,6 +47,8 @@ class AdaptConfig:
     def __post_init__(self) -> None:
         if not self.rate > 0 or not self.horizon_s > 0:
             raise ValueError(f"rate and horizon must be positive, got {self.rate}, {self.horizon_s}")
+        if self.label_depth not in LABEL_DEPTHS:
+            raise ValueError(f"label_depth must be one of {', '.join(LABEL_DEPTHS)}, got {self.label_depth!r}")
         if not 0 < self.holdout_fraction < 1:
             raise ValueError(f"holdout_fraction must be in (0, 1), got {self.holdout_fraction}")
         if self.steps < 1 or self.batch_size < 1:

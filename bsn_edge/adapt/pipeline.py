@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from bsn_edge.adapt.clips import UnusableClipError, clip_name, import_clip, moving_seconds
+from bsn_edge.adapt.clips import Imported, UnusableClipError, clip_name, import_clip, moving_seconds
 from bsn_edge.adapt.config import AdaptConfig
 from bsn_edge.adapt.finetune import agreement, at_threshold, finetune_b
 from bsn_edge.adapt.labeller import load_teacher, prepare_labeller, road_share
@@ -96,7 +96,7 @@ def _labelling_settings(run_dir: str | Path, weights: str, videos: list[str | Pa
     c = cfg.to_dict()
     return {"run": str(Path(run_dir).resolve()), "weights_sha256": weights,
             "videos": [str(Path(v).resolve()) for v in videos], "calib": str(calib or ""), "fps": fps,
-            **{k: c[k] for k in ("rate", "horizon_s", "min_corr", "max_fps", "min_moving_s")}}
+            **{k: c[k] for k in ("rate", "horizon_s", "min_corr", "label_depth", "max_fps", "min_moving_s")}}
 
 
 def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: AdaptConfig,
@@ -143,15 +143,33 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
             del report["clips"][imp.name]
         else:
             road_ok.append(imp)
-    sources = Sources(depth=specs["depth"], seg=specs["seg"], poses="vo")
+    depth_of = {imp.name: _first_depth(cfg.label_depth, imp.path, lcfg.name, specs["depth"]) for imp in road_ok}
+    results: dict[str, Any] = {}
     with tqdm(total=0, desc="label", unit="frame", disable=None if progress else True) as bar:
         def on_total(n: int) -> None:
             bar.total = (bar.total or 0) + n
             bar.refresh()
-        results = label_many([i.path for i in road_ok], lcfg, sources, jobs=1, progress=bar.update,
-                             on_total=on_total)
+
+        def label(group: list[Imported], force: bool = False) -> None:
+            for depth in sorted({depth_of[imp.name] for imp in group}):
+                part = [imp for imp in group if depth_of[imp.name] == depth]
+                sources = Sources(depth=depth, seg=specs["seg"], poses="vo")
+                done = label_many([i.path for i in part], lcfg, sources, jobs=1, progress=bar.update,
+                                  on_total=on_total, force=force)
+                results.update({imp.name: r for imp, r in zip(part, done, strict=True)})
+
+        label(road_ok)
+        # auto: a clip the depth head does not fit is labelled from the road plane when its mounting is known
+        fallback = [imp for imp in road_ok if cfg.label_depth == "auto" and depth_of[imp.name] != "ground"
+                    and results[imp.name].status == "rejected" and _has_mounting(imp.path)]
+        for imp in fallback:
+            report["clips"][imp.name]["model_depth_rejected"] = results[imp.name].message
+            depth_of[imp.name] = "ground"
+        label(fallback, force=True)
     labelled = []
-    for imp, r in zip(road_ok, results, strict=True):
+    for imp in road_ok:
+        r = results[imp.name]
+        report["clips"][imp.name]["label_depth"] = "ground" if depth_of[imp.name] == "ground" else "model"
         frames = tuple(SequenceFolder(imp.path).labels(lcfg.name).frames()) if r.status == "ok" else ()
         if not frames:
             report["rejected"][imp.name] = f"labels {r.status}: {r.message or 'no label frame'}"
@@ -169,6 +187,26 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
         report["clips"][imp.name].update(cov)
         labelled.append(Clip(imp.path, "user", frames))
     return labelled
+
+
+def _has_mounting(clip: Path) -> bool:
+    return Calibration.read(SequenceFolder(clip).calibration_path).mounting is not None
+
+
+def _first_depth(choice: str, clip: Path, label: str, model_spec: str) -> str:
+    """The depth source spec a clip is first labelled with (``AdaptConfig.label_depth``): ``auto``
+    tries the depth head first, unless the clip's labels were already made from the road plane (a
+    resumed adaptation keeps them)."""
+    if choice == "ground":
+        return "ground"
+    if choice == "auto":
+        try:
+            made = json.loads(SequenceFolder(clip).labels(label).params_path.read_text())
+            if made.get("sources", {}).get("depth") == "ground":
+                return "ground"
+        except (OSError, json.JSONDecodeError):
+            pass
+    return model_spec
 
 
 def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, report: dict[str, Any],

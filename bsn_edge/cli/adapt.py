@@ -6,6 +6,7 @@ import argparse
 import json
 
 from bsn_edge.adapt import AdaptConfig, AdaptError, adapt
+from bsn_edge.adapt.config import LABEL_DEPTHS
 from bsn_edge.cli.common import fail
 
 PROG = "bsn-adapt"
@@ -40,6 +41,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-corr", type=float, default=d.min_corr,
                    help="reject clips whose depth/landmark alignment correlation is below this "
                         f"(default {d.min_corr:g}, as bsn-label)")
+    p.add_argument("--label-depth", default=d.label_depth, choices=LABEL_DEPTHS,
+                   help="depth the labels are made with: model (the run's depth head), ground (the road plane "
+                        "of your camera's mounting, things at their ground contact; needs a camera file with a "
+                        "mounting, from bsn-calibrate --mount), auto (the depth head, and the road plane for a clip "
+                        f"it does not fit when the mounting is known; default {d.label_depth})")
     p.add_argument("--holdout", type=float, default=d.holdout_fraction,
                    help="share of the labelled frames held out to choose the threshold "
                         f"(default {d.holdout_fraction:g})")
@@ -57,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         cfg = AdaptConfig(rate=args.rate, horizon_s=args.horizon, min_corr=args.min_corr,
-                          holdout_fraction=args.holdout, steps=args.steps,
+                          label_depth=args.label_depth, holdout_fraction=args.holdout, steps=args.steps,
                           lr=args.lr, seed=args.seed)
         rep = adapt(args.run, args.video, args.out, cfg, calib=args.calib, fps=args.fps, export=args.export,
                     resume=args.resume, force=args.force, progress=not args.quiet)
@@ -65,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     for name, c in rep["clips"].items():
         print(f"{name}: {c['label_frames']} label frames, blind spots {100 * c['blind_spot_share_of_v']:.1f} % of V, "
-              f"depth/landmark correlation {c['depth']}, camera: {c['camera']}")
+              f"depth ({c.get('label_depth', 'model')})/landmark correlation {c['depth']}, camera: {c['camera']}")
     for name, why in rep["rejected"].items():
         print(f"{name}: rejected: {why}")
     a = rep["agreement"]

@@ -26,7 +26,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--T", dest="horizon", type=float, default=5.0, help="horizon T in seconds (default 5)")
     p.add_argument("--depth", default="files",
                    help="depth source: files | onnx:MODEL (a depth network) | bsn:MODEL (a bsn-edge model's depth, the "
-                        "frame warped into its camera with the clip's calibration) | rel:DIR[:inverse] (default files)")
+                        "frame warped into its camera with the clip's calibration) | rel:DIR[:inverse] | ground "
+                        "(the road plane of the camera file's mounting, things at their ground contact; reads "
+                        "--seg) (default files)")
     p.add_argument("--seg", default="files", help="segmentation source: files | onnx:MODEL (default files)")
     p.add_argument("--poses", default="files",
                    help="poses: files (poses.txt) | vo (built-in visual odometry) | TRAJ.txt (KITTI or "

@@ -158,7 +158,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         if sources.poses == "vo" and sources.depth != "files":
             # no metric depth to anchor VO: seed poses, align, ground-scale, re-solve (monocular.py)
             seed, pose_info = seed_poses(clip)
-            aligned = make_depth(sources.depth, clip, seed, cfg, [int(i) for i in idx], window=SEED_WINDOW)
+            aligned = make_depth(sources.depth, clip, seed, cfg, [int(i) for i in idx], window=SEED_WINDOW, seg=seg)
             height = (cfg.camera_height or (cal.mounting.height_m if cal is not None and cal.mounting else None)
                       or clip.meta.extra.get("camera_height") or DEFAULT_CAMERA_HEIGHT)
             depth, poses, more = metric_depth_and_poses(clip, aligned, seg, idx, float(height))
@@ -166,7 +166,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         else:
             metric = FilesDepth(clip) if sources.depth == "files" else None
             poses, pose_info = make_poses(sources.poses, clip, metric)
-            depth = make_depth(sources.depth, clip, poses, cfg, [int(i) for i in idx])
+            depth = make_depth(sources.depth, clip, poses, cfg, [int(i) for i in idx], seg=seg)
     except ClipRejectedError as e:
         report.update(status="rejected", reason=str(e))
         _write_report(out, report)

@@ -98,6 +98,7 @@ def test_adapt_runs_on_a_clip_without_ground_truth(run, user_clip, stand_in_labe
     assert not any((imported / n).exists() for n in GROUND_TRUTH)
     label_report = json.loads((imported / "labels" / "T1s" / "report.json").read_text())
     assert label_report["sources_detail"]["poses"]["kind"] == "vo"
+    assert clip["label_depth"] == "model" and "model_depth_rejected" not in clip    # the depth fits
     a = rep["agreement"]
     assert 0 <= a["before"]["iou"] <= 1 and 0 < a["after"]["threshold"] < 1
     model, card = Run(out).load_model()          # a run like any other: verified weights, its threshold
@@ -118,6 +119,45 @@ def test_adapt_runs_on_a_clip_without_ground_truth(run, user_clip, stand_in_labe
                            "--seed", "1", "--resume", "--quiet"]) == 0
     assert {p.name: p.stat().st_mtime_ns for p in labels.iterdir()} == stamp
     assert json.loads((out / "adapt" / "report.json").read_text())["fine_tune"]["seed"] == 1
+
+
+def test_a_clip_the_depth_head_does_not_fit_is_labelled_from_the_road_plane(run, user_clip, stand_in_labellers,
+                                                                            monkeypatch, tmp_path):
+    seq, _ = user_clip
+    noise = tmp_path / "noise"
+    noise.mkdir()
+    rng = np.random.default_rng(3)
+    for i in range(40):
+        np.save(noise / f"{i:06d}.npy", rng.uniform(0.05, 1.0, (256, 512)).astype(np.float32))
+    monkeypatch.setattr(pipeline, "prepare_labeller",
+                        lambda src, depth, teacher: {"depth": f"rel:{noise}:inverse", "seg": "hidden"})
+    out = tmp_path / "adapted"
+    rep = pipeline.adapt(run, [seq], out, pipeline.AdaptConfig(horizon_s=1.0, steps=2), progress=False)
+    clip = rep["clips"]["drive"]
+    assert clip["label_depth"] == "ground" and "depth" in clip["model_depth_rejected"]
+    made = json.loads((out / "adapt" / "clips" / "drive" / "labels" / "T1s" / "report.json").read_text())
+    assert made["sources_detail"]["depth"]["kind"] == "ground"
+    # resumed, the clip goes straight to the road plane and keeps its label files
+    labels = out / "adapt" / "clips" / "drive" / "labels" / "T1s" / "blindspot"
+    stamp = {p.name: p.stat().st_mtime_ns for p in labels.iterdir()}
+    rep = pipeline.adapt(run, [seq], out, pipeline.AdaptConfig(horizon_s=1.0, steps=2), resume=True, progress=False)
+    assert rep["clips"]["drive"]["label_depth"] == "ground"
+    assert {p.name: p.stat().st_mtime_ns for p in labels.iterdir()} == stamp
+
+
+def test_ground_label_depth_without_a_mounting_is_refused_with_the_reason(run, user_clip, stand_in_labellers,
+                                                                          tmp_path):
+    from bsn_edge.calibration import Calibration
+    from bsn_edge.sequence.folder import SequenceFolder
+
+    seq, _ = user_clip
+    bare = tmp_path / "bare"
+    shutil.copytree(seq, bare)
+    cal = Calibration.read(SequenceFolder(bare).calibration_path)
+    Calibration.of(cal.intrinsics, cal.dist, method="chessboard only").write(SequenceFolder(bare).calibration_path)
+    with pytest.raises(pipeline.AdaptError, match="mounting"):
+        pipeline.adapt(run, [bare], tmp_path / "o", pipeline.AdaptConfig(horizon_s=1.0, steps=2,
+                                                                         label_depth="ground"), progress=False)
 
 
 def test_unusable_clips_are_rejected_with_the_reason(run, stand_in_labellers, tmp_path, capsys):

@@ -12,14 +12,15 @@ from bsn_edge.labels.sources.files import FilesDepth, FilesSeg, load_poses
 if TYPE_CHECKING:
     from bsn_edge.labels.config import LabelConfig
 
-DEPTH_KINDS = ("files", "onnx:MODEL", "bsn:MODEL", "rel:DIR[:inverse]")
+DEPTH_KINDS = ("files", "onnx:MODEL", "bsn:MODEL", "rel:DIR[:inverse]", "ground")
 SEG_KINDS = ("files", "onnx:MODEL")
 POSE_KINDS = ("files", "vo", "TRAJ.txt")
 
 
 def make_depth(spec: str, clip: ClipData, poses: np.ndarray, cfg: LabelConfig,
-               frames: list[int], window: int | None = None) -> DepthSource:
-    """The depth source; a model's or relative one (``onnx:``, ``bsn:``, ``rel:``) is aligned to the poses on ``frames``
+               frames: list[int], window: int | None = None, seg: SegSource | None = None) -> DepthSource:
+    """The depth source; a model's or relative one (``onnx:``, ``bsn:``, ``rel:``) or the road plane's
+    (``ground``, which reads ``seg`` and the clip's mounting) is aligned to the poses on ``frames``
     (the label-rate frames; ``window`` as in ``AlignedDepth``) and may raise ``ClipRejectedError``."""
     if spec == "files":
         return FilesDepth(clip)
@@ -32,6 +33,11 @@ def make_depth(spec: str, clip: ClipData, poses: np.ndarray, cfg: LabelConfig,
     if spec.startswith("rel:"):
         from bsn_edge.labels.sources.rel_depth import RelFilesDepth
         return RelFilesDepth.from_spec(spec[4:], clip, poses, cfg.min_corr, frames, window)
+    if spec == "ground":
+        if seg is None:
+            raise ValueError("the ground depth source needs the clip's segmentation")
+        from bsn_edge.labels.sources.ground_depth import GroundDepth
+        return GroundDepth.for_clip(clip, seg, poses, cfg, frames, window)
     raise ValueError(f"unknown depth source {spec!r}; valid: {', '.join(DEPTH_KINDS)}")
 
 
