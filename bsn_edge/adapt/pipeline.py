@@ -23,6 +23,7 @@ from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.data.dataset import BlindSpotDataset, Clip
 from bsn_edge.labels import LabelConfig, Sources
 from bsn_edge.labels.batch import label_many
+from bsn_edge.labels.generator import made_with
 from bsn_edge.labels.sources.base import ClipData
 from bsn_edge.labels.sources.registry import make_seg
 from bsn_edge.sequence.folder import SequenceFolder
@@ -199,13 +200,8 @@ def _first_depth(choice: str, clip: Path, label: str, model_spec: str) -> str:
     resumed adaptation keeps them)."""
     if choice == "ground":
         return "ground"
-    if choice == "auto":
-        try:
-            made = json.loads(SequenceFolder(clip).labels(label).params_path.read_text())
-            if made.get("sources", {}).get("depth") == "ground":
-                return "ground"
-        except (OSError, json.JSONDecodeError):
-            pass
+    if choice == "auto" and made_with(SequenceFolder(clip).labels(label)).get("sources", {}).get("depth") == "ground":
+        return "ground"
     return model_spec
 
 

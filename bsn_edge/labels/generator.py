@@ -20,7 +20,7 @@ from bsn_edge.card import EARLY_MOUNTING
 from bsn_edge.labels.config import LabelConfig
 from bsn_edge.labels.monocular import metric_depth_and_poses, seed_poses
 from bsn_edge.labels.sources import ClipData, FilesDepth, frame_count
-from bsn_edge.labels.sources.base import ClipRejectedError
+from bsn_edge.labels.sources.base import ClipRejectedError, SegSource
 from bsn_edge.labels.sources.registry import make_depth, make_poses, make_seg
 from bsn_edge.labels.warp import Cloud, Warper, label_frame
 from bsn_edge.model_frame import ModelFrame
@@ -65,14 +65,40 @@ def _params(cfg: LabelConfig, sources: Sources, camera: Intrinsics) -> dict[str,
     return {"config": cfg.to_dict(), "sources": dataclasses.asdict(sources), "camera": camera.to_dict()}
 
 
+def made_with(labels: LabelSet) -> dict[str, Any]:
+    """How a label set was made (``_params``: config, sources, camera); empty when unrecorded."""
+    try:
+        return json.loads(labels.params_path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return {}
+
+
 def label_camera(labels: LabelSet) -> Intrinsics | None:
     """The camera a label set was made with (a ``--calib`` calibration's, else the clip's), or None
     for labels made before it was recorded."""
-    try:
-        cam = json.loads(labels.params_path.read_text()).get("camera")
-    except (OSError, json.JSONDecodeError):
-        return None
+    cam = made_with(labels).get("camera")
     return Intrinsics(**cam) if cam else None
+
+
+class _Remembered(SegSource):
+    """A segmentation model's classes, computed once per frame: aligning a model's depth, scaling
+    it by the ground and labelling each read every label frame's classes."""
+
+    def __init__(self, base: SegSource) -> None:
+        self.base, self.name = base, base.name
+        self._done: dict[int, np.ndarray] = {}
+
+    def __call__(self, i: int) -> np.ndarray:
+        if i not in self._done:
+            self._done[i] = self.base(i)
+        return self._done[i]
+
+    def forget(self, upto: int) -> None:
+        for k in [k for k in self._done if k <= upto]:
+            del self._done[k]
+
+    def describe(self) -> dict[str, Any]:
+        return self.base.describe()
 
 
 def _check_params(labels: LabelSet, params: dict[str, Any], force: bool) -> None:
@@ -155,6 +181,9 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     }
     try:
         seg = make_seg(sources.seg, clip)
+        if sources.seg != "files" and sources.depth != "files":
+            # the depth source holds every label frame's depth already; their classes cost a quarter of it
+            seg = _Remembered(seg)
         if sources.poses == "vo" and sources.depth != "files":
             # no metric depth to anchor VO: seed poses, align, ground-scale, re-solve (monocular.py)
             seed, pose_info = seed_poses(clip)
@@ -216,6 +245,8 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
             d_t, sem_t = frame(k)
             for old in [c for c in sources_at if c <= k]:
                 del sources_at[old]
+            if isinstance(seg, _Remembered):
+                seg.forget(i)
             lab = label_frame(warper, [cloud(k + j) for j in range(1, T + 1)], d_t,
                               sm.is_traversable(sem_t), sem_t == sm.SKY, poses[i],
                               cfg.depth_tol, cfg.vis_range, min_area, cfg.shrink_margin)
