@@ -12,7 +12,7 @@ its own threshold:
 - bsn-adapt: the same model adapted with bsn-adapt's own stages on the target style's ``DATA``
   clips, reading only their frames and camera files (labels from the model's depth or, where it
   does not fit, the road plane of the clip's mounting (``--label-depth``), its teacher and the
-  built-in VO; threshold by agreement with those labels);
+  built-in VO, with bsn-adapt's look check; threshold by agreement with those labels);
 - exact labels (upper bound): the same fine-tuning, on the same clips, with their exact labels.
 
 The source model is trained once (its seed 0); fine-tuning runs once per seed. Gap closed =
@@ -111,6 +111,7 @@ def main(argv: list[str] | None = None) -> int:
                  "runs": v} for k, v in rows.items()}
     result = {"source": args.source, "target": args.target, "seeds": args.seeds, "size": [h, w],
               "train_steps": args.train_steps, "adapt_steps": args.adapt_steps, "rows": stats,
+              "label_config": AdaptConfig(label_depth=args.label_depth).label_config().to_dict(),
               "gap_closed": gaps, "labelling": report, "timing": timing,
               "target_clips": [c.path.name for c in target], "held_out_clips": [c.path.name for c in held]}
     lines = [f"# bsn-adapt across styles: {args.source} -> {args.target}", "",

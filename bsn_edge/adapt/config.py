@@ -6,6 +6,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from bsn_edge.labels.config import LabelConfig
+
 LABEL_DEPTHS = ("auto", "ground", "model")
 
 
@@ -19,6 +21,10 @@ class AdaptConfig:
                                 ground contact: needs a camera file with a mounting), ``auto`` (the
                                 depth head, and the road plane for a clip it does not fit when the
                                 clip's mounting is known)
+    look_tol:                   grey levels: warped road that looks like the label frame's picture
+                                where it lands is visible road, not a blind spot
+                                (``LabelConfig.look_tol``; 0 = off). Model depth and classes put a
+                                near car's outline a few pixels off; the picture does not
     holdout_fraction:           share of the user's labelled frames kept out of fine-tuning to
                                 choose the threshold and measure agreement (whole clips when
                                 there are several, else the end of the one clip)
@@ -34,6 +40,7 @@ class AdaptConfig:
     horizon_s: float = 5.0
     min_corr: float = 0.7
     label_depth: str = "auto"
+    look_tol: float = 8.0
     holdout_fraction: float = 0.25
     steps: int = 300
     batch_size: int = 8
@@ -59,6 +66,10 @@ class AdaptConfig:
             raise ValueError(f"max_fps must be positive, got {self.max_fps}")
         if self.min_moving_s < 0 or self.threads < 1:
             raise ValueError("min_moving_s must be >= 0 and threads >= 1")
+
+    def label_config(self) -> LabelConfig:
+        """The T-frame label settings this adaptation labels its clips with."""
+        return LabelConfig(rate=self.rate, horizon_s=self.horizon_s, min_corr=self.min_corr, look_tol=self.look_tol)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -21,7 +21,7 @@ from bsn_edge.adapt.labeller import load_teacher, prepare_labeller, road_share
 from bsn_edge.adapt.workspace import AdaptFolder
 from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.data.dataset import BlindSpotDataset, Clip
-from bsn_edge.labels import LabelConfig, Sources
+from bsn_edge.labels import Sources
 from bsn_edge.labels.batch import label_many
 from bsn_edge.labels.generator import made_with
 from bsn_edge.labels.sources.base import ClipData
@@ -97,7 +97,8 @@ def _labelling_settings(run_dir: str | Path, weights: str, videos: list[str | Pa
     c = cfg.to_dict()
     return {"run": str(Path(run_dir).resolve()), "weights_sha256": weights,
             "videos": [str(Path(v).resolve()) for v in videos], "calib": str(calib or ""), "fps": fps,
-            **{k: c[k] for k in ("rate", "horizon_s", "min_corr", "label_depth", "max_fps", "min_moving_s")}}
+            **{k: c[k] for k in ("rate", "horizon_s", "min_corr", "label_depth", "look_tol", "max_fps",
+                                 "min_moving_s")}}
 
 
 def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: AdaptConfig,
@@ -107,7 +108,7 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
     built-in VO; clips that cannot be used go to ``report["rejected"]`` with the reason. Both steps
     resume: a finished import and finished label frames are kept."""
     card = src.card()
-    lcfg = LabelConfig(rate=cfg.rate, horizon_s=cfg.horizon_s, min_corr=cfg.min_corr)
+    lcfg = cfg.label_config()
     hfov = float(np.degrees(2 * np.arctan(card.camera.width / (2 * card.camera.fx))))
     names: set[str] = set()
     usable = []
@@ -214,7 +215,7 @@ def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, repo
 
     model, card = src.load_model()
     teacher, _, teacher_scale = load_teacher(src)
-    lcfg = LabelConfig(rate=cfg.rate, horizon_s=cfg.horizon_s, min_corr=cfg.min_corr)
+    lcfg = cfg.label_config()
     train, held = _split(labelled, cfg.holdout_fraction, lcfg.horizon_frames, cfg.seed)
     size = card.input_size
     train_ds = BlindSpotDataset(train, size, augment=True, label_name=lcfg.name, seed=cfg.seed,

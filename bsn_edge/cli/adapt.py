@@ -46,6 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "of your camera's mounting, things at their ground contact; needs a camera file with a "
                         "mounting, from bsn-calibrate --mount), auto (the depth head, and the road plane for a clip "
                         f"it does not fit when the mounting is known; default {d.label_depth})")
+    p.add_argument("--look-tol", type=float, default=d.look_tol, metavar="GREY",
+                   help="warped road that looks like the label frame within this many grey levels (0-255) is "
+                        f"visible, not a blind spot; 0 turns the check off (default {d.look_tol:g}, see bsn-label)")
     p.add_argument("--holdout", type=float, default=d.holdout_fraction,
                    help="share of the labelled frames held out to choose the threshold "
                         f"(default {d.holdout_fraction:g})")
@@ -63,8 +66,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         cfg = AdaptConfig(rate=args.rate, horizon_s=args.horizon, min_corr=args.min_corr,
-                          label_depth=args.label_depth, holdout_fraction=args.holdout, steps=args.steps,
-                          lr=args.lr, seed=args.seed)
+                          label_depth=args.label_depth, look_tol=args.look_tol, holdout_fraction=args.holdout,
+                          steps=args.steps, lr=args.lr, seed=args.seed)
         rep = adapt(args.run, args.video, args.out, cfg, calib=args.calib, fps=args.fps, export=args.export,
                     resume=args.resume, force=args.force, progress=not args.quiet)
     except (AdaptError, FileNotFoundError, ValueError) as e:

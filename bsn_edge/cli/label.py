@@ -36,6 +36,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--depth-tol", type=float, default=1.0,
                    help="l_d, metres: warped road whose depth agrees with frame t's within this is "
                         "visible (default 1.0)")
+    p.add_argument("--look-tol", type=float, default=0.0, metavar="GREY",
+                   help="grey levels (0-255): warped road that also looks like frame t where it lands is "
+                        "visible; for model depth and segmentation, whose outlines are a few pixels off "
+                        "(bsn-adapt uses 8; default 0 = off)")
     p.add_argument("--vis-range", type=float, default=16.0,
                    help="L, metres: V is sky or a surface nearer than this (default 16)")
     p.add_argument("--min-area", type=int, default=None,
@@ -65,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = LabelConfig(rate=args.rate, horizon_s=args.horizon, depth_tol=args.depth_tol,
                           vis_range=args.vis_range, min_area=args.min_area, min_corr=args.min_corr,
-                          camera_height=args.camera_height)
+                          camera_height=args.camera_height, look_tol=args.look_tol)
     except ValueError as e:
         return fail(PROG, str(e))
     sources = Sources(depth=args.depth, seg=args.seg, poses=args.poses, calib=args.calib)

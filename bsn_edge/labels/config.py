@@ -24,6 +24,10 @@ class LabelConfig:
     shrink_margin: subsampling safety factor of the forward warp (see ``warp.py``).
     camera_height: metres above the road, to put monocular VO in metres; ``None`` takes
                  meta.json's ``camera_height`` or 1.5 m.
+    look_tol:    grey levels (0-255); > 0: a warped road point is also visible when it looks like
+                 frame t's picture where it lands (window mean difference under this), for depth
+                 and segmentation from models, whose own depth and classes cannot say it; 0: off
+                 (exact depth and classes need no second opinion).
     """
 
     rate: float = 5.0
@@ -34,6 +38,7 @@ class LabelConfig:
     min_corr: float = 0.7
     shrink_margin: float = 0.5
     camera_height: float | None = None
+    look_tol: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.rate > 0:
@@ -50,6 +55,8 @@ class LabelConfig:
             raise ValueError(f"min_corr must be in [-1, 1], got {self.min_corr}")
         if self.camera_height is not None and not 0.2 <= self.camera_height <= 5.0:
             raise ValueError(f"camera_height must be in [0.2, 5] m, got {self.camera_height}")
+        if not 0 <= self.look_tol <= 255:
+            raise ValueError(f"look_tol must be in [0, 255] grey levels, got {self.look_tol}")
         if not 0 < self.shrink_margin <= 1:
             raise ValueError(f"shrink_margin must be in (0, 1], got {self.shrink_margin}")
 

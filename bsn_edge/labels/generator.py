@@ -26,6 +26,7 @@ from bsn_edge.labels.warp import Cloud, Warper, label_frame
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.sequence import SequenceMeta, read_mask, write_mask
 from bsn_edge.sequence.folder import LabelSet, SequenceFolder
+from bsn_edge.sequence.frames import read_gray
 from bsn_edge.sequence.images import atomic_write_bytes
 
 DEFAULT_CAMERA_HEIGHT = 1.5  # metres, a car's dashcam
@@ -101,6 +102,9 @@ class _Remembered(SegSource):
         return self.base.describe()
 
 
+_DEFAULTS = LabelConfig().to_dict()
+
+
 def _check_params(labels: LabelSet, params: dict[str, Any], force: bool) -> None:
     """Refuse labels made otherwise (or, with ``force``, remove them); record ``params``."""
     p = labels.params_path
@@ -109,6 +113,9 @@ def _check_params(labels: LabelSet, params: dict[str, Any], force: bool) -> None
             old = json.loads(p.read_text())
         except json.JSONDecodeError:
             old = None
+        if isinstance(old, dict) and isinstance(old.get("config"), dict):
+            # a setting added since the record was written was made at its default
+            old["config"] = {**_DEFAULTS, **old["config"]}
         if old != params and not force:
             diff = _differences(old or {}, params)
             raise StaleLabelsError(f"{labels.root} holds labels made with other parameters ({diff}); pass --force "
@@ -211,21 +218,24 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     clouds: dict[int, Cloud] = {}
     # each label-rate frame is read (or inferred, for model sources) once: first as a later frame
     # of an earlier label, then again as a label frame itself
-    sources_at: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    sources_at: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}
+    by_look = cfg.look_tol > 0
 
-    def frame(k: int) -> tuple[np.ndarray, np.ndarray]:
+    def frame(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         if k not in sources_at:
             i = int(idx[k])
             d, s = depth(i), seg(i)
+            g = read_gray(seq, i) if by_look else None
             if lens is not None:
                 d, s = lens.depth_to_model(d), lens.labels_to_model(s)
-            sources_at[k] = (d, s)
+                g = None if g is None else lens.to_model(g)
+            sources_at[k] = (d, s, g)
         return sources_at[k]
 
     def cloud(k: int) -> Cloud:
         if k not in clouds:
-            d, sem = frame(k)
-            clouds[k] = warper.cloud(d, sm.is_traversable(sem), poses[int(idx[k])])
+            d, sem, g = frame(k)
+            clouds[k] = warper.cloud(d, sm.is_traversable(sem), poses[int(idx[k])], g)
         return clouds[k]
 
     per_frame = []
@@ -242,21 +252,21 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         else:
             for old in [c for c in clouds if c <= k]:
                 del clouds[old]
-            d_t, sem_t = frame(k)
+            d_t, sem_t, grey_t = frame(k)
             for old in [c for c in sources_at if c <= k]:
                 del sources_at[old]
             if isinstance(seg, _Remembered):
                 seg.forget(i)
             lab = label_frame(warper, [cloud(k + j) for j in range(1, T + 1)], d_t,
                               sm.is_traversable(sem_t), sem_t == sm.SKY, poses[i],
-                              cfg.depth_tol, cfg.vis_range, min_area, cfg.shrink_margin)
+                              cfg.depth_tol, cfg.vis_range, min_area, cfg.shrink_margin, grey_t, cfg.look_tol)
             write_mask(bs_path, lab.omega, durable=True)
             write_mask(vis_path, lab.visibility, durable=True)
             per_frame.append({
                 "frame": i, "blindspot_px": int(lab.omega.sum()), "visible_px": int(lab.visibility.sum()),
                 "blindspot_in_v_px": int((lab.omega & lab.visibility).sum()),
                 "warped_px": int(lab.warped.sum()), "removed_by_depth_px": lab.removed_by_depth,
-                "removed_by_area_px": lab.removed_by_area,
+                "removed_by_area_px": lab.removed_by_area, "removed_by_look_px": lab.removed_by_look,
             })
         if progress:
             progress(1)

@@ -9,6 +9,8 @@ pixel, z-buffered per j so the nearest point wins. Then (paper, Section 3):
     d_a    = mean_j warped depth_j              aggregated depth where warped
     omega &= |d(t) - d_a| >= l_d                points that agree with t's depth are visible
                                                 (within one pixel, see ``depth_agrees``)
+    omega &= NOT looks alike                    optional (``look_tol``): warped road that looks
+                                                like what t shows there is visible too
     omega  = drop components < min area
     V      = sky(t) OR d(t) < L
 
@@ -29,6 +31,20 @@ import numpy as np
 from bsn_edge.camera import Intrinsics
 
 LEVELS = 4  # pixel grids of 1, 2, 4, 8
+LOOK_WINDOW = 7        # pixels: looks are compared as the mean over this square, a patch not a pixel
+LOOK_SMOOTH_SIGMA = 1.0  # pixels: pictures are smoothed so that half-pixel warp error is no difference
+
+
+def smooth_grey(gray: np.ndarray) -> np.ndarray:
+    """A grey picture as float32, smoothed so that half-pixel warp error is not a difference."""
+    return cv2.GaussianBlur(gray.astype(np.float32), (0, 0), LOOK_SMOOTH_SIGMA)
+
+
+def window_mean(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Mean of ``values`` over the ``valid`` pixels of each pixel's ``LOOK_WINDOW`` square."""
+    count = cv2.blur(valid.astype(np.float32), (LOOK_WINDOW, LOOK_WINDOW))
+    total = cv2.blur(np.where(valid, values, 0.0).astype(np.float32), (LOOK_WINDOW, LOOK_WINDOW))
+    return total / np.maximum(count, 1e-6)
 
 
 @dataclass(frozen=True)
@@ -37,11 +53,17 @@ class Cloud:
 
     ``levels[k]`` holds the points on the 2^k pixel grid but not the 2^(k+1) one (the last
     level holds everything on its grid), each sorted by depth in their own frame:
-    ``(x, y, z, depth)`` float32 arrays.
+    ``(x, y, z, depth)`` float32 arrays, and the point's grey level in its own frame when the
+    cloud was made with its picture.
     """
 
     centre: np.ndarray
-    levels: tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], ...]
+    levels: tuple[tuple[np.ndarray, ...], ...]
+
+    @property
+    def has_grey(self) -> bool:
+        """Whether the points carry their grey levels (the cloud was made with its picture)."""
+        return all(len(lv) == 5 for lv in self.levels)
 
     @property
     def size(self) -> int:
@@ -69,10 +91,13 @@ class Warper:
         # world coordinates relative to this origin keep float32 precise for large coordinates
         self.origin = np.zeros(3) if origin is None else np.asarray(origin, np.float64)
 
-    def cloud(self, depth: np.ndarray, traversable: np.ndarray, T_wc: np.ndarray) -> Cloud:
-        """Lift a frame's traversable pixels with valid depth to world coordinates."""
+    def cloud(self, depth: np.ndarray, traversable: np.ndarray, T_wc: np.ndarray,
+              grey: np.ndarray | None = None) -> Cloud:
+        """Lift a frame's traversable pixels with valid depth to world coordinates (with their
+        grey levels when the frame's ``grey`` picture is given, for ``look_agrees``)."""
         m = traversable & (depth > 0)
         d = depth[m].astype(np.float32)
+        extra = () if grey is None else (smooth_grey(grey)[m],)
         x_c, y_c = self._rx[m] * d, self._ry[m] * d
         R = T_wc[:3, :3].astype(np.float32)
         t = (T_wc[:3, 3] - self.origin).astype(np.float32)
@@ -82,7 +107,7 @@ class Warper:
         for k in range(LEVELS):
             sel = lvl == k if k < LEVELS - 1 else lvl >= k
             order = np.argsort(d[sel], kind="stable")
-            levels.append(tuple(a[sel][order] for a in (*world, d)))
+            levels.append(tuple(a[sel][order] for a in (*world, d, *extra)))
         return Cloud(centre=t.astype(np.float64), levels=tuple(levels))
 
     def _pick(self, cloud: Cloud, baseline: float, margin: float):
@@ -91,17 +116,18 @@ class Warper:
         parts = []
         b = margin * baseline
         for k in range(LEVELS):
-            x, y, z, d = cloud.levels[k]
+            lv = cloud.levels[k]
+            d = lv[3]
             # points on grid level k are needed when their shrink is worse than 1 / 2^(k+1),
             # i.e. d >= b / (2^(k+1) - 1); the coarsest level is always needed
             needed_from = b / ((1 << (k + 1)) - 1) if (k < LEVELS - 1 and b > 0) else 0.0
             start = np.searchsorted(d, needed_from)
             if start < len(d):
-                parts.append((x[start:], y[start:], z[start:]))
+                parts.append([a[start:] for i, a in enumerate(lv) if i != 3])
+        n = 4 if cloud.has_grey else 3
         if not parts:
-            e = np.zeros(0, np.float32)
-            return e, e, e
-        return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+            return tuple(np.zeros(0, np.float32) for _ in range(n))
+        return tuple(np.concatenate([p[i] for p in parts]) for i in range(n))
 
     def splat(self, clouds: list[Cloud], T_wc: np.ndarray, margin: float = 0.5
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -110,18 +136,27 @@ class Warper:
         Returns ``(s, d_a, hits)``: the OR of the warped masks, the mean of the per-cloud
         z-buffered depths (0 where nothing landed) and how many clouds landed on each pixel.
         """
+        s, d_a, hits, _ = self._splat(clouds, T_wc, margin, False)
+        return s, d_a, hits
+
+    def _splat(self, clouds: list[Cloud], T_wc: np.ndarray, margin: float, want_grey: bool):
+        """``splat``, and with ``want_grey`` the grey level of each cloud's nearest point per
+        pixel, ``[len(clouds), H, W]`` (NaN where the cloud did not land)."""
         h, w = self.intr.height, self.intr.width
         n_px = h * w
         R_cw = T_wc[:3, :3].T.astype(np.float32)
         C = (T_wc[:3, 3] - self.origin).astype(np.float32)
-        keys, depths = [], []
+        keys, depths, greys = [], [], []
         for j, cl in enumerate(clouds):
             base = float(np.linalg.norm(cl.centre - C))
-            x, y, z = self._pick(cl, base, margin)
+            x, y, z, *g = self._pick(cl, base, margin)
+            if want_grey and not g:
+                raise ValueError("a cloud made without its picture cannot be compared by look")
             x, y, z = x - C[0], y - C[1], z - C[2]
             zc = R_cw[2, 0] * x + R_cw[2, 1] * y + R_cw[2, 2] * z
             ok = zc > 0.05
             x, y, z, zc = x[ok], y[ok], z[ok], zc[ok]
+            g = [a[ok] for a in g]
             inv = 1.0 / zc
             u = (self.intr.fx * (R_cw[0, 0] * x + R_cw[0, 1] * y + R_cw[0, 2] * z) * inv + self.intr.cx)
             v = (self.intr.fy * (R_cw[1, 0] * x + R_cw[1, 1] * y + R_cw[1, 2] * z) * inv + self.intr.cy)
@@ -130,15 +165,26 @@ class Warper:
             ok = (ui >= 0) & (ui < w) & (vi >= 0) & (vi < h)
             keys.append(j * n_px + vi[ok] * w + ui[ok])
             depths.append(zc[ok])
+            if want_grey:
+                greys.append(g[0][ok])
         zbuf = np.full(len(clouds) * n_px, np.inf, np.float32)
+        gbuf = None
         if keys:
-            np.minimum.at(zbuf, np.concatenate(keys), np.concatenate(depths))
+            all_keys, all_depths = np.concatenate(keys), np.concatenate(depths)
+            np.minimum.at(zbuf, all_keys, all_depths)
+            if want_grey:
+                gbuf = np.full(len(clouds) * n_px, np.nan, np.float32)
+                won = zbuf[all_keys] == all_depths        # the nearest point of its cloud on its pixel
+                gbuf[all_keys[won]] = np.concatenate(greys)[won]
+                gbuf = gbuf.reshape(len(clouds), h, w)
+        elif want_grey:
+            gbuf = np.full((len(clouds), h, w), np.nan, np.float32)
         zbuf = zbuf.reshape(len(clouds), h, w)
         landed = np.isfinite(zbuf)
         hits = landed.sum(axis=0)
         total = np.where(landed, zbuf, 0.0).sum(axis=0)
         d_a = np.divide(total, hits, out=np.zeros((h, w), np.float32), where=hits > 0)
-        return hits > 0, d_a.astype(np.float32), hits
+        return hits > 0, d_a.astype(np.float32), hits, gbuf
 
 
 def remove_small_components(mask: np.ndarray, min_area: int) -> np.ndarray:
@@ -161,6 +207,7 @@ class FrameLabel:
     aggregated_depth: np.ndarray  # d_a
     removed_by_depth: int
     removed_by_area: int
+    removed_by_look: int = 0
 
 
 def depth_agrees(depth: np.ndarray, d_a: np.ndarray, depth_tol: float) -> np.ndarray:
@@ -175,14 +222,37 @@ def depth_agrees(depth: np.ndarray, d_a: np.ndarray, depth_tol: float) -> np.nda
     return (d_a > lo - depth_tol) & (d_a < hi + depth_tol)
 
 
+def look_agrees(grey: np.ndarray, warped_grey: np.ndarray, look_tol: float) -> np.ndarray:
+    """Pixels where some later frame's road, warped here, looks like what this frame shows: the
+    window mean of ``|grey - warped|`` over the pixels it landed on is under ``look_tol`` grey
+    levels. That road is seen here, whatever this frame's segmentation or depth says.
+    ``warped_grey`` is ``[n, H, W]`` (NaN where a frame's road did not land)."""
+    here = smooth_grey(grey)
+    seen = np.zeros(here.shape, bool)
+    for g in warped_grey:
+        landed = np.isfinite(g)
+        if landed.any():
+            diff = np.where(landed, np.abs(here - np.nan_to_num(g)), 0.0).astype(np.float32)
+            seen |= landed & (window_mean(diff, landed) < look_tol)
+    return seen
+
+
 def label_frame(warper: Warper, clouds: list[Cloud], depth: np.ndarray, traversable: np.ndarray,
                 sky: np.ndarray, T_wc: np.ndarray, depth_tol: float, vis_range: float,
-                min_area: int, margin: float = 0.5) -> FrameLabel:
-    """T-frame blind spots and the visibility mask of one frame from the clouds of later frames."""
-    s, d_a, _ = warper.splat(clouds, T_wc, margin)
+                min_area: int, margin: float = 0.5, grey: np.ndarray | None = None,
+                look_tol: float = 0.0) -> FrameLabel:
+    """T-frame blind spots and the visibility mask of one frame from the clouds of later frames;
+    with ``look_tol`` > 0 (clouds made with their pictures, this frame's ``grey``), warped road
+    that looks like this frame's picture is visible too (``look_agrees``)."""
+    by_look = look_tol > 0
+    if by_look and grey is None:
+        raise ValueError("comparing by look needs the label frame's grey picture")
+    s, d_a, _, warped_grey = warper._splat(clouds, T_wc, margin, by_look)
     omega = s & ~traversable & ~sky
     agree = omega & depth_agrees(depth, d_a, depth_tol) if depth_tol > 0 else np.zeros_like(omega)
     omega &= ~agree
+    looks = omega & look_agrees(grey, warped_grey, look_tol) if by_look else np.zeros_like(omega)
+    omega &= ~looks
     kept = remove_small_components(omega, min_area)
     vis = sky | ((depth > 0) & (depth < vis_range))
-    return FrameLabel(kept, vis, s, d_a, int(agree.sum()), int(omega.sum() - kept.sum()))
+    return FrameLabel(kept, vis, s, d_a, int(agree.sum()), int(omega.sum() - kept.sum()), int(looks.sum()))

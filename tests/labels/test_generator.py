@@ -10,6 +10,7 @@ import pytest
 from bsn_edge.calibration import Calibration
 from bsn_edge.cli import label as label_cli
 from bsn_edge.labels import LabelConfig, Sources, label_sequence, labels_dir, resample
+from bsn_edge.labels.generator import StaleLabelsError
 from bsn_edge.sequence import read_kitti_poses, read_mask, write_kitti_poses, write_tum_poses
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth import SynthConfig, write_clip
@@ -180,6 +181,25 @@ def test_a_rerun_with_other_parameters_refuses_then_relabels_with_force(seq, cap
     # min-area 5000 px on a 64x128 frame leaves no component
     assert not any(read_mask(p).any() for p in (out / "blindspot").iterdir())
     assert label_cli.main([*argv]) == 0 and "10 frames (10 already done)" in capsys.readouterr().out
+
+
+def test_labels_recorded_before_a_setting_existed_resume_at_its_default(seq):
+    label_sequence(seq, CFG)
+    params = labels_dir(seq, CFG) / "params.json"
+    rec = json.loads(params.read_text())
+    del rec["config"]["look_tol"]                   # a record written before the look check
+    params.write_text(json.dumps(rec))
+    assert label_sequence(seq, CFG)["resumed_frames"] == 10
+    with pytest.raises(StaleLabelsError, match=r"look_tol 0\.0 -> 8\.0"):
+        label_sequence(seq, LabelConfig(rate=5.0, horizon_s=1.0, look_tol=8.0))
+
+
+def test_the_look_check_labels_a_clip_and_reports_what_it_removed(seq):
+    rep = label_sequence(seq, LabelConfig(rate=5.0, horizon_s=1.0, look_tol=8.0))
+    assert rep["status"] == "ok" and rep["config"]["look_tol"] == 8.0
+    assert all("removed_by_look_px" in f for f in rep["per_frame"])
+    with pytest.raises(ValueError, match="look_tol"):
+        LabelConfig(look_tol=-1.0)
 
 
 def test_a_damaged_label_file_is_relabelled_on_resume(seq):

@@ -1,11 +1,13 @@
 """T-frame labels on scenes whose geometry is known exactly."""
 
+import cv2
 import numpy as np
 import pytest
 
 from bsn_edge import semantics as sm
 from bsn_edge.camera import Intrinsics, look_pose
 from bsn_edge.labels import LabelConfig, Warper, label_frame, remove_small_components
+from bsn_edge.labels.warp import look_agrees, smooth_grey
 from bsn_edge.synth import Boxes, Renderer
 from tests.conftest import car, world_with
 
@@ -107,3 +109,52 @@ def test_config_min_area_scales_with_image():
     assert cfg.horizon_frames == 25 and cfg.name == "T5s"
     with pytest.raises(ValueError, match="spans no frame"):
         LabelConfig(rate=1.0, horizon_s=0.2)
+
+
+def grey(frame) -> np.ndarray:
+    return cv2.cvtColor(frame.rgb, cv2.COLOR_BGR2GRAY)
+
+
+def bloated(frame, px: int):
+    """Frame 0 as a segmentation model with a few pixels of outline error sees it: the car's mask
+    grown over the road, the grown pixels at the car's depth."""
+    is_car = frame.semantic == sm.CAR
+    kernel = np.ones((2 * px + 1, 2 * px + 1), np.uint8)
+    ring = cv2.dilate(is_car.astype(np.uint8), kernel).astype(bool) & ~is_car
+    sem = np.where(ring, np.uint8(sm.CAR), frame.semantic)
+    depth = np.where(ring, cv2.dilate(np.where(is_car, frame.depth, 0).astype(np.float32), kernel), frame.depth)
+    return sem, depth.astype(np.float32), ring
+
+
+def test_look_check_clears_road_a_bloated_outline_hides_and_keeps_true_blind_spots(straight_road):
+    van = car(3.4, 12.0, 5.4, 18.0, h=2.4)
+    intr, frames, poses = drive(straight_road, van)
+    sem, depth, ring = bloated(frames[0], 3)
+    w = Warper(intr, poses[0, :3, 3])
+    clouds = [w.cloud(f.depth, sm.is_traversable(f.semantic), p, grey(f))
+              for f, p in zip(frames[1:], poses[1:], strict=True)]
+
+    def label(look_tol):
+        return label_frame(w, clouds, depth, sm.is_traversable(sem), sem == sm.SKY, poses[0], 1.0, 16.0, 0,
+                           grey=grey(frames[0]), look_tol=look_tol)
+    off, on = label(0.0), label(8.0)
+    gt = frames[0].bsgt
+
+    assert (off.omega & ring).sum() > 30, "the bloated outline makes false blind spots on road"
+    assert (on.omega & ring).sum() < 0.2 * (off.omega & ring).sum()
+    assert (on.omega & gt).sum() > 0.85 * (off.omega & gt).sum(), "what the car hides stays a blind spot"
+    assert on.removed_by_look >= (off.omega & ring).sum() - (on.omega & ring).sum()
+
+
+def test_look_agrees_compares_patches_where_warped_road_landed():
+    rng = np.random.default_rng(0)
+    here = rng.integers(60, 120, (40, 60)).astype(np.uint8)
+    same = here.astype(np.float32)
+    brighter = same + 30.0                          # another surface: 30 grey levels apart
+    nowhere = np.full(same.shape, np.nan, np.float32)
+    warped = np.stack([np.where(np.arange(60) < 30, same, np.nan), nowhere]).astype(np.float32)
+    seen = look_agrees(here, np.stack([smooth_grey(here), nowhere]), 8.0)
+    assert seen.all(), "the same picture looks alike everywhere"
+    assert not look_agrees(here, np.stack([smooth_grey(brighter), nowhere]), 8.0).any()
+    half = look_agrees(here, np.where(np.isfinite(warped), smooth_grey(here), np.nan).astype(np.float32), 8.0)
+    assert half[:, :30].all() and not half[:, 30:].any(), "only where road landed"
