@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
                  "runs": v} for k, v in rows.items()}
     result = {"source": args.source, "target": args.target, "seeds": args.seeds, "size": [h, w],
               "train_steps": args.train_steps, "adapt_steps": args.adapt_steps, "rows": stats,
-              "label_config": AdaptConfig(label_depth=args.label_depth).label_config().to_dict(),
+              "adapt_config": AdaptConfig(label_depth=args.label_depth).to_dict(),
               "gap_closed": gaps, "labelling": report, "timing": timing,
               "target_clips": [c.path.name for c in target], "held_out_clips": [c.path.name for c in held]}
     lines = [f"# bsn-adapt across styles: {args.source} -> {args.target}", "",

@@ -21,10 +21,13 @@ class AdaptConfig:
                                 ground contact: needs a camera file with a mounting), ``auto`` (the
                                 depth head, and the road plane for a clip it does not fit when the
                                 clip's mounting is known)
-    look_tol:                   grey levels: warped road that looks like the label frame's picture
-                                where it lands is visible road, not a blind spot
-                                (``LabelConfig.look_tol``; 0 = off). Model depth and classes put a
-                                near car's outline a few pixels off; the picture does not
+    look_tol:                   grey levels, for clips labelled from the road plane: warped road
+                                that looks like the label frame's picture where it lands is visible
+                                road, not a blind spot (``LabelConfig.look_tol``; 0 = off). The
+                                teacher's car outlines spill over the road by a few pixels and the
+                                plane puts them at the car's ground contact; the picture does not.
+                                Labels from the depth head are made without it (measured: it cost
+                                them recall and gained nothing)
     holdout_fraction:           share of the user's labelled frames kept out of fine-tuning to
                                 choose the threshold and measure agreement (whole clips when
                                 there are several, else the end of the one clip)
@@ -67,9 +70,11 @@ class AdaptConfig:
         if self.min_moving_s < 0 or self.threads < 1:
             raise ValueError("min_moving_s must be >= 0 and threads >= 1")
 
-    def label_config(self) -> LabelConfig:
-        """The T-frame label settings this adaptation labels its clips with."""
-        return LabelConfig(rate=self.rate, horizon_s=self.horizon_s, min_corr=self.min_corr, look_tol=self.look_tol)
+    def label_config(self, depth: str = "") -> LabelConfig:
+        """The T-frame label settings of a clip labelled with the ``depth`` source spec (the look
+        check is for the road plane's labels, ``ground``)."""
+        return LabelConfig(rate=self.rate, horizon_s=self.horizon_s, min_corr=self.min_corr,
+                           look_tol=self.look_tol if depth == "ground" else 0.0)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -156,7 +156,7 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
             for depth in sorted({depth_of[imp.name] for imp in group}):
                 part = [imp for imp in group if depth_of[imp.name] == depth]
                 sources = Sources(depth=depth, seg=specs["seg"], poses="vo")
-                done = label_many([i.path for i in part], lcfg, sources, jobs=1, progress=bar.update,
+                done = label_many([i.path for i in part], cfg.label_config(depth), sources, jobs=1, progress=bar.update,
                                   on_total=on_total, force=force)
                 results.update({imp.name: r for imp, r in zip(part, done, strict=True)})
 

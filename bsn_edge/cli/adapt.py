@@ -47,8 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "mounting, from bsn-calibrate --mount), auto (the depth head, and the road plane for a clip "
                         f"it does not fit when the mounting is known; default {d.label_depth})")
     p.add_argument("--look-tol", type=float, default=d.look_tol, metavar="GREY",
-                   help="warped road that looks like the label frame within this many grey levels (0-255) is "
-                        f"visible, not a blind spot; 0 turns the check off (default {d.look_tol:g}, see bsn-label)")
+                   help="for clips labelled from the road plane: warped road that looks like the label frame "
+                        "within this many grey levels (0-255) is visible, not a blind spot; 0 turns the check "
+                        f"off (default {d.look_tol:g}, see bsn-label)")
     p.add_argument("--holdout", type=float, default=d.holdout_fraction,
                    help="share of the labelled frames held out to choose the threshold "
                         f"(default {d.holdout_fraction:g})")

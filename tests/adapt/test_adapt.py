@@ -99,6 +99,7 @@ def test_adapt_runs_on_a_clip_without_ground_truth(run, user_clip, stand_in_labe
     label_report = json.loads((imported / "labels" / "T1s" / "report.json").read_text())
     assert label_report["sources_detail"]["poses"]["kind"] == "vo"
     assert clip["label_depth"] == "model" and "model_depth_rejected" not in clip    # the depth fits
+    assert label_report["config"]["look_tol"] == 0.0, "the look check is for the road plane's labels"
     a = rep["agreement"]
     assert 0 <= a["before"]["iou"] <= 1 and 0 < a["after"]["threshold"] < 1
     model, card = Run(out).load_model()          # a run like any other: verified weights, its threshold
@@ -137,6 +138,7 @@ def test_a_clip_the_depth_head_does_not_fit_is_labelled_from_the_road_plane(run,
     assert clip["label_depth"] == "ground" and "depth" in clip["model_depth_rejected"]
     made = json.loads((out / "adapt" / "clips" / "drive" / "labels" / "T1s" / "report.json").read_text())
     assert made["sources_detail"]["depth"]["kind"] == "ground"
+    assert made["config"]["look_tol"] == pipeline.AdaptConfig().look_tol > 0
     # resumed, the clip goes straight to the road plane and keeps its label files
     labels = out / "adapt" / "clips" / "drive" / "labels" / "T1s" / "blindspot"
     stamp = {p.name: p.stat().st_mtime_ns for p in labels.iterdir()}
