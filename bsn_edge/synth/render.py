@@ -23,6 +23,7 @@ from bsn_edge.synth.light import GroundMaps
 from bsn_edge.synth.shading import Shader
 from bsn_edge.synth.world import World
 
+SPHERE_MARGIN_M = 0.05   # frustum culling keeps a box whose bounding sphere is within this of the view
 _EDGES = np.array([(a, b) for a in range(8) for b in range(a + 1, 8)
                    if bin(a ^ b).count("1") == 1])  # the 12 edges of a box, corner-index pairs
 
@@ -66,6 +67,13 @@ class Renderer:
         self._ry = np.ascontiguousarray(rays[..., 1])
         # ``far`` bounds the z-depth; the farthest point in view is that far along the widest ray
         self._reach = self.far * float(np.sqrt(1.0 + rays[..., 0] ** 2 + rays[..., 1] ** 2).max())
+        # the view frustum's planes in the camera frame (unit normals pointing in, offsets): near,
+        # then the picture's left, right, top and bottom edges
+        k = intrinsics
+        sides = np.array([[k.fx, 0.0, k.cx], [-k.fx, 0.0, k.width - k.cx],
+                          [0.0, k.fy, k.cy], [0.0, -k.fy, k.height - k.cy]])
+        self._planes = np.vstack([[0.0, 0.0, 1.0], sides / np.linalg.norm(sides, axis=1, keepdims=True)])
+        self._plane_offsets = np.array([self.near, 0.0, 0.0, 0.0, 0.0])
         self.shader = Shader(intrinsics.height, intrinsics.width)
         self.shader.set_rays(rays)
         self._maps: GroundMaps | None = None
@@ -85,9 +93,13 @@ class Renderer:
         centre = 0.5 * (boxes.lo + boxes.hi)
         radius = 0.5 * np.linalg.norm(boxes.hi - boxes.lo, axis=1)
         cand = np.where(np.linalg.norm(centre[:, :2] - C[:2], axis=1) - radius < self._reach)[0]
+        R_cw = T_wc[:3, :3].T
+        # a box whose bounding sphere lies wholly outside one plane of the frustum covers no pixel
+        # and no ground point in view: its corners are not needed (the margin absorbs rounding)
+        dist = (centre[cand] - C) @ R_cw.T @ self._planes.T - self._plane_offsets
+        cand = cand[(dist > -(radius[cand, None] + SPHERE_MARGIN_M)).all(axis=1)]
         if not len(cand):
             return cand, np.zeros((0, 4), np.intp), np.zeros(0)
-        R_cw = T_wc[:3, :3].T
         corners = (boxes.take(cand).corners() - C) @ R_cw.T          # [n, 8, 3] camera frame
         z = corners[..., 2]
         front = z >= self.near
@@ -140,16 +152,20 @@ class Renderer:
         gap = np.maximum(np.maximum(lo[:, :2], -hi[:, :2]), 0.0)
         footprint_matters = boxes.grounded[idx] & (np.hypot(gap[:, 0], gap[:, 1]) <= self.bs_range)
         near = np.float32(self.near)
+        # the loop reads per-box values as Python numbers (float32 values, exactly): reading numpy
+        # scalars one by one costs more than the work on small boxes
+        rect_l, zmin_l, lo_l, hi_l = rects.tolist(), zmin.tolist(), lo.tolist(), hi.tolist()
         with np.errstate(invalid="ignore", over="ignore"):
             for k in range(len(idx)):
-                u0, v0, u1, v1 = rects[k]
+                u0, v0, u1, v1 = rect_l[k]
                 sl = (slice(v0, v1), slice(u0, u1))
                 tb = t[sl]
-                if tb.max() > zmin[k]:
+                if tb.max() > zmin_l[k]:
                     tn = tf = None
+                    lo_k, hi_k = lo_l[k], hi_l[k]
                     for a in range(3):
                         ia = inv[a][sl]
-                        p, q = lo[k, a] * ia, hi[k, a] * ia
+                        p, q = lo_k[a] * ia, hi_k[a] * ia
                         if tn is None:
                             tn, tf = np.minimum(p, q), np.maximum(p, q)
                         else:

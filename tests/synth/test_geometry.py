@@ -5,6 +5,7 @@ import numpy as np
 from bsn_edge import semantics as sm
 from bsn_edge.sequence.images import depth_to_png16
 from bsn_edge.synth import Boxes, Renderer
+from bsn_edge.synth.boxes import KIND_VEHICLE
 from tests.conftest import car, ego_pose, world_with
 
 
@@ -84,3 +85,28 @@ def test_box_straddling_the_camera_plane_is_drawn(straight_road, small_camera):
     # a parked car beside the ego, half of it behind the camera
     fr = Renderer(small_camera).render(world_with(straight_road, car(3.3, -3, 5.1, 5.0)), ego_pose())
     assert (fr.semantic[:, small_camera.width // 2:] == sm.CAR).sum() > 200
+
+
+def test_boxes_culled_before_projection_show_on_no_pixel(small_camera):
+    """Frustum culling against brute force: every box left out has no point of its surface in
+    the picture in front of the camera; boxes with points in view are all kept."""
+    rng = np.random.default_rng(4)
+    lo = np.c_[rng.uniform(-40, 40, (400, 2)), np.zeros(400)]
+    hi = lo + rng.uniform(0.2, 6.0, (400, 3))
+    boxes = Boxes.make(lo, hi, sm.CAR, KIND_VEHICLE, (0.5, 0.5, 0.5))
+    r = Renderer(small_camera)
+    T_wc = ego_pose()
+    kept = set(r._screen_boxes(boxes, T_wc)[0].tolist())
+    g = np.linspace(0.0, 1.0, 9)
+    unit = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    R_cw, C = T_wc[:3, :3].T, T_wc[:3, 3]
+    k = small_camera
+    for b in range(len(boxes)):
+        p = (boxes.lo[b] + unit * (boxes.hi[b] - boxes.lo[b]) - C) @ R_cw.T
+        z = p[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u, v = k.fx * p[:, 0] / z + k.cx, k.fy * p[:, 1] / z + k.cy
+        seen = ((z > r.near) & (u >= 0) & (u <= k.width) & (v >= 0) & (v <= k.height)).any()
+        if seen:
+            assert b in kept, f"box {b} has points in view but was culled"
+    assert 20 < len(kept) < 300, "the scene has boxes both in view and out of it"
