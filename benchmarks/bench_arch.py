@@ -34,13 +34,18 @@ from bsn_edge.runtime.model_file import session
 ARCHS = ("unet", "small", "small-light", "medium", "large")
 
 
+def count_gmacs(model: torch.nn.Module, size: tuple[int, int]) -> float:
+    """Multiply-accumulates of one forward pass at ``size`` (H, W), in billions."""
+    with FlopCounterMode(display=False) as fc, torch.no_grad():
+        model(torch.zeros(1, 3, *size))
+    return fc.get_total_flops() / 2e9
+
+
 def measure(name: str, size: tuple[int, int], repeats: int, workdir: Path) -> dict:
     torch.manual_seed(0)
     m = create_model(name).eval()
     params = sum(p.numel() for p in m.parameters())
-    with FlopCounterMode(display=False) as fc, torch.no_grad():
-        m(torch.zeros(1, 3, *size))
-    gmacs = fc.get_total_flops() / 2e9
+    gmacs = count_gmacs(m, size)
     path = workdir / f"{name}.onnx"
     # timing only: any camera of the right size will do
     to_onnx(m, path, describe(name, m, Intrinsics.from_fov(size[1], size[0], 80.0)))

@@ -17,8 +17,8 @@ from matplotlib.ticker import NullFormatter, ScalarFormatter
 
 from benchmarks.common import machine
 
-ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "runtime", "footprint", "realcam",
-         "realview", "cameras", "remap")
+ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "floor", "runtime", "footprint",
+         "realcam", "realview", "cameras", "remap")
 
 
 def _load(results: Path, name: str) -> dict | None:

@@ -25,3 +25,20 @@ def test_quant_profile_blocks_follow_node_names():
     assert block_of("/depth_net/Exp_kernel_time") == "heads and upsampling"
     assert block_of("/normalise/Conv_kernel_time") == "input and layout"
     assert block_of("ReorderOutput_token_36_kernel_time") == "input and layout"
+
+
+def test_floor_counts_each_kind_of_convolution_from_the_graph(tmp_path):
+    import torch
+
+    from benchmarks.bench_floor import conv_kinds
+
+    net = torch.nn.Sequential(torch.nn.Conv2d(3, 16, 7, stride=2, padding=3),       # 16x32 out
+                              torch.nn.Conv2d(16, 16, 3, padding=1, groups=16),     # depthwise
+                              torch.nn.Conv2d(16, 32, 1),
+                              torch.nn.Conv2d(32, 32, 3, padding=1)).eval()
+    path = tmp_path / "net.onnx"
+    torch.onnx.export(net, (torch.zeros(1, 3, 32, 64),), str(path), dynamo=False)
+    got = sorted(conv_kinds(path).values())
+    px = 16 * 32
+    assert got == sorted([("dense 7x7", 16 * 3 * 49 * px), ("depthwise", 16 * 9 * px), ("1x1", 32 * 16 * px),
+                          ("dense 3x3", 32 * 32 * 9 * px)])

@@ -1,0 +1,209 @@
+"""The shipped model's latency as a multiple of this machine's int8 floor.
+
+    python -m benchmarks.bench_floor [--model models/bsn_small_light_int8.onnx] --out benchmarks/results
+
+The floor is how fast the model could run if every multiply-accumulate went at the best int8
+rate onnxruntime reaches on this machine: a stack of dense 3x3 convolutions (with ReLU),
+quantized exactly as ``bsn-export --int8`` quantizes the model (static QDQ, the same
+``QuantConfig``), at the feature sizes of the model's encoder stages. The rate is their MACs
+over their median latency; the fastest stack is then timed again, one run at a time in alternation
+with the model, and its rate there is the machine's int8 peak. Then:
+
+    floor   = the model's GMACs / peak rate
+    multiple = the model's median latency / floor      (1 / multiple = share of peak)
+
+Everything with 2 intra-op threads, in one run of this script, so the multiple compares like
+with like on whatever machine runs it. An onnxruntime profile of the model says where the rest
+goes, by operator.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import onnx
+import torch
+from onnxruntime.quantization import QuantFormat, quantize_static
+from onnxruntime.quantization.shape_inference import quant_pre_process
+
+from benchmarks.bench_arch import count_gmacs
+from benchmarks.bench_quant import latency
+from benchmarks.common import write_result
+from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
+from bsn_edge.export.seal import read_card
+from bsn_edge.models import create_model
+from bsn_edge.runtime.model_file import session
+
+CHECKOUT = Path(__file__).resolve().parents[1]
+DEFAULT_MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
+# (channels, stride below the input) of dense 3x3 stacks: ResNet stages at 1/4 to 1/32
+STACKS = ((64, 4), (128, 8), (256, 16), (512, 32))
+DEPTH = 6          # convolutions per stack
+GOAL_MULTIPLE = 1.5
+
+
+class ConvStack(torch.nn.Module):
+    """``DEPTH`` dense 3x3 convolutions with ReLU, ``channels`` in and out."""
+
+    def __init__(self, channels: int) -> None:
+        super().__init__()
+        self.body = torch.nn.Sequential(*[m for _ in range(DEPTH) for m in
+                                          (torch.nn.Conv2d(channels, channels, 3, padding=1), torch.nn.ReLU())])
+
+    def forward(self, frame: torch.Tensor) -> torch.Tensor:
+        return self.body(frame)
+
+
+def stack_rate(channels: int, hw: tuple[int, int], cfg: QuantConfig, runs: int, tmp: Path) -> dict:
+    """int8 multiply-accumulates per second of one dense stack at feature size ``hw``."""
+    torch.manual_seed(0)
+    net = ConvStack(channels).eval()
+    x = torch.randn(1, channels, *hw).relu()
+    fp32, pre, q = (tmp / f"stack{channels}_{n}.onnx" for n in ("fp32", "pre", "int8"))
+    torch.onnx.export(net, (x,), str(fp32), input_names=["frame"], output_names=["out"], dynamo=False)
+    quant_pre_process(str(fp32), str(pre), skip_symbolic_shape=True)
+    calib = np.stack([torch.randn(channels, *hw).relu().numpy() for _ in range(8)])
+    quantize_static(str(pre), str(q), FrameReader(calib), quant_format=QuantFormat.QDQ, per_channel=cfg.per_channel,
+                    activation_type=TYPES[cfg.activations], weight_type=TYPES[cfg.weights],
+                    calibrate_method=METHODS[cfg.method],
+                    extra_options={"ActivationSymmetric": cfg.activations == "int8"})
+    macs = DEPTH * channels * channels * 9 * hw[0] * hw[1]
+    t = latency(q, x.numpy(), runs)
+    return {"channels": channels, "size": list(hw), "gmacs": macs / 1e9, "median_ms": 1e3 * t,
+            "tmacs_per_s": macs / t / 1e12, "path": q, "input": x.numpy()}
+
+
+def side_by_side(a: tuple[Path, np.ndarray], b: tuple[Path, np.ndarray], runs: int) -> tuple[float, float]:
+    """Median seconds per run of two models timed in alternation (one run of each per round), so
+    that the machine's drift during the measurement falls on both alike."""
+    # no spinning: an idle session's spinning threads would take the cores from the running one
+    sa, sb = session(a[0], threads=2, spinning=False), session(b[0], threads=2, spinning=False)
+    ta, tb = [], []
+    for _ in range(5):
+        sa.run(None, {"frame": a[1]})
+        sb.run(None, {"frame": b[1]})
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        sa.run(None, {"frame": a[1]})
+        t1 = time.perf_counter()
+        sb.run(None, {"frame": b[1]})
+        ta.append(t1 - t0)
+        tb.append(time.perf_counter() - t1)
+    return float(np.median(ta)), float(np.median(tb))
+
+
+def conv_kinds(path: Path) -> dict[str, tuple[str, float]]:
+    """Every convolution of the model by name: its kind (dense kxk, 1x1, depthwise) and its MACs,
+    from the graph's weights and inferred shapes."""
+    model = onnx.shape_inference.infer_shapes(onnx.load(str(path)))
+    init = {t.name: tuple(t.dims) for t in model.graph.initializer}
+    producer = {o: n for n in model.graph.node for o in n.output}
+    shapes = {v.name: [d.dim_value for d in v.type.tensor_type.shape.dim]
+              for v in (*model.graph.value_info, *model.graph.output)}
+    out: dict[str, tuple[str, float]] = {}
+    for n in model.graph.node:
+        if n.op_type != "Conv":
+            continue
+        w = n.input[1]
+        while w not in init and w in producer:      # through DequantizeLinear to the stored weight
+            w = producer[w].input[0]
+        if w not in init or n.output[0] not in shapes:
+            continue
+        c_out, c_in_g, kh, kw = init[w]
+        group = next((a.i for a in n.attribute if a.name == "group"), 1)
+        _, _, ho, wo = shapes[n.output[0]]
+        kind = "depthwise" if group > 1 and c_in_g == 1 else ("1x1" if kh == kw == 1 else f"dense {kh}x{kw}")
+        out[n.name] = (kind, float(c_out * c_in_g * kh * kw * ho * wo))
+    return out
+
+
+def op_shares(path: Path, frame: np.ndarray, runs: int) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
+    """Milliseconds per run in each onnxruntime operator type, and per kind of convolution its
+    milliseconds, GMACs and rate (the profiler adds overhead: read shares and ratios, not sums)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        s = session(path, threads=2, profile_prefix=str(Path(tmp) / "prof"))
+        for _ in range(runs):
+            s.run(None, {"frame": frame})
+        events = json.loads(Path(s.end_profiling()).read_text())
+    kinds = conv_kinds(path)
+    ms: dict[str, float] = {}
+    conv: dict[str, dict[str, float]] = {}
+    seen: set[str] = set()
+    for e in events:
+        if e.get("cat") != "Node" or not e["name"].endswith("_kernel_time"):
+            continue
+        op = e.get("args", {}).get("op_name", "?")
+        ms[op] = ms.get(op, 0.0) + e["dur"] / 1e3 / runs
+        name = re.sub(r"(_token_\d+)?_kernel_time$", "", e["name"])
+        if name in kinds:
+            kind, macs = kinds[name]
+            c = conv.setdefault(kind, {"ms": 0.0, "gmacs": 0.0})
+            c["ms"] += e["dur"] / 1e3 / runs
+            if name not in seen:
+                seen.add(name)
+                c["gmacs"] += macs / 1e9
+    for c in conv.values():
+        c["tmacs_per_s"] = c["gmacs"] / c["ms"] if c["ms"] else 0.0
+    return dict(sorted(ms.items(), key=lambda kv: -kv[1])), dict(sorted(conv.items(), key=lambda kv: -kv[1]["ms"]))
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", default=str(DEFAULT_MODEL), help="an int8 model exported by bsn-export")
+    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--runs", type=int, default=60)
+    args = p.parse_args(argv)
+    card = read_card(args.model)
+    h, w = card.input_size
+    cfg = QuantConfig()
+    torch.manual_seed(0)
+    gmacs = count_gmacs(create_model(card.variant).eval(), (h, w))
+    frame = np.random.default_rng(0).integers(0, 256, (1, h, w, 3), dtype=np.uint8)
+    with tempfile.TemporaryDirectory() as tmp:
+        stacks = [stack_rate(c, (h // s, w // s), cfg, args.runs, Path(tmp)) for c, s in STACKS]
+        best = max(stacks, key=lambda r: r["tmacs_per_s"])
+        # the model and the fastest stack again, alternating: the multiple is a ratio of these two
+        t_model, t_best = side_by_side((Path(args.model), frame), (best["path"], best["input"]), 3 * args.runs)
+        for r in stacks:
+            del r["path"], r["input"]
+    peak = best["gmacs"] * 1e9 / t_best / 1e12
+    floor_s = gmacs * 1e9 / (peak * 1e12)
+    multiple = t_model / floor_s
+    ops, convs = op_shares(Path(args.model), frame, 20)
+    total = sum(ops.values())
+    result = {"model": str(args.model), "variant": card.variant, "size": [h, w], "scheme": cfg.scheme(),
+              "stacks": stacks, "peak_tmacs_per_s": peak, "model_gmacs": gmacs, "model_median_ms": 1e3 * t_model,
+              "floor_ms": 1e3 * floor_s, "multiple": multiple, "share_of_peak": 1 / multiple,
+              "goal_multiple": GOAL_MULTIPLE, "op_ms": ops, "conv_kinds": convs}
+    lines = ["# The shipped model against this machine's int8 floor", "",
+             f"Dense 3x3 stacks ({DEPTH} convolutions + ReLU each), quantized as `bsn-export --int8` does "
+             f"({cfg.scheme()}), onnxruntime with 2 intra-op threads:", "",
+             "| channels | feature size | GMACs | median ms | TMAC/s |", "|---|---|---|---|---|"]
+    lines += [f"| {r['channels']} | {r['size'][0]}x{r['size'][1]} | {r['gmacs']:.2f} | {r['median_ms']:.2f} | "
+              f"{r['tmacs_per_s']:.3f} |" for r in stacks]
+    lines += ["", f"Peak int8 rate here: **{peak:.3f} TMAC/s** (the fastest stack, {best['channels']} channels, "
+              f"timed again in alternation with the model, {3 * args.runs} runs each).", "",
+              f"`{card.variant}` at {h}x{w}: {gmacs:.2f} GMACs, median {1e3 * t_model:.2f} ms; floor "
+              f"{1e3 * floor_s:.2f} ms. **Latency = {multiple:.2f}x its int8 floor ({100 / multiple:.0f} % of "
+              f"peak)**; goal <= {GOAL_MULTIPLE:g}x ({'met' if multiple <= GOAL_MULTIPLE else 'not met'}).", "",
+              "Where the model's time goes (onnxruntime profile, 20 runs; shares of the profiled kernel time):", "",
+              "| operator | ms per run | share |", "|---|---|---|"]
+    lines += [f"| {op} | {v:.2f} | {100 * v / total:.0f} % |" for op, v in list(ops.items())[:10]]
+    lines += ["", "The convolutions by kind (profiled time, their MACs, the rate they reach against the peak "
+              "above, which was measured without the profiler):", "",
+              "| kind | ms per run | GMACs | TMAC/s | share of peak |", "|---|---|---|---|---|"]
+    lines += [f"| {k} | {c['ms']:.2f} | {c['gmacs']:.3f} | {c['tmacs_per_s']:.3f} | "
+              f"{100 * c['tmacs_per_s'] / peak:.0f} % |" for k, c in convs.items()]
+    write_result(args.out, "floor", result, "\n".join(lines))
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
