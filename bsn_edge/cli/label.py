@@ -38,8 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "visible (default 1.0)")
     p.add_argument("--look-tol", type=float, default=0.0, metavar="GREY",
                    help="grey levels (0-255): warped road that also looks like frame t where it lands is "
-                        "visible; for model depth and segmentation, whose outlines are a few pixels off "
-                        "(bsn-adapt uses 8; default 0 = off)")
+                        "visible; for --depth ground with a segmentation model, whose outlines are a few "
+                        "pixels off (bsn-adapt uses 8 there; default 0 = off)")
     p.add_argument("--vis-range", type=float, default=16.0,
                    help="L, metres: V is sky or a surface nearer than this (default 16)")
     p.add_argument("--min-area", type=int, default=None,
