@@ -283,3 +283,8 @@ def test_a_distorted_clip_is_labelled_in_its_undistorted_camera(tmp_path):
     label_sequence(out, LabelConfig(), Sources(calib=str(plain)), force=True)
     without = precision()
     assert with_lens[0] > 0.85 and with_lens[0] > without[0] and with_lens[1] > without[1]
+    # the look check compares the undistorted pictures: with exact sources it keeps the labels true
+    rep = label_sequence(out, LabelConfig(look_tol=8.0), force=True)
+    looked = precision()
+    assert looked[0] > 0.85 and looked[1] > 0.7 * with_lens[1]
+    assert sum(f["removed_by_look_px"] for f in rep["per_frame"]) > 0
