@@ -177,7 +177,9 @@ def main(argv: list[str] | None = None) -> int:
     multiple = t_model / floor_s
     ops, convs = op_shares(Path(args.model), frame, 20)
     total = sum(ops.values())
-    result = {"model": str(args.model), "variant": card.variant, "size": [h, w], "scheme": cfg.scheme(),
+    model = Path(args.model).resolve()
+    shown = model.relative_to(CHECKOUT) if model.is_relative_to(CHECKOUT) else model.name
+    result = {"model": str(shown), "variant": card.variant, "size": [h, w], "scheme": cfg.scheme(),
               "stacks": stacks, "peak_tmacs_per_s": peak, "model_gmacs": gmacs, "model_median_ms": 1e3 * t_model,
               "floor_ms": 1e3 * floor_s, "multiple": multiple, "share_of_peak": 1 / multiple,
               "goal_multiple": GOAL_MULTIPLE, "op_ms": ops, "conv_kinds": convs}
