@@ -20,7 +20,6 @@ goes, by operator.
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import tempfile
 import time
@@ -33,7 +32,7 @@ from onnxruntime.quantization import QuantFormat, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
 from benchmarks.bench_arch import count_gmacs
-from benchmarks.bench_quant import latency
+from benchmarks.bench_quant import kernel_times, latency
 from benchmarks.common import write_result
 from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
 from bsn_edge.export.seal import read_card
@@ -126,25 +125,17 @@ def conv_kinds(path: Path) -> dict[str, tuple[str, float]]:
 def op_shares(path: Path, frame: np.ndarray, runs: int) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
     """Milliseconds per run in each onnxruntime operator type, and per kind of convolution its
     milliseconds, GMACs and rate (the profiler adds overhead: read shares and ratios, not sums)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        s = session(path, threads=2, profile_prefix=str(Path(tmp) / "prof"))
-        for _ in range(runs):
-            s.run(None, {"frame": frame})
-        events = json.loads(Path(s.end_profiling()).read_text())
     kinds = conv_kinds(path)
     ms: dict[str, float] = {}
     conv: dict[str, dict[str, float]] = {}
     seen: set[str] = set()
-    for e in events:
-        if e.get("cat") != "Node" or not e["name"].endswith("_kernel_time"):
-            continue
-        op = e.get("args", {}).get("op_name", "?")
-        ms[op] = ms.get(op, 0.0) + e["dur"] / 1e3 / runs
-        name = re.sub(r"(_token_\d+)?_kernel_time$", "", e["name"])
+    for entry, op, t in kernel_times(path, frame, runs):
+        ms[op] = ms.get(op, 0.0) + t
+        name = re.sub(r"(_token_\d+)?_kernel_time$", "", entry)
         if name in kinds:
             kind, macs = kinds[name]
             c = conv.setdefault(kind, {"ms": 0.0, "gmacs": 0.0})
-            c["ms"] += e["dur"] / 1e3 / runs
+            c["ms"] += t
             if name not in seen:
                 seen.add(name)
                 c["gmacs"] += macs / 1e9

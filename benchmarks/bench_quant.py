@@ -51,19 +51,25 @@ def block_of(node: str) -> str:
     return "input and layout"
 
 
-def profile_blocks(path: Path, frame: np.ndarray, runs: int) -> dict[str, float]:
-    """Milliseconds per run spent in each block, from onnxruntime's profiler (which adds its own
-    overhead, so only the shares and the fp32/int8 ratios per block are meaningful)."""
+def kernel_times(path: Path, frame: np.ndarray, runs: int) -> list[tuple[str, str, float]]:
+    """onnxruntime's profile of ``runs`` runs: ``(node entry name, operator, milliseconds per
+    run)`` for every kernel (the profiler adds its own overhead: read shares and ratios)."""
     with tempfile.TemporaryDirectory() as tmp:
         s = session(path, threads=2, profile_prefix=str(Path(tmp) / "prof"))
         for _ in range(runs):
             s.run(None, {"frame": frame})
         events = json.loads(Path(s.end_profiling()).read_text())
+    return [(e["name"], e.get("args", {}).get("op_name", "?"), e["dur"] / 1e3 / runs) for e in events
+            if e.get("cat") == "Node" and e["name"].endswith("_kernel_time")]
+
+
+def profile_blocks(path: Path, frame: np.ndarray, runs: int) -> dict[str, float]:
+    """Milliseconds per run spent in each block, from onnxruntime's profiler (which adds its own
+    overhead, so only the shares and the fp32/int8 ratios per block are meaningful)."""
     ms: dict[str, float] = {}
-    for e in events:
-        if e.get("cat") == "Node" and e["name"].endswith("_kernel_time"):
-            b = block_of(e["name"])
-            ms[b] = ms.get(b, 0.0) + e["dur"] / 1e3 / runs
+    for name, _, t in kernel_times(path, frame, runs):
+        b = block_of(name)
+        ms[b] = ms.get(b, 0.0) + t
     return ms
 
 
