@@ -28,6 +28,7 @@ from bsn_edge.labels.tracks import detect, track
 from bsn_edge.mounting import Mounting, angles_of
 
 MAX_ROLL_DEG = 15.0        # a camera rolled further is not mounted for driving
+SLOW_ROAD = 0.4            # a low corner moving slower than this share of the median road rate is not road
 WORK_WIDTH = 640           # frames are tracked at about this width (speed; the angles do not need more)
 
 
@@ -189,8 +190,16 @@ def _road_normal(n0: np.ndarray, n1: np.ndarray, R: np.ndarray, t: np.ndarray, f
     """The road's down direction from corners low in the picture: for the plane ``m . X0 = 1``
     (``m = n / d``), ``X1 = (R + t m^T) X0``; solved for ``m`` by least squares, robustly."""
     # corners well below the horizon and near the middle: mostly road
-    fy = forward[1] / forward[2]
-    low = (n0[:, 1] > fy + 0.12) & (np.abs(n0[:, 0] - forward[0] / forward[2]) < 0.6)
+    fx, fy = forward[0] / forward[2], forward[1] / forward[2]
+    low = (n0[:, 1] > fy + 0.12) & (np.abs(n0[:, 0] - fx) < 0.6)
+    # A road point's flow grows as its offset from the focus of expansion times its depth below
+    # the horizon; a car driving ahead at the ego's speed hardly moves in the picture, and an
+    # essential matrix of pure forward motion counts it as an inlier. Its corners would pull the
+    # plane: drop corners that move far less than the road's law says.
+    rate = np.linalg.norm(n1 - n0, axis=1) / np.maximum(np.linalg.norm(n0 - [fx, fy], axis=1)
+                                                        * (n0[:, 1] - fy), 1e-9)
+    if low.sum() >= 15:
+        low &= rate > SLOW_ROAD * np.median(rate[low])
     if low.sum() < 15:
         return None
     x0 = np.c_[n0[low], np.ones(low.sum())]

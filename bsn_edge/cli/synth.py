@@ -34,6 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--parked", type=float, default=1.0, help="parked-vehicle density multiplier")
     p.add_argument("--traffic", type=float, default=1.0, help="moving-traffic density multiplier")
     p.add_argument("--pedestrians", type=float, default=1.0, help="pedestrian density multiplier")
+    p.add_argument("--lead", type=float, default=0.7,
+                   help="probability that the clip follows 1-3 vehicles in its own lane, 0.3-2 s ahead "
+                        "plus 2-5 m (default 0.7; 0: never; none with --traffic 0)")
     p.add_argument("--range", dest="bs_range", type=float, default=50.0,
                    help="true blind spots count within this ground distance, metres (default 50)")
     p.add_argument("--camera", choices=("vary", "fixed"), default="vary",
@@ -56,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = SynthConfig(frames=args.frames, height=h, width=w, fps=args.fps, style=args.style,
                           seed=args.seed, camera=args.camera, parked=args.parked, traffic=args.traffic,
-                          pedestrians=args.pedestrians, bs_range=args.bs_range,
+                          pedestrians=args.pedestrians, lead=args.lead, bs_range=args.bs_range,
                           sensor_effects=not args.no_sensor_effects)
     except ValueError as e:
         return fail(PROG, str(e))

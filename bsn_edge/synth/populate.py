@@ -31,6 +31,13 @@ from bsn_edge.synth.world import Look, World
 MARGIN = 160.0          # objects exist this far around the route
 INTERSECTION_CLEAR = 6.0  # no parked vehicle this close to a crossing's carriageway
 EGO_CLEARANCE = 3.0     # moving objects keep this far from the ego footprint, metres
+# The platoon ahead of the ego (SynthConfig.lead): following the car in front is the commonest
+# scene of real driving and the one whose distance matters most on the bus.
+EGO_NOSE = 2.0          # the ego's front bumper ahead of its camera, metres
+LEAD_STANDSTILL = (2.0, 5.0)   # bumper-to-bumper gap at standstill, metres
+LEAD_HEADWAY = (0.3, 2.0)      # time gap on top of it, seconds at the ego's speed
+LEAD_SPEED = (1.0, 1.1)        # the platoon's speed over the ego's (never closing in on it)
+LEAD_VEHICLES = (1, 3)         # vehicles in the platoon
 
 FACADES = np.array([(0.55, 0.62, 0.70), (0.45, 0.50, 0.62), (0.62, 0.66, 0.68), (0.40, 0.42, 0.48),
                     (0.70, 0.74, 0.78), (0.38, 0.45, 0.55), (0.55, 0.55, 0.52), (0.30, 0.35, 0.50),
@@ -275,6 +282,12 @@ def _horizon(rng, bounds) -> Boxes:
     return out.boxes(rng)
 
 
+def _traffic_mix(style: Style) -> dict[str, float]:
+    if style.two_wheelers:
+        return TRAFFIC_MIX
+    return {k: v for k, v in TRAFFIC_MIX.items() if k not in ("motorbike", "bicycle")}
+
+
 def _agents(rng, style: Style, layout: RoadLayout, bounds, traffic: float, pedestrians: float) -> Agents:
     parts: list[Boxes] = []
     vel, wlo, whi, anchor = [], [], [], []
@@ -287,8 +300,7 @@ def _agents(rng, style: Style, layout: RoadLayout, bounds, traffic: float, pedes
         whi.extend([hi] * len(b))
         anchor.extend([c] * len(b))
 
-    mix = TRAFFIC_MIX if style.two_wheelers else {k: v for k, v in TRAFFIC_MIX.items()
-                                                  if k not in ("motorbike", "bicycle")}
+    mix = _traffic_mix(style)
     for axis, centres, lanes_of in ((1, layout.xs, layout.lanes_x), (0, layout.ys, layout.lanes_y)):
         lo_b, hi_b = (bounds[0], bounds[2]) if axis == 1 else (bounds[1], bounds[3])
         a_lo, a_hi = (bounds[1], bounds[3]) if axis == 1 else (bounds[0], bounds[2])
@@ -344,6 +356,42 @@ def _agents(rng, style: Style, layout: RoadLayout, bounds, traffic: float, pedes
         return Agents.empty()
     boxes = Boxes.concat(parts)
     return Agents(boxes, np.array(vel), np.array(wlo), np.array(whi), np.array(anchor))
+
+
+def _platoon(rng: np.random.Generator, style: Style, route: Route, speed: float, bounds, agents: Agents) -> Agents:
+    """A platoon of vehicles in the ego's lane, ahead of it at a following distance, driving on
+    along the route's first road; the same-direction traffic of that lane gives way to it."""
+    xy, yaw = route.at(0.0)
+    heading = np.array([np.cos(yaw[0]), np.sin(yaw[0])])
+    axis = int(np.argmax(np.abs(heading)))
+    sign = float(np.sign(heading[axis]))
+    across = float(xy[0, 1 - axis])
+    v = speed * float(rng.uniform(*LEAD_SPEED))
+    lo_b, hi_b = (bounds[1], bounds[3]) if axis == 1 else (bounds[0], bounds[2])
+    # the lane's own traffic would drive through the platoon
+    lane = ((np.sign(agents.velocity[:, axis]) == sign) & (np.abs(agents.velocity[:, 1 - axis]) == 0)
+            & (np.abs(agents.anchor[:, 1 - axis] - across) < 0.5 * style.lane_width))
+    agents = agents.take(np.flatnonzero(~lane))
+    parts, front = [], float(xy[0, axis]) + sign * EGO_NOSE    # the front of the last vehicle in line
+    n = int(rng.integers(LEAD_VEHICLES[0], LEAD_VEHICLES[1] + 1))
+    track0 = int(agents.boxes.track.max()) + 1 if len(agents) else 0
+    for k, vt in enumerate(draw_types(rng, n, _traffic_mix(style))):
+        size = draw_size(rng, vt)
+        gap = rng.uniform(*LEAD_STANDSTILL) + rng.uniform(*LEAD_HEADWAY) * speed
+        centre = front + sign * (gap + 0.5 * size[0])
+        front = centre + sign * 0.5 * size[0]
+        parts.append(vehicle_parts(rng, vt, Placed(axis, across, centre, sign), size, track0 + k))
+    boxes = Boxes.concat(parts)
+    vel = np.zeros((len(boxes), 2))
+    vel[:, axis] = sign * v
+    # every part of a vehicle wraps with the vehicle's centre
+    anchor = np.array([0.5 * (boxes.lo[boxes.track == t, :2] + boxes.hi[boxes.track == t, :2]).mean(axis=0)
+                       for t in boxes.track])
+    n_new = len(boxes)
+    return Agents(Boxes.concat([agents.boxes, boxes]), np.concatenate([agents.velocity, vel]),
+                  np.concatenate([agents.wrap_lo, np.full(n_new, lo_b)]),
+                  np.concatenate([agents.wrap_hi, np.full(n_new, hi_b)]),
+                  np.concatenate([agents.anchor, anchor]))
 
 
 def _clear_of_ego(rng, agents: Agents, ego_xy: np.ndarray, times: np.ndarray, tries: int = 8) -> Agents:
@@ -414,6 +462,10 @@ def build_scenario(cfg: SynthConfig) -> Scenario:
     furniture = _street_furniture(rng, style, layout, bounds)
     horizon = _horizon(rng, bounds) if style.horizon else Boxes.empty()
     agents = _agents(rng, style, layout, bounds, cfg.traffic, cfg.pedestrians)
+    # the platoon draws from its own stream: every other object of a seed is the same with or without it
+    lead_rng = np.random.default_rng([cfg.seed, 0x6C_6561_64])
+    if lead_rng.random() < cfg.lead and cfg.traffic > 0:
+        agents = _platoon(lead_rng, style, route, speed, bounds, agents)
     agents = _clear_of_ego(rng, agents, ego_xy, times)
     *static_parts, moving = _renumber([buildings, parked, furniture, horizon, agents.boxes])
     static = Boxes.concat(static_parts)
