@@ -369,10 +369,11 @@ def _platoon(rng: np.random.Generator, style: Style, route: Route, speed: float,
     v = speed * float(rng.uniform(*LEAD_SPEED))
     lo_b, hi_b = (bounds[1], bounds[3]) if axis == 1 else (bounds[0], bounds[2])
     # the lane's own traffic would drive through the platoon
-    lane = ((np.sign(agents.velocity[:, axis]) == sign) & (np.abs(agents.velocity[:, 1 - axis]) == 0)
-            & (np.abs(agents.anchor[:, 1 - axis] - across) < 0.5 * style.lane_width))
+    lane = (np.sign(agents.velocity[:, axis]) == sign) & (np.abs(agents.anchor[:, 1 - axis] - across)
+                                                          < 0.5 * style.lane_width)
     agents = agents.take(np.flatnonzero(~lane))
-    parts, front = [], float(xy[0, axis]) + sign * EGO_NOSE    # the front of the last vehicle in line
+    parts, anchor = [], []
+    front = float(xy[0, axis]) + sign * EGO_NOSE    # the front of the last vehicle in line
     n = int(rng.integers(LEAD_VEHICLES[0], LEAD_VEHICLES[1] + 1))
     track0 = int(agents.boxes.track.max()) + 1 if len(agents) else 0
     for k, vt in enumerate(draw_types(rng, n, _traffic_mix(style))):
@@ -380,17 +381,16 @@ def _platoon(rng: np.random.Generator, style: Style, route: Route, speed: float,
         gap = rng.uniform(*LEAD_STANDSTILL) + rng.uniform(*LEAD_HEADWAY) * speed
         centre = front + sign * (gap + 0.5 * size[0])
         front = centre + sign * 0.5 * size[0]
-        parts.append(vehicle_parts(rng, vt, Placed(axis, across, centre, sign), size, track0 + k))
+        b = vehicle_parts(rng, vt, Placed(axis, across, centre, sign), size, track0 + k)
+        parts.append(b)
+        # every part of a vehicle wraps with the vehicle's centre
+        anchor += [0.5 * (b.lo[:, :2] + b.hi[:, :2]).mean(axis=0)] * len(b)
     boxes = Boxes.concat(parts)
     vel = np.zeros((len(boxes), 2))
     vel[:, axis] = sign * v
-    # every part of a vehicle wraps with the vehicle's centre
-    anchor = np.array([0.5 * (boxes.lo[boxes.track == t, :2] + boxes.hi[boxes.track == t, :2]).mean(axis=0)
-                       for t in boxes.track])
-    n_new = len(boxes)
     return Agents(Boxes.concat([agents.boxes, boxes]), np.concatenate([agents.velocity, vel]),
-                  np.concatenate([agents.wrap_lo, np.full(n_new, lo_b)]),
-                  np.concatenate([agents.wrap_hi, np.full(n_new, hi_b)]),
+                  np.concatenate([agents.wrap_lo, np.full(len(boxes), lo_b)]),
+                  np.concatenate([agents.wrap_hi, np.full(len(boxes), hi_b)]),
                   np.concatenate([agents.anchor, anchor]))
 
 
