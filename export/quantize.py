@@ -37,6 +37,9 @@ class QuantConfig:
     weights: str = "int8"
     per_channel: bool = True
     keep_heads_float: bool = True
+    # 7-bit weights ([-64, 63]): x86 CPUs without VNNI then run uint8 x int8 without saturating,
+    # at full speed, where 8-bit weights fall back to slower uint8 x uint8 (the runtime's session)
+    reduce_range: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -47,7 +50,8 @@ class QuantConfig:
 
     def scheme(self) -> str:
         return (f"static QDQ, activations {self.activations}, weights {self.weights}"
-                f"{' per-channel' if self.per_channel else ''}, {self.method} calibration")
+                f"{' (7-bit range)' if self.reduce_range else ''}{' per-channel' if self.per_channel else ''}, "
+                f"{self.method} calibration")
 
 
 class FrameReader(CalibrationDataReader):
@@ -121,7 +125,8 @@ def quantize(fp32: str | Path, out: str | Path, frames: np.ndarray, cfg: QuantCo
         model = onnx.load(str(pre))
         excluded = {**input_nodes(model), **(head_nodes(model) if cfg.keep_heads_float else {})}
         quantize_static(str(pre), str(out), FrameReader(frames), quant_format=QuantFormat.QDQ,
-                        per_channel=cfg.per_channel, activation_type=TYPES[cfg.activations],
+                        per_channel=cfg.per_channel, reduce_range=cfg.reduce_range,
+                        activation_type=TYPES[cfg.activations],
                         weight_type=TYPES[cfg.weights], calibrate_method=METHODS[cfg.method],
                         nodes_to_exclude=list(excluded),
                         extra_options={"ActivationSymmetric": cfg.activations == "int8"})

@@ -7,11 +7,13 @@ import numpy as np
 import onnx
 import pytest
 import torch
+from onnx import numpy_helper
 
 from bsn_edge.card import ModelCard
 from bsn_edge.cli.export import main as export_main
 from bsn_edge.export import FusedModel, check_parity, head_nodes, quantize, read_card, to_onnx
 from bsn_edge.export.calib_frames import load_frames
+from bsn_edge.export.quantize import QuantConfig
 from bsn_edge.models import create_model
 from bsn_edge.runtime.model_file import session
 from bsn_edge.synth import SynthConfig, write_clip
@@ -153,6 +155,25 @@ def test_quantize_directly_reports_its_scheme(run, tmp_path):
     assert info["scheme"].startswith("static QDQ") and info["calibration_frames"] == 4
     assert info["card"].quantization == info["scheme"] and info["card"].sealed
     check_parity(model, p, [np.zeros((*SIZE, 3), np.uint8)])
+
+
+def test_reduced_range_keeps_every_weight_within_seven_bits(run, tmp_path):
+    """--reduce-range: int8 weights in [-64, 64], so uint8 x int8 pairs stay inside int16 on x86
+    CPUs without VNNI (255 * 64 * 2 = 32640); the default uses the whole int8 range."""
+    _, clip, model = run
+    p = tmp_path / "m.onnx"
+    to_onnx(model, p, card_for(SIZE))
+    frames = load_frames(clip, SIZE, 4)
+    spans = {}
+    for reduce in (False, True):
+        out = tmp_path / f"q{int(reduce)}.onnx"
+        info = quantize(p, out, frames, QuantConfig(reduce_range=reduce))
+        weights = [numpy_helper.to_array(i) for i in onnx.load(str(out)).graph.initializer
+                   if i.data_type == onnx.TensorProto.INT8 and i.dims and len(i.dims) == 4]
+        spans[reduce] = (min(int(w.min()) for w in weights), max(int(w.max()) for w in weights))
+        assert ("7-bit" in info["scheme"]) == reduce
+    assert spans[True][0] >= -64 and spans[True][1] <= 64
+    assert spans[False][0] < -64 or spans[False][1] > 64
 
 
 def test_opencv_dnn_runs_the_fp32_model(run, tmp_path):

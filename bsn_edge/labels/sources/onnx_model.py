@@ -25,16 +25,13 @@ class OnnxImageModel:
     """One onnxruntime session and the pre-processing its input asks for."""
 
     def __init__(self, path: str | Path, threads: int = 2) -> None:
-        import onnxruntime as ort
+        from bsn_edge.runtime.model_file import session
 
         self.path = Path(path)
         if not self.path.is_file():
             raise FileNotFoundError(f"ONNX model {self.path} not found")
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = threads
-        opts.inter_op_num_threads = 1
         try:
-            self.session = ort.InferenceSession(str(self.path), opts, providers=["CPUExecutionProvider"])
+            self.session = session(self.path, threads)
         except Exception as e:
             raise ValueError(f"{self.path}: onnxruntime cannot load it: {e}") from None
         inp = self.session.get_inputs()[0]
