@@ -13,8 +13,8 @@ from bsn_edge.cli.common import CHECKOUT, fail
 PROG = "bsn-bench"
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
-NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "runtime", "accuracy", "footprint", "realcam",
-         "realview", "adapt")
+NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "footprint",
+         "realcam", "realview", "adapt")
 ADAPT_SOURCE, ADAPT_TARGET = "suburb", "urban"
 ADAPT_EVAL_SEEDS = (1300, 1301)   # held-out target clips: seeds no training clip has
 
@@ -101,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
             _py("-m", "benchmarks.bench_realview", "--out", out)
         if "floor" in names:
             _py("-m", "benchmarks.bench_floor", "--out", out)
+        if "int8_cpu" in names:
+            _py("-m", "benchmarks.bench_int8_cpu", "--out", out)
         if "footprint" in names:
             _py("-m", "benchmarks.bench_footprint", "--out", out)
         if "adapt" in names:

@@ -34,9 +34,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--parked", type=float, default=1.0, help="parked-vehicle density multiplier")
     p.add_argument("--traffic", type=float, default=1.0, help="moving-traffic density multiplier")
     p.add_argument("--pedestrians", type=float, default=1.0, help="pedestrian density multiplier")
-    p.add_argument("--lead", type=float, default=0.7,
+    p.add_argument("--lead", type=float, default=SynthConfig.lead,
                    help="probability that the clip follows 1-3 vehicles in its own lane, 0.3-2 s ahead "
-                        "plus 2-5 m (default 0.7; 0: never; none with --traffic 0)")
+                        f"plus 2-5 m (default {SynthConfig.lead}; 0: never; none with --traffic 0)")
+    p.add_argument("--queue", type=float, default=SynthConfig.queue,
+                   help="probability that the clip creeps in slow traffic at 1.5-4 m/s behind such vehicles, "
+                        f"the nearest 4-15 m from the camera (default {SynthConfig.queue}; 0: never)")
     p.add_argument("--range", dest="bs_range", type=float, default=50.0,
                    help="true blind spots count within this ground distance, metres (default 50)")
     p.add_argument("--camera", choices=("vary", "fixed"), default="vary",
@@ -59,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = SynthConfig(frames=args.frames, height=h, width=w, fps=args.fps, style=args.style,
                           seed=args.seed, camera=args.camera, parked=args.parked, traffic=args.traffic,
-                          pedestrians=args.pedestrians, lead=args.lead, bs_range=args.bs_range,
+                          pedestrians=args.pedestrians, lead=args.lead, queue=args.queue, bs_range=args.bs_range,
                           sensor_effects=not args.no_sensor_effects)
     except ValueError as e:
         return fail(PROG, str(e))

@@ -31,6 +31,7 @@ class SynthConfig:
     traffic: float = 1.0
     pedestrians: float = 1.0
     lead: float = 0.7             # probability that the clip follows a platoon in its lane (not with traffic 0)
+    queue: float = 0.0            # probability that the clip creeps in slow traffic behind a platoon
     sensor_effects: bool = True   # blur, noise, tone curve, vignetting, JPEG (synth.sensor)
 
     def __post_init__(self) -> None:
@@ -51,8 +52,9 @@ class SynthConfig:
             raise ValueError(f"need 0 < bs_range < far, got {self.bs_range} and {self.far}")
         if self.far > 255.0:
             raise ValueError(f"far must be <= 255 m (the 16-bit depth format's limit), got {self.far}")
-        if not 0.0 <= self.lead <= 1.0:
-            raise ValueError(f"lead is a probability in [0, 1], got {self.lead}")
+        for name in ("lead", "queue"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} is a probability in [0, 1], got {getattr(self, name)}")
         for name in ("parked", "traffic", "pedestrians"):
             if not 0.0 <= getattr(self, name) <= 5.0:
                 raise ValueError(f"{name} density multiplier must be in [0, 5], got {getattr(self, name)}")

@@ -38,6 +38,9 @@ LEAD_STANDSTILL = (2.0, 5.0)   # bumper-to-bumper gap at standstill, metres
 LEAD_HEADWAY = (0.3, 2.0)      # time gap on top of it, seconds at the ego's speed
 LEAD_SPEED = (1.0, 1.1)        # the platoon's speed over the ego's (never closing in on it)
 LEAD_VEHICLES = (1, 3)         # vehicles in the platoon
+# A clip in slow traffic (SynthConfig.queue): the ego creeps behind a platoon at walking pace,
+# the way a dashcam spends much of its time in towns, so the car ahead is often within 10 m.
+QUEUE_SPEED = (1.5, 4.0)       # the ego's speed in a queue, m/s
 
 FACADES = np.array([(0.55, 0.62, 0.70), (0.45, 0.50, 0.62), (0.62, 0.66, 0.68), (0.40, 0.42, 0.48),
                     (0.70, 0.74, 0.78), (0.38, 0.45, 0.55), (0.55, 0.55, 0.52), (0.30, 0.35, 0.50),
@@ -444,6 +447,12 @@ def build_scenario(cfg: SynthConfig) -> Scenario:
     style = get_style(cfg.style)
     rng = np.random.default_rng([cfg.seed, 0x6273_6E])
     speed = float(rng.uniform(*style.ego_speed))
+    # the queue and the platoon draw from their own streams: a seed they pass by is the same world
+    # (a queued clip drives slower, so its route and everything around it differ)
+    queue_rng = np.random.default_rng([cfg.seed, 0x71_7565_7565])
+    queued = cfg.traffic > 0 and queue_rng.random() < cfg.queue
+    if queued:
+        speed = float(queue_rng.uniform(*QUEUE_SPEED))
     length = cfg.frames / cfg.fps * speed + 1.0
     # the route starts mid-network and may go straight through two blocks before it turns, so
     # the network reaches the route's length plus two of the longest blocks from its middle
@@ -462,9 +471,8 @@ def build_scenario(cfg: SynthConfig) -> Scenario:
     furniture = _street_furniture(rng, style, layout, bounds)
     horizon = _horizon(rng, bounds) if style.horizon else Boxes.empty()
     agents = _agents(rng, style, layout, bounds, cfg.traffic, cfg.pedestrians)
-    # the platoon draws from its own stream: every other object of a seed is the same with or without it
     lead_rng = np.random.default_rng([cfg.seed, 0x6C_6561_64])
-    if lead_rng.random() < cfg.lead and cfg.traffic > 0:
+    if (lead_rng.random() < cfg.lead or queued) and cfg.traffic > 0:
         agents = _platoon(lead_rng, style, route, speed, bounds, agents)
     agents = _clear_of_ego(rng, agents, ego_xy, times)
     *static_parts, moving = _renumber([buildings, parked, furniture, horizon, agents.boxes])

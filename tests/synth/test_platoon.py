@@ -5,7 +5,7 @@ import pytest
 
 from bsn_edge import semantics as sm
 from bsn_edge.synth import SynthConfig, make_clip, render_frames
-from bsn_edge.synth.populate import EGO_NOSE, LEAD_HEADWAY, LEAD_STANDSTILL, build_scenario
+from bsn_edge.synth.populate import EGO_NOSE, LEAD_HEADWAY, LEAD_STANDSTILL, QUEUE_SPEED, build_scenario
 
 
 def _ahead(scenario):
@@ -23,25 +23,48 @@ def _ahead(scenario):
 
 def test_the_platoon_follows_in_the_egos_lane_at_a_following_distance():
     for seed in range(4):
-        cfg = SynthConfig(frames=40, style="town", seed=seed, lead=1.0, parked=0, pedestrians=0)
+        cfg = SynthConfig(frames=40, style="town", seed=seed, lead=1.0, queue=0.0, parked=0,
+                          pedestrians=0)
         sc = build_scenario(cfg)
         near, across = _ahead(sc)
         in_lane = (np.abs(across) < 1.0) & (near > 0)
         gap = near[in_lane].min() - EGO_NOSE
         assert LEAD_STANDSTILL[0] <= gap <= LEAD_STANDSTILL[1] + LEAD_HEADWAY[1] * sc.speed, (seed, gap)
         # without it, everything else of the seed is the same world
-        bare = build_scenario(SynthConfig(frames=40, style="town", seed=seed, lead=0.0, parked=0, pedestrians=0))
+        bare = build_scenario(SynthConfig(frames=40, style="town", seed=seed, lead=0.0, queue=0.0, parked=0,
+                                          pedestrians=0))
         np.testing.assert_array_equal(bare.world.static.lo, sc.world.static.lo)
         near0, across0 = _ahead(bare)
         assert not ((np.abs(across0) < 1.0) & (near0 > 0) & (near0 < EGO_NOSE + gap + 0.5)).any()
 
 
 def test_no_platoon_on_an_empty_road_or_when_off():
-    for cfg in (SynthConfig(frames=10, seed=1, traffic=0, lead=1.0), SynthConfig(frames=10, seed=1, lead=0.0)):
+    for cfg in (SynthConfig(frames=10, seed=1, traffic=0, lead=1.0, queue=1.0),
+                SynthConfig(frames=10, seed=1, lead=0.0, queue=0.0)):
         near, across = _ahead(build_scenario(cfg))
         assert not ((np.abs(across) < 1.0) & (near > 0) & (near < 30)).any()
     with pytest.raises(ValueError, match="lead"):
         SynthConfig(lead=1.5)
+    with pytest.raises(ValueError, match="queue"):
+        SynthConfig(queue=-0.1)
+
+
+def test_a_queued_clip_creeps_close_behind_a_platoon():
+    for seed in range(4):
+        sc = build_scenario(SynthConfig(frames=40, style="urban", seed=seed, lead=0.0, queue=1.0, parked=0,
+                                        pedestrians=0))
+        assert QUEUE_SPEED[0] <= sc.speed <= QUEUE_SPEED[1]
+        near, across = _ahead(sc)
+        gap = near[(np.abs(across) < 1.0) & (near > 0)].min() - EGO_NOSE
+        assert LEAD_STANDSTILL[0] <= gap <= LEAD_STANDSTILL[1] + LEAD_HEADWAY[1] * QUEUE_SPEED[1], (seed, gap)
+    # the queue draws from its own stream: a seed it passes by is the same world as with no queue at all
+    passed = [s for s in range(20) if build_scenario(SynthConfig(frames=10, seed=s, queue=0.5)).speed
+              == build_scenario(SynthConfig(frames=10, seed=s, queue=0.0)).speed]
+    assert 0 < len(passed) < 20
+    a = build_scenario(SynthConfig(frames=10, seed=passed[0], queue=0.5))
+    b = build_scenario(SynthConfig(frames=10, seed=passed[0], queue=0.0))
+    np.testing.assert_array_equal(a.world.static.lo, b.world.static.lo)
+    np.testing.assert_array_equal(a.world.agents.boxes.lo, b.world.agents.boxes.lo)
 
 
 def test_the_lead_vehicle_is_drawn_at_its_distance():
