@@ -15,14 +15,20 @@ from typing import Any
 def machine() -> dict[str, Any]:
     """The machine a result was measured on."""
     cpu = platform.processor() or platform.machine()
+    flags: set[str] = set()
     try:
+        info = {}
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+            key, _, value = line.partition(":")
+            info.setdefault(key.strip(), value.strip())   # the first processor's
+        cpu = info.get("model name", cpu)
+        flags = set(info.get("flags", "").split())
     except OSError:
         pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+    # machines of one name differ in what int8 runs on (the same "AMD EPYC" came with and without VNNI)
+    isa = [n for n, f in (("AVX-512", "avx512f"), ("VNNI", "avx512_vnni"), ("AVX-VNNI", "avx_vnni"), ("AVX2", "avx2"))
+           if f in flags]
+    return {"cpu": cpu, "isa": isa, "cores": os.cpu_count(), "python": platform.python_version(),
             "platform": platform.platform()}
 
 
@@ -54,7 +60,8 @@ def write_result(out_dir: str | Path, name: str, result: dict[str, Any], markdow
               "machine": machine(), **result}
     (out / f"{name}.json").write_text(json.dumps(result, indent=2) + "\n")
     m = result["machine"]
-    (out / f"{name}.md").write_text(markdown.rstrip() + f"\n\nMeasured on {m['cpu']}, "
+    isa = f" ({', '.join(m['isa'])})" if m["isa"] else ""
+    (out / f"{name}.md").write_text(markdown.rstrip() + f"\n\nMeasured on {m['cpu']}{isa}, "
                                     f"{m['cores']} cores, Python {m['python']}.\n")
     return out / f"{name}.json"
 
