@@ -78,16 +78,23 @@ def record(infer: Infer, size: tuple[int, int], quantization: str) -> SelfTest:
                     tuple(round(float(v), 5) for v in d.ravel()), atol, rtol)
 
 
-def check(infer: Infer, size: tuple[int, int], expected: SelfTest) -> dict[str, float]:
-    """Run the self-test; returns the worst differences, raises ``SelfTestError`` beyond tolerance."""
+def deviation(infer: Infer, size: tuple[int, int], expected: SelfTest) -> dict[str, float]:
+    """Run the self-test frame; the worst differences from the stored answer (inf for non-finite outputs)."""
     prob, depth = infer(test_frame(*size))
     p, d = pooled(prob, depth, expected.grid)
     want_p = np.array(expected.prob, np.float32).reshape(expected.grid)
     want_d = np.array(expected.depth, np.float32).reshape(expected.grid)
     worst_p = float(np.nanmax(np.abs(p - want_p))) if np.isfinite(p).all() else float("inf")
     worst_d = float(np.nanmax(np.abs(d - want_d) / want_d)) if np.isfinite(d).all() else float("inf")
+    return {"max_abs_prob": worst_p, "max_rel_depth": worst_d}
+
+
+def check(infer: Infer, size: tuple[int, int], expected: SelfTest) -> dict[str, float]:
+    """Run the self-test; returns the worst differences, raises ``SelfTestError`` beyond tolerance."""
+    dev = deviation(infer, size, expected)
+    worst_p, worst_d = dev["max_abs_prob"], dev["max_rel_depth"]
     if not (worst_p <= expected.prob_atol and worst_d <= expected.depth_rtol):
         raise SelfTestError(f"self-test failed: probabilities differ by up to {worst_p:.3g} (allowed "
                             f"{expected.prob_atol:g}), depth by up to {100 * worst_d:.3g} % (allowed "
                             f"{100 * expected.depth_rtol:g} %) from the answer stored at export")
-    return {"max_abs_prob": worst_p, "max_rel_depth": worst_d}
+    return dev
