@@ -45,6 +45,10 @@ BINS = ((5, 10), (10, 20), (20, 40), (5, 40))
 ROAD_TOL_M = 0.15
 OBJECT_M = (0.3, 2.5)
 CORRIDOR_M = 8.0
+OBJECT_CELL_M = 0.4
+OBJECT_MIN_POINTS = 15
+NEAREST_PCT = 5
+FRONT = "CAMERA_01"
 LANE_HALF_M = 1.2
 US_LANE_M = 3.7
 
@@ -52,11 +56,13 @@ US_LANE_M = 3.7
 # -- samples -----------------------------------------------------------------------------------
 
 class Sample:
-    """One real frame with its camera and sparse truth: pixels ``uv``, z-depth ``z``, ``kind`` road/object."""
+    """One real frame with its camera and sparse truth: pixels ``uv``, z-depth ``z``, ``kind`` road/object,
+    and ``obj``, the object each truth point belongs to (-1 for none)."""
 
     def __init__(self, name: str, image: np.ndarray, camera: Calibration, uv: np.ndarray, z: np.ndarray,
-                 kind: np.ndarray) -> None:
+                 kind: np.ndarray, obj: np.ndarray | None = None) -> None:
         self.name, self.image, self.camera, self.uv, self.z, self.kind = name, image, camera, uv, z, kind
+        self.obj = np.full(len(z), -1) if obj is None else obj
 
 
 def _quat(q: dict) -> np.ndarray:
@@ -66,9 +72,12 @@ def _quat(q: dict) -> np.ndarray:
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
-def _ground(points_v: np.ndarray) -> tuple[np.ndarray, float]:
-    """Road plane ``n . X = c`` (n up, vehicle frame) from points 4-25 m ahead within 4 m of the axis."""
-    sel = points_v[(points_v[:, 0] > 4) & (points_v[:, 0] < 25) & (np.abs(points_v[:, 1]) < 4)]
+def _ground(points_v: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, float]:
+    """Road plane ``n . X = c`` (n up, vehicle frame) from points 4-25 m along ``heading`` (a horizontal
+    unit vector from the vehicle origin) within 4 m of it."""
+    along = points_v @ heading
+    lateral = points_v @ np.cross([0.0, 0.0, 1.0], heading)
+    sel = points_v[(along > 4) & (along < 25) & (np.abs(lateral) < 4)]
     low = sel[sel[:, 2] < np.percentile(sel[:, 2], 30) + 0.2]
     for _ in range(3):
         A = np.c_[low[:, 0], low[:, 1], np.ones(len(low))]
@@ -79,11 +88,27 @@ def _ground(points_v: np.ndarray) -> tuple[np.ndarray, float]:
     return n / np.linalg.norm(n), c / np.linalg.norm([-a, -b, 1.0])
 
 
+def _objects(along: np.ndarray, lateral: np.ndarray) -> np.ndarray:
+    """Object id per point: points whose cells on a ground grid touch (8-connected) are one object."""
+    if not len(along):
+        return np.zeros(0, int)
+    cell = np.stack([np.floor(along / OBJECT_CELL_M), np.floor(lateral / OBJECT_CELL_M)], 1).astype(int)
+    cell -= cell.min(0)
+    grid = np.zeros(tuple(cell.max(0) + 1), np.uint8)
+    grid[cell[:, 0], cell[:, 1]] = 1
+    _, comp = cv2.connectedComponents(grid, connectivity=8)
+    return comp[cell[:, 0], cell[:, 1]]
+
+
 def _ddad_sample(name: str, image: np.ndarray, K: Intrinsics, R_vc: np.ndarray, t_vc: np.ndarray,
-                 points_v: np.ndarray) -> Sample:
-    n, c = _ground(points_v)
+                 points_v: np.ndarray, front: bool = True) -> Sample:
+    # The front camera's heading is the car's; any other camera is taken as a dashcam looking its
+    # own way (yaw 0 about its optical axis): depth depends on height, pitch and roll, not on yaw.
+    heading = np.array([1.0, 0.0, 0.0]) if front else np.array([R_vc[0, 2], R_vc[1, 2], 0.0])
+    heading /= np.linalg.norm(heading)
+    n, c = _ground(points_v, heading)
     height = float(n @ t_vc - c)
-    fwd = np.array([1.0, 0.0, 0.0]) - n[0] * n
+    fwd = heading - (heading @ n) * n
     fwd /= np.linalg.norm(fwd)
     down = -n
     level = np.stack([np.cross(down, fwd), down, fwd], 1)        # level axes in the vehicle frame
@@ -93,33 +118,45 @@ def _ddad_sample(name: str, image: np.ndarray, K: Intrinsics, R_vc: np.ndarray, 
     ok = pc[:, 2] > 1.0
     uv = pc[:, :2] / np.where(ok, pc[:, 2], 1.0)[:, None] * [K.fx, K.fy] + [K.cx, K.cy]
     ok &= (uv[:, 0] >= 0) & (uv[:, 0] < K.width - 0.5) & (uv[:, 1] >= 0) & (uv[:, 1] < K.height - 0.5)
-    lateral = np.abs(points_v @ np.cross(n, fwd))
+    lateral = (points_v - t_vc) @ np.cross(n, fwd)
     kind = np.where(np.abs(above) < ROAD_TOL_M, "road",
-                    np.where((above > OBJECT_M[0]) & (above < OBJECT_M[1]) & (lateral < CORRIDOR_M), "object", ""))
+                    np.where((above > OBJECT_M[0]) & (above < OBJECT_M[1]) & (np.abs(lateral) < CORRIDOR_M),
+                             "object", ""))
     keep = ok & (kind != "")
+    obj = np.full(len(points_v), -1)
+    sel = keep & (kind == "object")
+    obj[sel] = _objects((points_v[sel] - t_vc) @ fwd, lateral[sel])
     return Sample(name, image, Calibration.of(K, (), mounting, method="extrinsics and LiDAR road plane"),
-                  uv[keep], pc[keep, 2], kind[keep])
+                  uv[keep], pc[keep, 2], kind[keep], obj[keep])
 
 
-def ddad_samples() -> list[Sample]:
+def ddad_samples(cameras: str = "front") -> list[Sample]:
+    """DDAD frames with LiDAR truth: ``cameras`` "front" (CAMERA_01 and the camviz frame) or "other"
+    (every other camera of the scenes: front-left, front-right, rear-left, rear-right, rear)."""
+    if cameras not in ("front", "other"):
+        raise ValueError(f"cameras must be 'front' or 'other', got {cameras!r}")
     out = []
     for scene in sorted(glob.glob(str(REAL / "ddad_dgp" / "scene_*"))):
         cal = json.loads(Path(glob.glob(f"{scene}/calibration/*.json")[0]).read_text())
-        i = cal["names"].index("CAMERA_01")
-        ext, k = cal["extrinsics"][i], cal["intrinsics"][i]
-        R_vc = _quat(ext["rotation"])
-        t_vc = np.array([ext["translation"][a] for a in "xyz"])
         lidar = cal["extrinsics"][cal["names"].index("LIDAR")]
         R_vl, t_vl = _quat(lidar["rotation"]), np.array([lidar["translation"][a] for a in "xyz"])
-        images = sorted(glob.glob(f"{scene}/rgb/CAMERA_01/*.jpg"))
         clouds = sorted(glob.glob(f"{scene}/point_cloud/LIDAR/*.npz"))
-        for img_p, pc_p in zip(images, clouds, strict=True):
-            img = cv2.imread(img_p)
-            K = Intrinsics(k["fx"], k["fy"], k["cx"], k["cy"], img.shape[1], img.shape[0])
-            pts = np.load(pc_p)["data"][:, :3] @ R_vl.T + t_vl
-            out.append(_ddad_sample(f"ddad {Path(scene).name} {Path(img_p).stem}", img, K, R_vc, t_vc, pts))
+        names = [FRONT] if cameras == "front" else [c for c in cal["names"] if c.startswith("CAMERA") and c != FRONT]
+        for cam in names:
+            i = cal["names"].index(cam)
+            ext, k = cal["extrinsics"][i], cal["intrinsics"][i]
+            R_vc = _quat(ext["rotation"])
+            t_vc = np.array([ext["translation"][a] for a in "xyz"])
+            images = sorted(glob.glob(f"{scene}/rgb/{cam}/*.jpg"))
+            for img_p, pc_p in zip(images, clouds, strict=True):
+                img = cv2.imread(img_p)
+                K = Intrinsics(k["fx"], k["fy"], k["cx"], k["cy"], img.shape[1], img.shape[0])
+                pts = np.load(pc_p)["data"][:, :3] @ R_vl.T + t_vl
+                label = f"ddad {Path(scene).name} {Path(img_p).stem}"
+                out.append(_ddad_sample(label if cam == FRONT else f"{label} {cam}", img, K, R_vc, t_vc, pts,
+                                        front=cam == FRONT))
     npz = REAL / "ddad_camviz_eval.npz"
-    if npz.is_file():
+    if cameras == "front" and npz.is_file():
         d = np.load(npz)
         gt = d["gt_depth"]
         kf = d["intrinsics_full"]
@@ -194,6 +231,19 @@ def metrics(pred: np.ndarray, truth: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
+def object_distances(pred: np.ndarray, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
+    """Per object in the model's view: its distance by the prediction and by LiDAR, each the nearest
+    (``NEAREST_PCT`` percentile) depth over the object's truth pixels. The bus carries this reading:
+    the nearest blind-spot depth of a sector, not the depth of every point of a car."""
+    pd, td = [], []
+    for o in np.unique(sample.obj[sample.obj >= 0]):
+        m = (sample.obj == o) & (pred > 0)
+        if m.sum() >= OBJECT_MIN_POINTS:
+            pd.append(np.percentile(pred[m], NEAREST_PCT))
+            td.append(np.percentile(sample.z[m], NEAREST_PCT))
+    return np.array(pd), np.array(td)
+
+
 def picture(sample: Sample, depth: np.ndarray, prob: np.ndarray, threshold: float) -> np.ndarray:
     scale = 480.0 / sample.image.shape[1]
     size = (480, round(sample.image.shape[0] * scale))
@@ -214,45 +264,60 @@ def main(argv: list[str] | None = None) -> int:
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to measure")
         return 0
-    sets = {"DDAD (LiDAR)": ddad_samples()}
     uda, uda_info = udacity_samples()
-    sets["Udacity (lane geometry)"] = uda
+    # (key, title, samples, readings): the other DDAD cameras show the car's own body low in the
+    # picture, where the roof LiDAR sees road the camera cannot, so only objects are read there
+    sets = [("ddad", "DDAD front (LiDAR)", ddad_samples("front"), ("road", "object", "car distance")),
+            ("ddad_other", "DDAD other cameras (LiDAR)", ddad_samples("other"), ("object", "car distance")),
+            ("udacity", "Udacity (lane geometry)", uda, ("road",))]
     out = Path(args.out)
-    results: dict[str, Any] = {"models": {}, "udacity_camera": uda_info}
+    results: dict[str, Any] = {"models": {}, "udacity_camera": uda_info,
+                               "frames": {title: len(samples) for _, title, samples, _ in sets}}
     lines = ["# Real cameras: depth before and after the model camera", "",
              "Before: the frame resized into the model (what bsn-run did). After: warped into the model camera "
              "with the camera's calibration (`ModelFrame`), depth brought back by the height ratio. "
-             f"Udacity camera from the product's own steps: {uda_info['mounting']}.", ""]
+             f"Udacity camera from the product's own steps: {uda_info['mounting']}.", "",
+             "Readings: `road` and `object` are per LiDAR point (objects: 0.3-2.5 m above the road plane, "
+             f"within {CORRIDOR_M:g} m of the camera's heading: cars, people, poles, hedges); `car distance` is "
+             f"per object (points on touching {OBJECT_CELL_M:g} m ground cells, at least {OBJECT_MIN_POINTS} "
+             f"in view), its nearest ({NEAREST_PCT}th percentile) depth, binned by the true distance: what "
+             "the bus carries. Frames: " + ", ".join(f"{t} {len(s)}" for _, t, s, _ in sets) + ".", ""]
     for mp in models:
         engine = Engine(mp)
         name = Path(mp).stem
         res: dict[str, Any] = {}
-        lines += [f"## {name}", "", "| data | points | way | " + " | ".join(f"{lo}-{hi} m AbsRel / median / d1"
-                                                                         for lo, hi in BINS) + " |",
+        lines += [f"## {name}", "", "| data | reading | way | " + " | ".join(f"{lo}-{hi} m AbsRel / median / d1"
+                                                                          for lo, hi in BINS) + " |",
                   "|---|---|---|" + "---|" * len(BINS)]
-        for set_name, samples in sets.items():
-            for kind in ("road", "object"):
-                for way in ("resize", "model camera"):
-                    preds, truths = [], []
-                    for s in samples:
-                        sel = s.kind == kind
-                        if not sel.any():
-                            continue
-                        pr, raw_depth, raw_prob = predict(engine, s, way)
-                        preds.append(pr[sel])
-                        truths.append(s.z[sel])
-                        if way == "model camera" and kind == "road" and s is samples[0]:
-                            cv2.imwrite(str(out / f"realcam_{name}_{set_name.split()[0].lower()}.png"),
-                                        picture(s, raw_depth, raw_prob, engine.card.threshold))
-                    if not preds:
+        for key, title, samples, readings in sets:
+            for way in ("resize", "model camera"):
+                got: dict[str, tuple[list[np.ndarray], list[np.ndarray]]] = {r: ([], []) for r in readings}
+                for s in samples:
+                    pr, raw_depth, raw_prob = predict(engine, s, way)
+                    for r in readings:
+                        if r == "car distance":
+                            pd, td = object_distances(pr, s)
+                        else:
+                            pd, td = pr[s.kind == r], s.z[s.kind == r]
+                        got[r][0].append(pd)
+                        got[r][1].append(td)
+                    if way == "model camera" and s is samples[0]:
+                        cv2.imwrite(str(out / f"realcam_{name}_{key}.png"),
+                                    picture(s, raw_depth, raw_prob, engine.card.threshold))
+                for r in readings:
+                    if not got[r][0]:
                         continue
-                    m = metrics(np.concatenate(preds), np.concatenate(truths))
-                    res[f"{set_name} / {kind} / {way}"] = m
+                    m = metrics(np.concatenate(got[r][0]), np.concatenate(got[r][1]))
+                    res[f"{title} / {r} / {way}"] = m
                     cells = [f"{m[b]['abs_rel']:.3f} / {m[b]['median_ratio']:.2f} / {m[b]['delta_1.25']:.2f}"
+                             + (f" ({m[b]['n']})" if r == "car distance" else "")
                              if (b := f"{lo}-{hi}") in m else "-" for lo, hi in BINS]
-                    lines.append(f"| {set_name} | {kind} | {way} | " + " | ".join(cells) + " |")
+                    lines.append(f"| {title} | {r} | {way} | " + " | ".join(cells) + " |")
         results["models"][name] = res
-        lines += ["", f"![{name} DDAD](realcam_{name}_ddad.png) ![{name} Udacity](realcam_{name}_udacity.png)", ""]
+        lines += ["", "Car distance cells give the number of objects in brackets (an object seen in three "
+                  "frames counts three times).", "",
+                  " ".join(f"![{name} {title}](realcam_{name}_{key}.png)" for key, title, samples, _ in sets
+                           if samples), ""]
     write_result(out, "realcam", results, "\n".join(lines))
     print("\n".join(lines))
     return 0

@@ -83,3 +83,33 @@ def test_outputs_come_back_on_the_raw_pixels_and_outside_the_view_is_marked():
     assert not mf.seen[:, 0].any() and mf.seen[MODEL.height // 2, 40:-40].all()
     with pytest.raises(ValueError, match="built for"):
         mf.to_model(np.zeros((100, 100, 3), np.uint8))
+
+
+@pytest.mark.parametrize("k", [2, 3, 4])
+def test_a_frame_k_times_finer_is_the_area_average_of_k_by_k_blocks(k):
+    """The model camera itself, k times finer: the picture in the model frame is OpenCV's own area
+    resize (an independent implementation) of the raw frame, pixel for pixel."""
+    raw = MODEL.scaled(MODEL.width * k, MODEL.height * k)
+    frame = np.random.default_rng(k).integers(0, 256, (raw.height, raw.width, 3), dtype=np.uint8)
+    mf = ModelFrame(raw, (), REF, MODEL, REF)
+    assert mf.shrink == k
+    want = cv2.resize(frame, (MODEL.width, MODEL.height), interpolation=cv2.INTER_AREA)
+    assert np.abs(mf.to_model(frame).astype(int) - want).max() <= 1
+
+
+@pytest.mark.parametrize("factor, k", [(1.2, 1), (1.875, 1), (2.5, 2), (3.8, 3), (7.1, 7)])
+def test_a_finer_frame_is_shrunk_in_blocks_about_their_centres(factor, k):
+    """From twice the model's scale, a shrink by the whole factor k = floor(factor) (the remap is
+    left between 1 and 1.5), below it to the model's scale; either way every model pixel sees the
+    raw column its ray meets, and a frame cut to a multiple of k still fills the model frame."""
+    w, h = round(MODEL.width * factor), round(MODEL.height * factor)
+    raw = MODEL.scaled(w, h)
+    mf = ModelFrame(raw, (), REF, MODEL, REF)
+    assert mf.shrink == k
+    ramp = np.tile(np.arange(w, dtype=np.float32), (h, 1))    # each pixel holds its own column
+    out = mf.to_model(ramp)[MODEL.height // 2]
+    # model column u sees raw column (u + 0.5) * w / W - 0.5 (pixel centres); a block of k columns
+    # averages to its centre, so a misplaced block shows as (k - 1) / 2 columns off. The last few
+    # model columns meet the < k raw columns the cut left out, mirrored.
+    want = (np.arange(MODEL.width) + 0.5) * w / MODEL.width - 0.5
+    assert np.abs(out - want)[8:-8].max() < 0.02 * k + 0.02

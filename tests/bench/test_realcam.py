@@ -1,0 +1,73 @@
+"""The real-camera benchmark's truth: mounting, road and object points, objects and their distances,
+checked on an analytic scene (flat road, box faces at known distances)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks.bench_realcam import _ddad_sample, object_distances
+from bsn_edge.camera import Intrinsics
+
+K = Intrinsics(500.0, 500.0, 320.0, 240.0, 640, 480)
+HEIGHT = 1.6
+
+
+def _camera(yaw_deg: float) -> np.ndarray:
+    """Camera axes (x right, y down, z forward) in the vehicle frame (x forward, y left, z up)."""
+    a = math.radians(yaw_deg)
+    fwd = np.array([math.cos(a), math.sin(a), 0.0])
+    right = np.array([math.sin(a), -math.cos(a), 0.0])
+    return np.stack([right, [0.0, 0.0, -1.0], fwd], 1)
+
+
+def _face(x: float, y0: float, y1: float) -> np.ndarray:
+    """A vertical face at x, 0.5-1.5 m high (a car's back), sampled every 5 cm."""
+    y, z = np.meshgrid(np.arange(y0, y1, 0.05), np.arange(0.5, 1.5, 0.05))
+    return np.stack([np.full(y.size, x), y.ravel(), z.ravel()], 1)
+
+
+def _roof(x0: float, x1: float, y0: float, y1: float) -> np.ndarray:
+    """A level roof 1.5 m high, sampled every 5 cm."""
+    x, y = np.meshgrid(np.arange(x0, x1, 0.05), np.arange(y0, y1, 0.05))
+    return np.stack([x.ravel(), y.ravel(), np.full(x.size, 1.5)], 1)
+
+
+def _scene() -> np.ndarray:
+    gx, gy = np.meshgrid(np.arange(-40, 40, 0.25), np.arange(-40, 40, 0.25))
+    road = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], 1)
+    # a car's back at 8 m from the camera; a van's back at 20 m with its roof running on to 24 m
+    return np.concatenate([road, _face(9.5, -1.0, 1.0), _face(21.5, 3.0, 5.0), _roof(21.5, 25.5, 3.0, 5.0)])
+
+
+def test_front_camera_mounting_kinds_and_object_distances():
+    t_vc = np.array([1.5, 0.0, HEIGHT])
+    s = _ddad_sample("analytic", np.zeros((480, 640, 3), np.uint8), K, _camera(0.0), t_vc, _scene())
+    m = s.camera.mounting
+    assert m.height_m == pytest.approx(HEIGHT, abs=1e-6)
+    assert (m.pitch_deg, m.yaw_deg, m.roll_deg) == pytest.approx((0.0, 0.0, 0.0), abs=1e-6)
+    # road points lie on the plane: their z-depth is height * fy / (v - cy) from the image row
+    road = s.kind == "road"
+    below = s.uv[:, 1] > K.cy + 5
+    assert np.allclose(s.z[road & below], HEIGHT * K.fy / (s.uv[road & below, 1] - K.cy), rtol=1e-6)
+    # two faces, two objects, at 8 m and 20 m from the camera
+    ids = np.unique(s.obj[s.obj >= 0])
+    assert len(ids) == 2
+    van = s.obj == s.obj[np.argmax(s.z * (s.kind == "object"))]
+    assert np.median(s.z[van]) > 21.0
+    # an object's distance is its nearest part, not the depth of its average point
+    pred_d, true_d = object_distances(s.z * 1.3, s)
+    assert sorted(true_d) == pytest.approx([8.0, 20.0], abs=0.1)
+    assert pred_d / true_d == pytest.approx([1.3, 1.3])
+
+
+def test_other_cameras_look_their_own_way():
+    """A camera yawed 60 degrees left reads as a dashcam looking its own way (yaw 0), same height;
+    taken against the car's axis its yaw is beyond what a mounting allows."""
+    t_vc = np.array([1.5, 0.5, HEIGHT])
+    img = np.zeros((480, 640, 3), np.uint8)
+    side = _ddad_sample("side", img, K, _camera(60.0), t_vc, _scene(), front=False)
+    assert side.camera.mounting.height_m == pytest.approx(HEIGHT, abs=1e-6)
+    assert side.camera.mounting.yaw_deg == pytest.approx(0.0, abs=1e-6)
+    with pytest.raises(ValueError, match="yaw_deg"):
+        _ddad_sample("front", img, K, _camera(60.0), t_vc, _scene())
