@@ -88,12 +88,13 @@ def test_outputs_come_back_on_the_raw_pixels_and_outside_the_view_is_marked():
 @pytest.mark.parametrize("k", [2, 3, 4])
 def test_a_frame_k_times_finer_is_the_area_average_of_k_by_k_blocks(k):
     """The model camera itself, k times finer: the picture in the model frame is OpenCV's own area
-    resize (an independent implementation) of the raw frame, pixel for pixel."""
+    resize of the raw frame with the binomial low-pass after it, pixel for pixel (no remap code)."""
     raw = MODEL.scaled(MODEL.width * k, MODEL.height * k)
     frame = np.random.default_rng(k).integers(0, 256, (raw.height, raw.width, 3), dtype=np.uint8)
     mf = ModelFrame(raw, (), REF, MODEL, REF)
     assert mf.shrink == k
-    want = cv2.resize(frame, (MODEL.width, MODEL.height), interpolation=cv2.INTER_AREA)
+    area = cv2.resize(frame, (MODEL.width, MODEL.height), interpolation=cv2.INTER_AREA)
+    want = cv2.filter2D(area, -1, np.outer([1, 2, 1], [1, 2, 1]) / 16.0, borderType=cv2.BORDER_REFLECT_101)
     assert np.abs(mf.to_model(frame).astype(int) - want).max() <= 1
 
 
@@ -113,3 +114,15 @@ def test_a_finer_frame_is_shrunk_in_blocks_about_their_centres(factor, k):
     # model columns meet the < k raw columns the cut left out, mirrored.
     want = (np.arange(MODEL.width) + 0.5) * w / MODEL.width - 0.5
     assert np.abs(out - want)[8:-8].max() < 0.02 * k + 0.02
+
+
+@pytest.mark.parametrize("factor", [1.55, 1.875, 2.5, 3.8])
+def test_stripes_finer_than_the_model_can_show_come_out_grey_not_aliased(factor):
+    """One-pixel stripes are beyond the model camera's resolution whenever the raw frame is finer
+    than 1.5x: low-passed they come out as their mean grey; sampled without it they would alias
+    into false stripes (standard deviation ~73 grey levels)."""
+    w, h = round(MODEL.width * factor), round(MODEL.height * factor)
+    mf = ModelFrame(MODEL.scaled(w, h), (), REF, MODEL, REF)
+    stripes = np.tile((np.arange(w) % 2 * 255).astype(np.uint8), (h, 1))
+    out = mf.to_model(stripes)[8:-8, 8:-8].astype(float)
+    assert abs(out.mean() - 127.5) < 3 and out.std() < 5
