@@ -149,6 +149,23 @@ class Agents:
     def empty(cls) -> Agents:
         return cls(Boxes.empty(), np.zeros((0, 2)), np.zeros(0), np.zeros(0))
 
+    @classmethod
+    def moving(cls, boxes: Boxes, velocity, wrap_lo: float, wrap_hi: float) -> Agents:
+        """One object (all of ``boxes``) moving as one at ``velocity`` (x, y m/s), wrapping in
+        ``[wrap_lo, wrap_hi]``, anchored at the mean centre of its parts."""
+        n = len(boxes)
+        anchor = 0.5 * (boxes.lo[:, :2] + boxes.hi[:, :2]).mean(axis=0)
+        return cls(boxes, np.tile(np.asarray(velocity, np.float64), (n, 1)), np.full(n, float(wrap_lo)),
+                   np.full(n, float(wrap_hi)), np.tile(anchor, (n, 1)))
+
+    @staticmethod
+    def concat(parts: list[Agents]) -> Agents:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return Agents.empty()
+        return Agents(Boxes.concat([p.boxes for p in parts]), *(np.concatenate([getattr(p, f) for p in parts])
+                                                               for f in ("velocity", "wrap_lo", "wrap_hi", "anchor")))
+
     def take(self, idx: np.ndarray) -> Agents:
         return Agents(self.boxes.take(idx), self.velocity[idx], self.wrap_lo[idx], self.wrap_hi[idx],
                       self.anchor[idx])

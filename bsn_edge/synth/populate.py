@@ -292,16 +292,10 @@ def _traffic_mix(style: Style) -> dict[str, float]:
 
 
 def _agents(rng, style: Style, layout: RoadLayout, bounds, traffic: float, pedestrians: float) -> Agents:
-    parts: list[Boxes] = []
-    vel, wlo, whi, anchor = [], [], [], []
+    parts: list[Agents] = []     # one per object: its index is the object's track id
 
     def add(b: Boxes, v, lo, hi) -> None:
-        c = 0.5 * (b.lo[:, :2] + b.hi[:, :2]).mean(axis=0)
-        parts.append(b)
-        vel.extend([v] * len(b))
-        wlo.extend([lo] * len(b))
-        whi.extend([hi] * len(b))
-        anchor.extend([c] * len(b))
+        parts.append(Agents.moving(b, v, lo, hi))
 
     mix = _traffic_mix(style)
     for axis, centres, lanes_of in ((1, layout.xs, layout.lanes_x), (0, layout.ys, layout.lanes_y)):
@@ -355,10 +349,7 @@ def _agents(rng, style: Style, layout: RoadLayout, bounds, traffic: float, pedes
                     # walking across: the person's "road" runs along the other axis
                     b = person_parts(rng, Placed(1 - axis, at_along, across, walk), len(parts))
                     add(b, v, c - hw - layout.sidewalk_width, c + hw + layout.sidewalk_width)
-    if not parts:
-        return Agents.empty()
-    boxes = Boxes.concat(parts)
-    return Agents(boxes, np.array(vel), np.array(wlo), np.array(whi), np.array(anchor))
+    return Agents.concat(parts)
 
 
 def _platoon(rng: np.random.Generator, style: Style, route: Route, speed: float, bounds, agents: Agents) -> Agents:
@@ -375,7 +366,9 @@ def _platoon(rng: np.random.Generator, style: Style, route: Route, speed: float,
     lane = (np.sign(agents.velocity[:, axis]) == sign) & (np.abs(agents.anchor[:, 1 - axis] - across)
                                                           < 0.5 * style.lane_width)
     agents = agents.take(np.flatnonzero(~lane))
-    parts, anchor = [], []
+    parts = [agents]
+    vel = np.zeros(2)
+    vel[axis] = sign * v
     front = float(xy[0, axis]) + sign * EGO_NOSE    # the front of the last vehicle in line
     n = int(rng.integers(LEAD_VEHICLES[0], LEAD_VEHICLES[1] + 1))
     track0 = int(agents.boxes.track.max()) + 1 if len(agents) else 0
@@ -384,17 +377,9 @@ def _platoon(rng: np.random.Generator, style: Style, route: Route, speed: float,
         gap = rng.uniform(*LEAD_STANDSTILL) + rng.uniform(*LEAD_HEADWAY) * speed
         centre = front + sign * (gap + 0.5 * size[0])
         front = centre + sign * 0.5 * size[0]
-        b = vehicle_parts(rng, vt, Placed(axis, across, centre, sign), size, track0 + k)
-        parts.append(b)
-        # every part of a vehicle wraps with the vehicle's centre
-        anchor += [0.5 * (b.lo[:, :2] + b.hi[:, :2]).mean(axis=0)] * len(b)
-    boxes = Boxes.concat(parts)
-    vel = np.zeros((len(boxes), 2))
-    vel[:, axis] = sign * v
-    return Agents(Boxes.concat([agents.boxes, boxes]), np.concatenate([agents.velocity, vel]),
-                  np.concatenate([agents.wrap_lo, np.full(len(boxes), lo_b)]),
-                  np.concatenate([agents.wrap_hi, np.full(len(boxes), hi_b)]),
-                  np.concatenate([agents.anchor, anchor]))
+        parts.append(Agents.moving(vehicle_parts(rng, vt, Placed(axis, across, centre, sign), size, track0 + k),
+                                   vel, lo_b, hi_b))
+    return Agents.concat(parts)
 
 
 def _clear_of_ego(rng, agents: Agents, ego_xy: np.ndarray, times: np.ndarray, tries: int = 8) -> Agents:
