@@ -18,6 +18,7 @@ from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.cli.common import fail
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.camera_state import CameraState
+from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.sequence.images import atomic_write_bytes
 
 PROG = "bsn-run"
@@ -63,8 +64,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "existing file unless --force)")
     p.add_argument("--save-maps", metavar="DIR",
                    help="per frame, NAME_blindspot.png (8-bit probability) and NAME_depth.png (16-bit, metres x "
-                        "256, 0 = none) in the raw frame's own pixels, NAME the image's stem or the frame number")
-    p.add_argument("--force", action="store_true", help="let --save-calib overwrite an existing file")
+                        "256, 0 = none) in the raw frame's own pixels, NAME the image's stem or the frame number; "
+                        "a folder that already holds maps is refused unless --force")
+    p.add_argument("--force", action="store_true",
+                   help="let --save-calib overwrite an existing file and --save-maps write over an earlier run's maps")
     return p
 
 
@@ -150,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--height must lie in [0.2, 5] metres, got {args.height}")
         if args.save_calib and Path(args.save_calib).exists() and not args.force:
             raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
+        maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
         engine = Engine(args.model, args.threads, not args.no_spin)
         camera = CameraState(engine.card, calibration, args.height, args.save_calib)
         source = open_source(args.source, pace=args.pace)
@@ -161,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
                 tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
             summary = run(engine, source, senders, RuntimeConfig(cycle_s=args.cycle), overlay=args.overlay,
                           log=args.log, max_frames=args.max_frames, progress=bar.update, camera=camera,
-                          save_maps=args.save_maps, stop=stopper.event)
+                          save_maps=maps, stop=stopper.event)
     finally:
         source.close()
         for s in senders:

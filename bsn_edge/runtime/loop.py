@@ -59,7 +59,7 @@ class RuntimeConfig:
 
 def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig | None = None,
         overlay: str | Path | None = None, log: str | Path | None = None, max_frames: int | None = None,
-        progress=None, camera: CameraState | None = None, save_maps: str | Path | None = None,
+        progress=None, camera: CameraState | None = None, save_maps: str | Path | MapWriter | None = None,
         stop: threading.Event | None = None) -> dict[str, Any]:
     """Process ``source`` until it ends, ``max_frames`` or ``stop`` is set; returns the summary.
 
@@ -67,14 +67,15 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
     user's camera file, or online calibration, see there); the sectors are bearings in the model
     camera, which looks along the car, and distances are brought to the user's camera height.
     The overlay and ``save_maps`` (per frame ``<name>_blindspot.png``, 8-bit probability, and
-    ``<name>_depth.png``, 16-bit metres x 256, 0 = none) are in the raw frame's own pixels.
+    ``<name>_depth.png``, 16-bit metres x 256, 0 = none; a folder or a :class:`MapWriter`) are in
+    the raw frame's own pixels.
     Whatever ends the run, the last cycle on every bus says UNAVAILABLE, and the summary's
     ``source_failure`` says whether the source failed.
     """
     cfg = cfg or RuntimeConfig()
     camera = camera or CameraState(engine.card)
     geometry = SectorGeometry(engine.card.camera, cfg.sectors)
-    maps = MapWriter(save_maps) if save_maps is not None else None
+    maps = save_maps if isinstance(save_maps, MapWriter) or save_maps is None else MapWriter(save_maps)
     machines = [SectorState(cfg.alerts) for _ in range(3)]
     health = Health(cfg.health)
     emitter = CycleEmitter(senders, health, cfg.cycle_s)

@@ -186,6 +186,13 @@ def test_saved_maps_and_overlay_are_in_the_raw_frames_pixels(setup, tmp_path):
     (tmp_path / "cal.json").write_text("{}")
     assert run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--save-calib",
                          str(tmp_path / "cal.json")]) == 2
+    # a second run into the same maps folder would mix two runs' maps: refused, unless --force
+    before = {p.name: p.stat().st_mtime_ns for p in maps.iterdir()}
+    again = ["--model", str(model), "--source", str(clip / "rgb"), "--max-frames", "1", "--save-maps", str(maps)]
+    assert run_cli.main(again) == 2
+    assert {p.name: p.stat().st_mtime_ns for p in maps.iterdir()} == before
+    assert run_cli.main([*again, "--force"]) == 0
+    assert (maps / f"{first}_depth.png").stat().st_mtime_ns > before[f"{first}_depth.png"]
 
 
 REAL_CLIP = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "dashcam_highway.mp4"
