@@ -140,7 +140,9 @@ def ddad_samples(cameras: str = "front") -> list[Sample]:
         cal = json.loads(Path(glob.glob(f"{scene}/calibration/*.json")[0]).read_text())
         lidar = cal["extrinsics"][cal["names"].index("LIDAR")]
         R_vl, t_vl = _quat(lidar["rotation"]), np.array([lidar["translation"][a] for a in "xyz"])
-        clouds = sorted(glob.glob(f"{scene}/point_cloud/LIDAR/*.npz"))
+        # one cloud per time step, in the vehicle frame, shared by every camera of the scene
+        clouds = [np.load(pc_p)["data"][:, :3] @ R_vl.T + t_vl
+                  for pc_p in sorted(glob.glob(f"{scene}/point_cloud/LIDAR/*.npz"))]
         names = [FRONT] if cameras == "front" else [c for c in cal["names"] if c.startswith("CAMERA") and c != FRONT]
         for cam in names:
             i = cal["names"].index(cam)
@@ -148,10 +150,9 @@ def ddad_samples(cameras: str = "front") -> list[Sample]:
             R_vc = _quat(ext["rotation"])
             t_vc = np.array([ext["translation"][a] for a in "xyz"])
             images = sorted(glob.glob(f"{scene}/rgb/{cam}/*.jpg"))
-            for img_p, pc_p in zip(images, clouds, strict=True):
+            for img_p, pts in zip(images, clouds, strict=True):
                 img = cv2.imread(img_p)
                 K = Intrinsics(k["fx"], k["fy"], k["cx"], k["cy"], img.shape[1], img.shape[0])
-                pts = np.load(pc_p)["data"][:, :3] @ R_vl.T + t_vl
                 label = f"ddad {Path(scene).name} {Path(img_p).stem}"
                 out.append(_ddad_sample(label if cam == FRONT else f"{label} {cam}", img, K, R_vc, t_vc, pts,
                                         front=cam == FRONT))

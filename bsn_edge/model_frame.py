@@ -55,11 +55,9 @@ class ModelFrame:
         factor = min(raw.fx / model.fx, raw.fy / model.fy)
         self.shrink = math.floor(factor) if factor >= 2 else 1
         self.prefilter = factor > SHRINK_ABOVE
-        self.pre_size: tuple[int, int] | None = None
         if self.shrink > 1:
             k = self.shrink
             # block (i, j) averages raw pixels k*i .. k*i + k - 1: its centre is raw k*i + (k - 1) / 2
-            self.pre_size = (raw.width // k, raw.height // k)
             self._fwd = cv2.convertMaps((mx - (k - 1) / 2) / k, (my - (k - 1) / 2) / k, cv2.CV_16SC2)
         else:
             self._fwd = cv2.convertMaps(mx, my, cv2.CV_16SC2)   # fixed point: the fast path of remap
@@ -89,11 +87,11 @@ class ModelFrame:
         picture is mirrored from its edge (training and the runtime alike; ``seen`` says where):
         a frame in a black border is a look no model has learned."""
         self._check(frame)
-        if self.pre_size is not None:
-            pw, ph = self.pre_size
-            k = self.shrink
+        k = self.shrink
+        if k > 1:
             # the frame cut to a multiple of k (the last < k rows and columns go)
-            frame = cv2.resize(frame[:ph * k, :pw * k], self.pre_size, interpolation=cv2.INTER_AREA)
+            h, w = self.raw.height // k, self.raw.width // k
+            frame = cv2.resize(frame[:h * k, :w * k], (w, h), interpolation=cv2.INTER_AREA)
         if self.prefilter:
             frame = cv2.GaussianBlur(frame, (3, 3), 0)
         return cv2.remap(frame, *self._fwd, interpolation, dst=dst, borderMode=cv2.BORDER_REFLECT)
