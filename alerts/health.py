@@ -38,12 +38,18 @@ class HealthConfig:
 class Health:
     """Pure (time comes from the caller) and thread-safe: report valid inferences and faults with
     timestamps, ask for the state. ``unavailable()`` forces UNAVAILABLE from then on (the source
-    ended or failed: no valid inference is coming)."""
+    ended or failed: no valid inference is coming).
+
+    Two clocks: ``t`` is the frames' time (the deadline is kept in it), ``wall`` the processing
+    clock, over which the frame rate is counted: a video file played faster or slower than it was
+    recorded reports the rate the runtime achieves, not the file's. Without ``wall`` both are ``t``
+    (a live camera, whose frame times are the processing clock)."""
 
     def __init__(self, cfg: HealthConfig | None = None) -> None:
         self.cfg = cfg or HealthConfig()
         self._faults = dict.fromkeys(FAULTS, 0)
         self._valid: deque[float] = deque()
+        self._work: deque[float] = deque()     # processing-clock times of the same inferences
         self._down = False
         self._calibrating = False
         self._lock = threading.Lock()
@@ -53,11 +59,16 @@ class Health:
         with self._lock:
             self._calibrating = bool(on)
 
-    def valid(self, t: float) -> None:
+    def valid(self, t: float, wall: float | None = None) -> None:
+        """A valid inference on the frame of time ``t``, finished at ``wall`` on the processing clock."""
+        w = t if wall is None else wall
         with self._lock:
             self._valid.append(t)
+            self._work.append(w)
             while self._valid and self._valid[0] < t - self.cfg.window_s:
                 self._valid.popleft()
+            while self._work and self._work[0] < w - self.cfg.window_s:
+                self._work.popleft()
 
     def fault(self, name: str, n: int = 1) -> None:
         with self._lock:
@@ -84,34 +95,32 @@ class Health:
         with self._lock:
             self._down = True
 
-    def fps(self, t: float) -> float:
+    def fps(self, t: float, wall: float | None = None) -> float:
+        """Valid inferences per second of the processing clock, over the last ``window_s``."""
         with self._lock:
-            return self._fps(t)
+            return self._fps(t if wall is None else wall)
 
-    def _fps(self, t: float) -> float:
-        recent = [v for v in self._valid if v >= t - self.cfg.window_s]
+    def _fps(self, wall: float) -> float:
+        recent = [v for v in self._work if v >= wall - self.cfg.window_s]
         if len(recent) < 2:
             return 0.0
-        span = max(t - recent[0], 1e-6)
+        span = max(wall - recent[0], 1e-6)
         return (len(recent) - 1) / span if span < self.cfg.window_s else len(recent) / self.cfg.window_s
 
-    def state(self, t: float) -> SystemState:
-        with self._lock:
-            if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
-                return SystemState.UNAVAILABLE
-            if self._calibrating:
-                return SystemState.CALIBRATING
-            if self._fps(t) < self.cfg.fps_floor:
-                return SystemState.DEGRADED
-            return SystemState.OK
+    def _state(self, t: float, wall: float) -> SystemState:
+        if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
+            return SystemState.UNAVAILABLE
+        if self._calibrating:
+            return SystemState.CALIBRATING
+        return SystemState.DEGRADED if self._fps(wall) < self.cfg.fps_floor else SystemState.OK
 
-    def snapshot(self, t: float) -> tuple[SystemState, float, dict[str, int]]:
-        """State, frame rate and a copy of the counters at ``t``, read together."""
+    def state(self, t: float, wall: float | None = None) -> SystemState:
         with self._lock:
-            if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
-                state = SystemState.UNAVAILABLE
-            elif self._calibrating:
-                state = SystemState.CALIBRATING
-            else:
-                state = SystemState.DEGRADED if self._fps(t) < self.cfg.fps_floor else SystemState.OK
-            return state, self._fps(t), dict(self._faults)
+            return self._state(t, t if wall is None else wall)
+
+    def snapshot(self, t: float, wall: float | None = None) -> tuple[SystemState, float, dict[str, int]]:
+        """State, frame rate and a copy of the counters at ``t`` (``wall`` on the processing clock), read
+        together."""
+        w = t if wall is None else wall
+        with self._lock:
+            return self._state(t, w), self._fps(w), dict(self._faults)

@@ -65,6 +65,22 @@ class Sample:
         self.obj = np.full(len(z), -1) if obj is None else obj
 
 
+# source and licence of each real source's frames (../shared/data/real/README.md)
+DDAD = "DDAD test scenes, Toyota Research Institute (TRI-ML/dgp, TRI-ML/camviz), MIT licence, (c) 2019-2023 TRI"
+LICENCES = {
+    "udacity": "Udacity CarND-Vehicle-Detection `test_video.mp4`, MIT licence, (c) 2016-2017 Udacity, Inc.",
+    "dashcam_highway": "Udacity CarND-LaneLines-P1 `solidWhiteRight.mp4`, MIT licence, (c) 2016-2019 Udacity, Inc.",
+    "city pair": "frames of a video published under CC BY 3.0 (nianticlabs/manydepth `assets/`); author: the "
+                 "video's author on YouTube (video id sF0wXxZwISw)",
+}
+
+
+def licence(name: str) -> str:
+    """The source and licence line of a real source's frames."""
+    return DDAD if name.startswith("ddad") else LICENCES[name]
+
+
+
 def _quat(q: dict) -> np.ndarray:
     w, x, y, z = q["qw"], q["qx"], q["qy"], q["qz"]
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
@@ -318,7 +334,9 @@ def main(argv: list[str] | None = None) -> int:
         lines += ["", "Car distance cells give the number of objects in brackets (an object seen in three "
                   "frames counts three times).", "",
                   " ".join(f"![{name} {title}](realcam_{name}_{key}.png)" for key, title, samples, _ in sets
-                           if samples), ""]
+                           if samples), "",
+                  "Frames: " + "; ".join(sorted({licence("ddad" if key.startswith("ddad") else key)
+                                                 for key, _, samples, _ in sets if samples})) + ".", ""]
     write_result(out, "realcam", results, "\n".join(lines))
     print("\n".join(lines))
     return 0

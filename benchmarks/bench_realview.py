@@ -7,8 +7,9 @@ from its calibration and LiDAR road plane, the Udacity clip with the camera from
 own calibration steps, the 960x540 highway dashcam (intrinsics unknown) with no camera file
 (online calibration over the whole clip), the city pair with its published intrinsics and the
 model camera's mounting. Blind spots at the model's own threshold are tinted red on the raw frame;
-one column per model. The pictures show third-party data that must not be redistributed: they stay
-on the machine that ran the benchmark (git ignores them). Nothing here is scored: the figures are
+one column per model. The pictures are derived from third-party data and are committed with the
+source and licence line of the frames they show (``LICENCES``; the raw files themselves are never
+redistributed). Nothing here is scored: the figures are
 for judging by eye (light and dark cars, parked cars along curbs, nothing on sky, trees or open
 road).
 """
@@ -22,7 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from benchmarks.bench_realcam import REAL, ddad_samples, udacity_samples
+from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_samples
 from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import Intrinsics
@@ -124,8 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     lines = ["# Real images by eye", "",
              "Blind spots (red) of each model at its own threshold, on the raw frames of every real source in "
-             "`../shared/data/real/`, each seen as `bsn-run` sees it (the pictures are written beside this report "
-             "on the machine that has the data, never committed). Columns: " + ", ".join(models) + ".", ""]
+             "`../shared/data/real/`, each seen as `bsn-run` sees it. Each picture carries the source and licence of "
+             "its frames. Columns: " + ", ".join(models) + ".", ""]
     result: dict = {"models": {n: e.card.threshold for n, e in models.items()}, "sources": {}}
     for src in sources():
         cols = {name: run_model(engine, src) for name, engine in models.items()}
@@ -133,7 +134,8 @@ def main(argv: list[str] | None = None) -> int:
         cv2.imwrite(str(out / fname), figure(cols), [cv2.IMWRITE_JPEG_QUALITY, 88])
         result["sources"][src.name] = {"frames": src.shown, "camera": src.what, "figure": fname}
         shown = ", ".join(map(str, src.shown))
-        lines += [f"## {src.name} ({src.what}; frames {shown})", "", f"![{src.name}]({fname})", ""]
+        lines += [f"## {src.name} ({src.what}; frames {shown})", "", f"![{src.name}]({fname})", "",
+                  f"Frames: {licence(src.name)}.", ""]
     write_result(out, "realview", result, "\n".join(lines))
     print("\n".join(lines))
     return 0

@@ -1,51 +1,147 @@
-"""Seconds per training step (D + B + distillation, batch 8, 256x512) on this machine's CPU."""
+"""Training throughput, before and after each lever, side by side in one run.
+
+    python -m benchmarks.bench_train_step --data DIR [--clips 8] [--steps 6] [--rounds 3]
+
+A step is what ``bsn-train`` does per step (``bsn_edge.train.trainer``: the batch from the data
+stream, D + B forward and backward, the teacher's distillation, Adam), batch 8 at 256x512, on the
+labelled clips under DIR. The levers are added one at a time, each a ``bsn-train`` setting:
+
+1. before: every sample decoded and warped from its PNGs every step (``data.cache=off``), the
+   teacher run every step, fp32, contiguous layout
+2. + the sample cache (``data.cache``): decoded and warped once, the batch augmented as tensors
+3. + the teacher's features computed once per frame (plain and flipped) and read from the cache
+4. + channels-last layout (``train.channels_last``)
+5. + bf16 autocast (``train.precision``), only on a CPU with native bf16 (AMX or AVX-512 BF16)
+
+The configurations take turns for ``--rounds`` rounds of ``--steps`` steps (after a warm-up
+each), and each reports its median step. One-off costs (building the cache, the teacher's
+features) are reported apart, per frame.
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
 import time
+from typing import Any
 
 import torch
 
 from benchmarks.common import write_result
+from bsn_edge.data import BlindSpotDataset, find_clips
+from bsn_edge.data.cache import SampleCache
 from bsn_edge.models import create_model, create_teacher
-from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce
-from bsn_edge.train.trainer import scaled
+from bsn_edge.train.config import load_config
+from bsn_edge.train.trainer import (
+    _adam,
+    _layout,
+    autocast_dtype,
+    cpu_has_native_bf16,
+    losses,
+    scaled,
+    training_batches,
+)
+
+LEVERS = [
+    ("before", {"cache": False, "teacher_grid": False, "channels_last": False, "precision": "fp32"}),
+    ("+ sample cache", {"cache": True, "teacher_grid": False, "channels_last": False, "precision": "fp32"}),
+    ("+ teacher features cached", {"cache": True, "teacher_grid": True, "channels_last": False, "precision": "fp32"}),
+    ("+ channels last", {"cache": True, "teacher_grid": True, "channels_last": True, "precision": "fp32"}),
+    ("+ bf16 autocast", {"cache": True, "teacher_grid": True, "channels_last": True, "precision": "bf16"}),
+]
+
+
+class Setup:
+    """One configuration: its model, optimizer and batch stream, stepped on demand."""
+
+    def __init__(self, name: str, lever: dict[str, Any], ds: BlindSpotDataset, cache: SampleCache, grid_cache,
+                 batch: int, model_name: str) -> None:
+        self.name = name
+        self.cfg = load_config(None, [f'model.name="{model_name}"', f"train.batch_size={batch}",
+                                      f"train.channels_last={str(lever['channels_last']).lower()}",
+                                      f"train.precision=\"{lever['precision']}\"",
+                                      "train.depth_object_weight=5", "train.depth_grad_scales=4"])
+        self.cfg = dataclasses.replace(self.cfg, data=dataclasses.replace(self.cfg.data, size=ds.size))
+        torch.manual_seed(0)
+        self.model = create_model(model_name)
+        cl = lever["channels_last"]
+        self.model.to(memory_format=torch.channels_last if cl else torch.contiguous_format).train()
+        self.teacher = create_teacher(18, 128).eval()
+        self.teacher.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
+        self.opt = _adam(self.model.parameters(), 1e-3, self.cfg)
+        self.dtype = autocast_dtype(self.cfg, torch.device("cpu"))
+        source = (grid_cache if lever["teacher_grid"] else cache) if lever["cache"] else None
+        self.batches = training_batches(ds, source, batch, 1, 0, 0, 0)
+        self.times: list[float] = []
+
+    def step(self, record: bool) -> None:
+        t0 = time.perf_counter()
+        b = next(self.batches)
+        loss, *_ = losses(self.model, b, self.teacher, self.cfg, self.dtype)
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.opt.step()
+        if record:
+            self.times.append(time.perf_counter() - t0)
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__)
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", required=True, help="folder of labelled sequence folders (256x512 or any size)")
+    p.add_argument("--clips", type=int, default=8, help="clips used (the first N found)")
     p.add_argument("--out", default="benchmarks/results")
-    p.add_argument("--steps", type=int, default=8)
+    p.add_argument("--steps", type=int, default=6, help="timed steps per configuration and round")
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--batch", type=int, default=8)
     p.add_argument("--model", default="small-light")
     args = p.parse_args(argv)
     torch.set_num_threads(2)
-    torch.manual_seed(0)
-    m, teacher = create_model(args.model), create_teacher(18, 128).eval()
-    opt = torch.optim.Adam(m.parameters(), 1e-3)
-    b = 8
-    x = torch.randn(b, 3, 256, 512)
-    y = (torch.rand(b, 1, 256, 512) > 0.9).float()
-    v = torch.ones(b, 1, 256, 512)
-    d = torch.rand(b, 1, 256, 512) * 50 + 1
-    times = []
-    for i in range(args.steps + 2):
-        t0 = time.perf_counter()
-        logits, depth, feats = m(x)
-        with torch.no_grad():
-            _, tf = teacher(scaled(x, 0.5))
-        loss = masked_bce(logits, y, v) + depth_loss(depth, d) + distillation_loss(feats, tf)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        if i >= 2:
-            times.append(time.perf_counter() - t0)
-    med = statistics.median(times)
-    res = {"model": args.model, "batch": b, "size": [256, 512], "seconds_per_step": med,
-           "samples_per_second": b / med, "threads": 2}
-    md = f"# Training step\n\n`{args.model}`, batch {b} at 256x512 with the teacher's distillation, 2 threads: " \
-         f"{med:.2f} s per step ({b / med:.1f} samples/s), median of {len(times)}."
+    clips = find_clips(args.data)[: args.clips]
+    size = (256, 512)
+    cam_cfg = load_config(None, [f"data.size=[{size[0]}, {size[1]}]"]).data
+    camera, mounting = cam_cfg.model_camera()
+    ds = BlindSpotDataset(clips, size, augment=True, camera=camera, mounting=mounting, seed=0)
+
+    t0 = time.perf_counter()
+    cache = SampleCache.for_dataset(ds, None)
+    build_s = (time.perf_counter() - t0) / len(ds)
+    grid_cache = SampleCache(cache.arrays, cache.items, cache.key)
+    teacher = create_teacher(18, 128)
+    t0 = time.perf_counter()
+    grid_cache.attach_teacher(teacher.eval(), 0.5, (8, 16), resize=lambda x, s: _layout(scaled(x, s), True))
+    teacher_s = (time.perf_counter() - t0) / len(ds)
+
+    levers = [(n, lv) for n, lv in LEVERS if lv["precision"] != "bf16" or cpu_has_native_bf16()]
+    setups = [Setup(n, lv, ds, cache, grid_cache, args.batch, args.model) for n, lv in levers]
+    for s in setups:
+        s.step(False)
+        s.step(False)
+    for _ in range(args.rounds):
+        for s in setups:
+            s.step(False)                       # the other configurations ran since: one untimed step
+            for _ in range(args.steps):
+                s.step(True)
+    base = statistics.median(setups[0].times)
+    rows = []
+    for s in setups:
+        med = statistics.median(s.times)
+        rows.append({"config": s.name, "seconds_per_step": med, "samples_per_second": args.batch / med,
+                     "speedup": base / med, "n": len(s.times)})
+    res = {"model": args.model, "batch": args.batch, "size": list(size), "threads": 2, "frames": len(ds),
+           "clips": [c.path.name for c in clips], "cache_build_ms_per_frame": 1e3 * build_s,
+           "teacher_features_ms_per_frame": 1e3 * teacher_s, "native_bf16": cpu_has_native_bf16(), "rows": rows}
+    lines = [f"# Training step, lever by lever\n\n`{args.model}`, batch {args.batch} at {size[0]}x{size[1]}, D + B + "
+             f"the teacher's distillation + Adam, 2 threads, on {len(clips)} labelled clips ({len(ds)} frames); "
+             f"configurations in turn, {args.rounds} rounds of {args.steps} steps, median step.\n",
+             "| configuration | s / step | samples / s | vs before |", "|---|---|---|---|"]
+    lines += [f"| {r['config']} | {r['seconds_per_step']:.3f} | {r['samples_per_second']:.1f} | "
+              f"{r['speedup']:.2f}x |" for r in rows]
+    lines.append(f"\nOne-off per frame: the sample cache {1e3 * build_s:.1f} ms, the teacher's features "
+                 f"(plain and flipped) {1e3 * teacher_s:.1f} ms.")
+    if not cpu_has_native_bf16():
+        lines.append("\nThis CPU has no native bf16 (AMX or AVX-512 BF16): `train.precision=auto` trains in fp32 here.")
+    md = "\n".join(lines)
     write_result(args.out, "train_step", res, md)
     print(md)
     return 0

@@ -26,7 +26,8 @@ def machine() -> dict[str, Any]:
     except OSError:
         pass
     # machines of one name differ in what int8 runs on (the same "AMD EPYC" came with and without VNNI)
-    isa = [n for n, f in (("AVX-512", "avx512f"), ("VNNI", "avx512_vnni"), ("AVX-VNNI", "avx_vnni"), ("AVX2", "avx2"))
+    isa = [n for n, f in (("AVX-512", "avx512f"), ("VNNI", "avx512_vnni"), ("AVX-VNNI", "avx_vnni"), ("AVX2", "avx2"),
+                          ("AVX512-BF16", "avx512_bf16"), ("AMX", "amx_tile"))
            if f in flags]
     return {"cpu": cpu, "isa": isa, "cores": os.cpu_count(), "python": platform.python_version(),
             "platform": platform.platform()}

@@ -5,9 +5,13 @@ Rescaling intrinsics to another image size happens here and nowhere else.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+
+from bsn_edge.fields import number
 
 
 @dataclass(frozen=True)
@@ -28,6 +32,12 @@ class Intrinsics:
             raise ValueError(f"focal lengths must be positive and finite, got fx={self.fx} fy={self.fy}")
         if not (np.isfinite(self.cx) and np.isfinite(self.cy)):
             raise ValueError(f"principal point must be finite, got cx={self.cx} cy={self.cy}")
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], where: str = "intrinsics") -> Intrinsics:
+        """Every field required and numeric; ``ValueError`` names the field and ``where``."""
+        return cls(*(number(d, k, where) for k in ("fx", "fy", "cx", "cy")),
+                   *(number(d, k, where, int) for k in ("width", "height")))
 
     @classmethod
     def from_fov(cls, width: int, height: int, hfov_deg: float) -> Intrinsics:

@@ -170,7 +170,7 @@ class ModelCard:
             except (TypeError, ValueError, KeyError) as e:
                 raise ValueError(f"{where}: model card key {key!r} is bad ({v!r:.120}): {e}") from None
 
-        intr = lambda v: None if v is None else Intrinsics(**v)  # noqa: E731
+        intr = lambda v: None if v is None else Intrinsics.from_dict(v, "intrinsics")  # noqa: E731
         card_fields = {
             "variant": build("variant", str),
             "spec": build("spec", lambda v: dict(v)),
@@ -184,7 +184,7 @@ class ModelCard:
             "train_camera": build("train_camera", intr),
             "graph_sha256": build("graph_sha256", lambda v: "" if v is None else str(v)),
             "self_test": build("self_test", _self_test),
-            "mounting": build("mounting", lambda v: EARLY_MOUNTING if v is None else Mounting.from_dict(v)),
+            "mounting": build("mounting", lambda v: EARLY_MOUNTING if v is None else Mounting.from_dict(v, "mounting")),
         }
         try:
             return cls(**card_fields)

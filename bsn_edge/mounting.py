@@ -14,12 +14,26 @@ when positive, so the picture turns the other way).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.fields import number
+
+HEIGHT_RANGE_M = (0.2, 5.0)     # a camera's height above the road: every tool checks against this one range
+ANGLE_LIMIT_DEG = 30.0          # pitch, yaw and roll
+
+
+def check_height(height_m: float, what: str = "height_m") -> float:
+    """``height_m`` if it is a camera height :data:`HEIGHT_RANGE_M` admits, else ``ValueError``."""
+    lo, hi = HEIGHT_RANGE_M
+    if not (math.isfinite(height_m) and lo <= height_m <= hi):
+        raise ValueError(f"{what} must lie in [{lo:g}, {hi:g}] metres, got {height_m:g}")
+    return height_m
 
 
 @dataclass(frozen=True)
@@ -32,12 +46,11 @@ class Mounting:
     roll_deg: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.height_m) and 0.2 <= self.height_m <= 5.0):
-            raise ValueError(f"height_m must lie in [0.2, 5] metres, got {self.height_m}")
+        check_height(self.height_m)
         for name in ("pitch_deg", "yaw_deg", "roll_deg"):
             v = getattr(self, name)
-            if not (math.isfinite(v) and abs(v) <= 30.0):
-                raise ValueError(f"{name} must lie in [-30, 30] degrees, got {v}")
+            if not (math.isfinite(v) and abs(v) <= ANGLE_LIMIT_DEG):
+                raise ValueError(f"{name} must lie in [-{ANGLE_LIMIT_DEG:g}, {ANGLE_LIMIT_DEG:g}] degrees, got {v}")
 
     def rotation(self) -> np.ndarray:
         """``R`` with ``x_cam = R @ x_level``: a level-frame vector in this camera's frame."""
@@ -81,9 +94,10 @@ class Mounting:
                 "roll_deg": self.roll_deg}
 
     @classmethod
-    def from_dict(cls, d: dict) -> Mounting:
-        return cls(float(d["height_m"]), float(d.get("pitch_deg", 0.0)), float(d.get("yaw_deg", 0.0)),
-                   float(d.get("roll_deg", 0.0)))
+    def from_dict(cls, d: Mapping[str, Any], where: str = "mounting") -> Mounting:
+        """Every field is required: a file without its pitch is not a camera at pitch 0 (a wrong pitch
+        skews every distance on the bus)."""
+        return cls(*(number(d, key, where) for key in ("height_m", "pitch_deg", "yaw_deg", "roll_deg")))
 
 
 

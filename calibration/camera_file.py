@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.fields import number
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.mounting import Mounting
 from bsn_edge.sequence.images import atomic_write_bytes
@@ -90,17 +91,26 @@ class Calibration:
             raise FileNotFoundError(f"calibration file {p} not found")
         try:
             d = json.loads(p.read_text())
-            if not isinstance(d, dict):
-                raise TypeError("expected a JSON object")
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise ValueError(f"{p}: not a camera file (not JSON: {e})") from None
+        if not isinstance(d, dict):
+            raise ValueError(f"{p}: not a camera file (expected a JSON object; bsn-calibrate writes one)")
+        known = {f.name for f in fields(cls)}     # fields of other versions are left out, not guessed at
+        try:
+            intrinsic = {k: number(d, k, str(p)) for k in ("fx", "fy", "cx", "cy")}
+            size = {k: number(d, k, str(p), int) for k in ("width", "height")}
             m = d.get("mounting")
-            return cls(**{**d, "dist": tuple(d.get("dist", ())), "used": tuple(d.get("used", ())),
-                          "skipped": tuple(d.get("skipped", ())), "board": tuple(d.get("board", (9, 6))),
-                          "mounting": None if m is None else Mounting.from_dict(m),
+            rest = {k: v for k, v in d.items() if k in known and k not in (*intrinsic, *size)}
+            return cls(**{**rest, **intrinsic, **size, "dist": tuple(d.get("dist", ())),
+                          "used": tuple(d.get("used", ())), "skipped": tuple(d.get("skipped", ())),
+                          "board": tuple(d.get("board", (9, 6))),
+                          "mounting": None if m is None else Mounting.from_dict(m, f"{p}: mounting"),
                           "mounting_report": dict(d.get("mounting_report") or {})})
-        except (json.JSONDecodeError, TypeError, KeyError) as e:
-            raise ValueError(f"{p}: not a calibration file: {e}") from None
+        except TypeError as e:
+            raise ValueError(f"{p}: not a camera file ({e})") from None
         except ValueError as e:
-            raise ValueError(f"{p}: {e}") from None
+            msg = str(e)
+            raise ValueError(msg if msg.startswith(str(p)) else f"{p}: {msg}") from None
 
 
 def clip_camera(path: str | os.PathLike, fallback_mounting: Mounting) -> Calibration:

@@ -69,6 +69,10 @@ def calibrate(source: str | os.PathLike, board: tuple[int, int] = (9, 6), square
         obj.append(objp)
         img.append(corners)
         used.append(name)
+    if not used and not skipped:
+        kinds = " ".join(sorted(IMAGE_EXTS)) if source.is_dir() else "frames"
+        raise ValueError(f"{source}: no images found (looked for {kinds}); give a folder of chessboard photos "
+                         "or a video of the board")
     if len(used) < 3:
         raise ValueError(f"{source}: found the {cols}x{rows} board in {len(used)} views; need at least 3 "
                          f"(skipped: {len(skipped)})")

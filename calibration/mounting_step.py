@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -9,11 +10,23 @@ from pathlib import Path
 from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.calibration.lane_height import LaneHeight
 from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
+from bsn_edge.mounting import check_height
 from bsn_edge.sequence.media import read_video
+
+LANE_WIDTH_RANGE_M = (2.0, 6.0)   # marking centre to marking centre, narrow urban lanes to wide highway ones
 
 
 class MountingRefusedError(ValueError):
     """The clip does not allow the estimate; the message says why, with the counts."""
+
+
+def check_arguments(height_m: float | None, lane_width_m: float | None) -> None:
+    """``ValueError`` for a height or lane width out of range, before any frame is read."""
+    if height_m is not None:
+        check_height(height_m, "--height")
+    lo, hi = LANE_WIDTH_RANGE_M
+    if lane_width_m is not None and not (math.isfinite(lane_width_m) and lo <= lane_width_m <= hi):
+        raise ValueError(f"--lane-width must lie in [{lo:g}, {hi:g}] metres, got {lane_width_m:g}")
 
 
 def calibrate_mounting(video: str | os.PathLike, camera: Calibration, height_m: float | None = None,
@@ -24,6 +37,7 @@ def calibrate_mounting(video: str | os.PathLike, camera: Calibration, height_m: 
     measured (``height_m``) or from the lane width. Raises :class:`MountingRefusedError`."""
     if (height_m is None) == (lane_width_m is None):
         raise ValueError("give the camera's height (--height) or the lane width (--lane-width), one of them")
+    check_arguments(height_m, lane_width_m)
     path = Path(video)
     if not path.is_file():
         raise FileNotFoundError(f"{path} not found")

@@ -1,3 +1,5 @@
+import os
+
 import numpy as np
 import pytest
 
@@ -29,3 +31,9 @@ def car(x0, y0, x1, y1, h=1.5) -> Boxes:
 
 def world_with(layout: RoadLayout, boxes: Boxes) -> World:
     return World(layout, boxes, Agents.empty())
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _sample_cache_in_tmp(tmp_path_factory) -> None:
+    """Training's sample caches go to a temporary folder, never the user's cache folder."""
+    os.environ["BSN_EDGE_CACHE"] = str(tmp_path_factory.mktemp("sample-cache"))

@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         if "labels" in names:
             _py("-m", "benchmarks.bench_labels", "--out", out)
         if "train_step" in names:
-            _py("-m", "benchmarks.bench_train_step", "--out", out)
+            _py("-m", "benchmarks.bench_train_step", "--data", str(_prepare_data(work)), "--out", out)
         if {"arch", "quant", "runtime"} & set(names):
             data, run, model = _prepare(work)
             if "quant" in names:

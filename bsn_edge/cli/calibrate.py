@@ -11,7 +11,7 @@ from tqdm import tqdm
 
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.calibration.mount_fit import MountFitConfig
-from bsn_edge.calibration.mounting_step import MountingRefusedError, calibrate_mounting
+from bsn_edge.calibration.mounting_step import MountingRefusedError, calibrate_mounting, check_arguments
 from bsn_edge.cli.common import fail
 
 PROG = "bsn-calibrate"
@@ -57,10 +57,10 @@ def build_parser() -> argparse.ArgumentParser:
 def mount(args) -> int:
     if not args.calib:
         return fail(PROG, "--mount needs --calib INTRINSICS.json (run the chessboard step first)")
-    for name in ("height", "lane_width"):
-        v = getattr(args, name)
-        if v is not None and not (0.2 <= v <= 10.0):
-            return fail(PROG, f"--{name.replace('_', '-')} must lie in [0.2, 10] metres, got {v}")
+    try:
+        check_arguments(args.height, args.lane_width)
+    except ValueError as e:
+        return fail(PROG, str(e))
     try:
         camera = Calibration.read(args.calib)
         with tqdm(desc="frames", unit="frame", disable=None) as bar:
@@ -104,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     cal.write(args.out)
     print(f"{len(cal.used)} views used, {len(cal.skipped)} skipped; RMS reprojection error {cal.rms_px:.3f} px")
-    print(f"fx {cal.fx:.1f}  fy {cal.fy:.1f}  cx {cal.cx:.1f}  cy {cal.cy:.1f}  at {cal.height}x{cal.width} (H x W)")
+    print(f"fx {cal.fx:.1f}  fy {cal.fy:.1f}  cx {cal.cx:.1f}  cy {cal.cy:.1f}  at {cal.width}x{cal.height} "
+          "(width x height)")
     print("distortion k1 k2 p1 p2 k3: " + " ".join(f"{d:+.4f}" for d in cal.dist))
     for s in cal.skipped:
         print(f"  skipped {s['view']}: {s['reason']}")

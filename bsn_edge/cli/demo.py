@@ -9,6 +9,7 @@ from pathlib import Path
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli import sheet, synth
 from bsn_edge.cli.common import CHECKOUT, fail
+from bsn_edge.runtime import Engine
 from bsn_edge.synth.style import STYLES
 
 PROG = "bsn-demo"
@@ -36,6 +37,10 @@ def main(argv: list[str] | None = None) -> int:
     model = Path(args.model)
     if not model.is_file():
         return fail(PROG, f"model {model} not found; make one with bsn-train and bsn-export (see models/README.md)")
+    try:
+        Engine(model)              # the model is verified (seal, graph, self-test) before the clip is rendered
+    except (ValueError, OSError) as e:
+        return fail(PROG, str(e))
     clip = out / f"{args.style}_{args.seed}"
     rc = synth.main([str(clip), "--frames", str(args.frames), "--style", args.style, "--seed", str(args.seed),
                      "--force"])

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from bsn_edge.cli.common import fail, parse_size
+from bsn_edge.cli.common import fail, glue_values, parse_size
 from bsn_edge.data import find_clips
 from bsn_edge.evaluate.evaluator import evaluate, grid_image, load_teacher
 from bsn_edge.sequence import write_image
@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(glue_values(argv))
     run = Run(args.run)
     try:
         model, card = run.load_model()
@@ -51,8 +51,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.styles:
         clips = [c for c in clips if c.style in args.styles]
     if not clips:
-        return fail(PROG, f"no clips to evaluate in {args.data} (held-out: {args.clips == 'held-out'}, "
-                          f"styles: {args.styles or 'any'})")
+        if args.clips == "held-out":
+            return fail(PROG, f"no held-out clips in {args.data}: the run trained or validated on every labelled "
+                              f"clip there (styles: {args.styles or 'any'}). Label clips it never saw into another "
+                              "folder and pass that as --data, or pass --clips all to score the training clips too "
+                              "(an optimistic figure)")
+        return fail(PROG, f"no labelled clips of styles {args.styles} in {args.data}")
     size = tuple(args.size or card.input_size)
     teacher = None if args.no_baselines else load_teacher(run)
     res = evaluate(model, card, clips, size, label, teacher,

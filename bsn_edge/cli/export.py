@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bsn_edge.cli.common import fail, parse_size
+from bsn_edge.cli.common import fail, glue_values, parse_size
 from bsn_edge.export.pipeline import export_run
 from bsn_edge.export.quantize import METHODS, TYPES, QuantConfig
 from bsn_edge.export.seal import read_card, seal
@@ -58,7 +58,7 @@ def reseal(src: Path, out: Path) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(glue_values(argv))
     out = Path(args.out)
     if out.exists() and not args.force:
         return fail(PROG, f"{out} exists; pass --force to overwrite it")

@@ -93,6 +93,9 @@ def candump_lines(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]
             yield int(m.group(2), 16), bytes.fromhex(payload), f"{path}:{n}"
 
 
+PYTHON_CAN_LOGS = (".asc", ".blf", ".csv", ".db", ".mf4", ".trc")
+
+
 def python_can_log(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]:
     import can
 
@@ -121,7 +124,11 @@ def main(argv: list[str] | None = None) -> int:
             path = Path(args.can_log)
             if not path.is_file():
                 return fail(PROG, f"CAN log {path} not found")
-            frames = candump_lines(path, show) if path.suffix.lower() == ".log" else python_can_log(path, show)
+            suffix = path.suffix.lower()
+            if suffix != ".log" and suffix not in PYTHON_CAN_LOGS:
+                return fail(PROG, f"{path}: not a CAN log this tool reads (.log, as bsn-run --can-log writes, or "
+                                  f"python-can's {' '.join(PYTHON_CAN_LOGS)})")
+            frames = candump_lines(path, show) if suffix == ".log" else python_can_log(path, show)
             for fid, data, where in frames:
                 if not more():
                     break

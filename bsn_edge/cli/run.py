@@ -16,6 +16,7 @@ from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.senders import CanSender, Sender, SerialSender
 from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.cli.common import fail
+from bsn_edge.mounting import check_height
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.maps import MapWriter
@@ -139,6 +140,29 @@ class StopOnSignal:
             signal.signal(sig, old)
 
 
+def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: CameraState) -> str:
+    """The end of a run in a few lines (the whole record goes to ``--summary``)."""
+    lines = [f"{PROG}: {summary['frames']} frames ({summary['valid_frames']} valid) in {summary['seconds']:.1f} s: "
+             f"{summary['fps']:.1f} frames/s, latency p50 {summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms"
+             + (f", {summary['dropped']} dropped" if summary["dropped"] else "")]
+    faults = {k: v for k, v in summary["faults"].items() if v}
+    lines.append("  faults: " + (", ".join(f"{k} {v}" for k, v in faults.items()) if faults else "none"))
+    m = summary["camera"]["mounting"]
+    if camera.calibrating:
+        lines.append(f"  camera: still {camera.progress()}; online calibration needs about a minute of "
+                     "forward driving (or run bsn-calibrate --mount once and pass --calib)")
+    elif m is not None:
+        lines.append(f"  camera: height {m['height_m']:.2f} m, pitch {m['pitch_deg']:+.2f}, yaw {m['yaw_deg']:+.2f}, "
+                     f"roll {m['roll_deg']:+.2f} deg ({summary['camera']['calibration'].get('source', 'camera file')})")
+    outputs = [(name, getattr(args, key)) for name, key in (("overlay", "overlay"), ("frame log", "log"),
+                                                               ("CAN log", "can_log"), ("maps", "save_maps"),
+                                                               ("camera file", "save_calib"), ("summary", "summary"))
+               if getattr(args, key)]
+    if outputs:
+        lines.append("  outputs: " + ", ".join(f"{name} {path}" for name, path in outputs))
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.max_frames is not None and args.max_frames < 1:
@@ -149,8 +173,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     try:
         calibration = Calibration.read(args.calib) if args.calib else None
-        if args.height is not None and not 0.2 <= args.height <= 5.0:
-            raise ValueError(f"--height must lie in [0.2, 5] metres, got {args.height}")
+        if args.height is not None:
+            check_height(args.height, "--height")
         if args.save_calib and Path(args.save_calib).exists() and not args.force:
             raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
         maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
@@ -163,18 +187,22 @@ def main(argv: list[str] | None = None) -> int:
         total = args.max_frames or getattr(source, "total", None)
         with StopOnSignal(source) as stopper, \
                 tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
+            def tick(n: int) -> None:
+                bar.update(n)
+                if camera.calibrating and bar.n % 25 == 0:
+                    bar.set_postfix_str(camera.progress(), refresh=False)
+
             summary = run(engine, source, senders, RuntimeConfig(cycle_s=args.cycle), overlay=args.overlay,
-                          log=args.log, max_frames=args.max_frames, progress=bar.update, camera=camera,
+                          log=args.log, max_frames=args.max_frames, progress=tick, camera=camera,
                           save_maps=maps, stop=stopper.event)
     finally:
         source.close()
         for s in senders:
             s.close()
     summary["signal"] = stopper.signal
-    text = json.dumps(summary, indent=1)
     if args.summary:
-        atomic_write_bytes(args.summary, (text + "\n").encode())
-    print(text)
+        atomic_write_bytes(args.summary, (json.dumps(summary, indent=1) + "\n").encode())
+    print(human_summary(summary, args, camera))
     for s in senders:
         if s.stats.errors:
             print(f"{PROG}: warning: {s.name} failed {s.stats.errors} times ({s.stats.last_error})", file=sys.stderr)

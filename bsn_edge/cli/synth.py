@@ -8,7 +8,7 @@ import time
 
 from tqdm import tqdm
 
-from bsn_edge.cli.common import fail, parse_size
+from bsn_edge.cli.common import fail, glue_values, parse_size
 from bsn_edge.synth import STYLES, SynthConfig, write_clip
 
 PROG = "bsn-synth"
@@ -57,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(glue_values(argv))
     h, w = args.size
     try:
         cfg = SynthConfig(frames=args.frames, height=h, width=w, fps=args.fps, style=args.style,
@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     except (FileExistsError, OSError, ValueError) as e:
         return fail(PROG, str(e))
     dt = time.perf_counter() - t0
-    print(f"{out}: {cfg.frames} frames of {cfg.style} at {w}x{h}, {cfg.fps:g} fps, seed {cfg.seed} "
+    print(f"{out}: {cfg.frames} frames of {cfg.style} at {h}x{w}, {cfg.fps:g} fps, seed {cfg.seed} "
           f"in {dt:.1f} s ({cfg.frames / dt:.1f} frames/s)")
     return 0
 

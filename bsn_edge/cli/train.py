@@ -30,6 +30,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "where it stopped, so the result is the uninterrupted run's)")
     p.add_argument("--force", action="store_true",
                    help="start again in an --out that already holds a run (its checkpoint, state and teacher go)")
+    p.add_argument("--stop-after", type=float, default=None, metavar="MINUTES",
+                   help="end this piece of a long training after MINUTES, with a checkpoint; run the same "
+                        "command with --resume to go on (the learning-rate schedule spans train.steps, "
+                        "whatever the pieces)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
@@ -40,13 +44,19 @@ def main(argv: list[str] | None = None) -> int:
         cfg = load_config(args.config, args.overrides)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
+    if args.stop_after is not None and not args.stop_after > 0:
+        return fail(PROG, f"--stop-after must be a positive number of minutes, got {args.stop_after:g}")
     try:
-        summary = train(cfg, args.data, args.out, resume=args.resume, progress=not args.quiet, force=args.force)
+        summary = train(cfg, args.data, args.out, resume=args.resume, progress=not args.quiet, force=args.force,
+                        stop_after=None if args.stop_after is None else args.stop_after * 60.0)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     for line in summary.get("skipped_clips", []):
         print(f"{PROG}: skipped {line}", file=sys.stderr)
     print(json.dumps({k: v for k, v in summary.items() if k != "final_loss"}, indent=1))
+    if "stopped_at" in summary:
+        print(f"{PROG}: stopped at step {summary['stopped_at']} of {summary['steps']} (--stop-after); the same "
+              "command with --resume goes on from there", file=sys.stderr)
     return 0
 
 

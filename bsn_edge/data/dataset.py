@@ -57,7 +57,10 @@ def find_clips(root: str | Path, label_name: str = "T5s",
         meta = SequenceMeta.read(seq.path)
         out.append(Clip(seq.path, str(meta.extra.get("style", meta.source)), frames))
     if not out:
-        raise ValueError(f"no labelled sequence folders (labels/{label_name}) under {root}")
+        other = sorted({q.name for q in root.rglob("labels/T*s") if q.is_dir()} - {label_name})
+        hint = (f"; the clips there have labels {', '.join(other)}: pass --set data.label=\"{other[0]}\" "
+                "(the horizon they were made with)") if other else "; make them with bsn-label"
+        raise ValueError(f"no labelled sequence folders (labels/{label_name}) under {root}{hint}")
     return out
 
 

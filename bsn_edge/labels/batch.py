@@ -47,8 +47,8 @@ def label_clip(seq: str, cfg: LabelConfig, sources: Sources,
         return ClipResult(seq, "rejected", str(e))
     except StaleLabelsError as e:
         return ClipResult(seq, "stale", str(e))
-    except (OSError, ValueError) as e:
-        return ClipResult(seq, "failed", f"{type(e).__name__}: {e}")
+    except (OSError, ValueError) as e:       # our own messages: they say what is wrong, in the user's words
+        return ClipResult(seq, "failed", str(e))
     except Exception as e:  # a bug in one clip must not take the batch down
         return ClipResult(seq, "failed", f"{type(e).__name__}: {e}\n{traceback.format_exc(limit=3)}")
     return ClipResult(seq, "ok", "", rep["label_frames"], rep["resumed_frames"], rep["seconds"])

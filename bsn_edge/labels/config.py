@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from bsn_edge.mounting import check_height
+
 # The paper's minimum component area, 100 px, is for KITTI-size frames.
 REF_AREA_PX = 100
 REF_SIZE = (375, 1242)
@@ -53,8 +55,8 @@ class LabelConfig:
             raise ValueError(f"min_area must be >= 0, got {self.min_area}")
         if not -1.0 <= self.min_corr <= 1.0:
             raise ValueError(f"min_corr must be in [-1, 1], got {self.min_corr}")
-        if self.camera_height is not None and not 0.2 <= self.camera_height <= 5.0:
-            raise ValueError(f"camera_height must be in [0.2, 5] m, got {self.camera_height}")
+        if self.camera_height is not None:
+            check_height(self.camera_height, "camera_height")
         if not 0 <= self.look_tol <= 255:
             raise ValueError(f"look_tol must be in [0, 255] grey levels, got {self.look_tol}")
         if not 0 < self.shrink_margin <= 1:

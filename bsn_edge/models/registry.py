@@ -104,5 +104,5 @@ def weights_bytes(model: nn.Module) -> bytes:
     """The serialized state dict of ``model`` (what ``model.pt`` holds; its sha256 is the card's
     ``weights_sha256``)."""
     buf = io.BytesIO()
-    torch.save({k: v.detach().cpu() for k, v in model.state_dict().items()}, buf)
+    torch.save({k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}, buf)
     return buf.getvalue()

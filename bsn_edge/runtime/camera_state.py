@@ -95,6 +95,22 @@ class CameraState:
                 cam.with_mounting(m, **report).write(self.save_to)
                 self.report["saved"] = str(self.save_to)
 
+    def progress(self) -> str:
+        """Where online calibration stands, in a line: pairs used and the standard errors of pitch and
+        yaw against what convergence needs ("" when not calibrating)."""
+        if not self.calibrating:
+            return ""
+        r = self.report or {}
+        need = self._fit.cfg if self._fit is not None else None
+        if need is None or not r.get("pairs"):
+            return f"calibrating: {self._seen} frames seen, no usable frame pair yet (needs forward driving)"
+        text = f"calibrating: {r['used']} of {r['pairs']} frame pairs used (needs {need.min_pairs})"
+        se = r.get("standard_error_deg")
+        if se:
+            text += (f", standard error pitch {se['pitch']:.2f} yaw {se['yaw']:.2f} deg "
+                     f"(needs {need.max_spread_deg:g})")
+        return text
+
     def summary(self) -> dict[str, Any]:
         m = self.mounting
         return {"intrinsics": "assumed: the model camera's, rescaled (no camera file)" if self.assumed_intrinsics

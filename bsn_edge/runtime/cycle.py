@@ -21,10 +21,13 @@ class CycleEmitter:
     counted into the health's fault counters, which the next status message carries.
     """
 
-    def __init__(self, senders: list[Sender], health: Health, cycle_s: float = 0.1) -> None:
+    def __init__(self, senders: list[Sender], health: Health, cycle_s: float = 0.1,
+                 clock: Callable[[], float] | None = None) -> None:
+        """``clock`` is the processing clock the frame rate is counted on when the cycle times are a
+        file's (see :class:`Health`); None when they are the processing clock already (live)."""
         if cycle_s <= 0:
             raise ValueError(f"cycle must be positive, got {cycle_s}")
-        self.senders, self.health, self.cycle_s = senders, health, cycle_s
+        self.senders, self.health, self.cycle_s, self.clock = senders, health, cycle_s, clock
         self.latest: AlertFrame | None = None
         self.next_t: float | None = None
         self.sent_cycles = 0
@@ -54,7 +57,7 @@ class CycleEmitter:
 
     def _send(self, t: float) -> None:
         h = self.health
-        state, fps, faults = h.snapshot(t)
+        state, fps, faults = h.snapshot(t, None if self.clock is None else self.clock())
         base = self.latest if self.latest is not None and state != SystemState.UNAVAILABLE \
             else AlertFrame.unavailable(t)
         frame = replace(base, t=t, state=state, fps=fps, faults=faults)

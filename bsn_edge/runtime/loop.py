@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,7 +61,7 @@ class RuntimeConfig:
 def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig | None = None,
         overlay: str | Path | None = None, log: str | Path | None = None, max_frames: int | None = None,
         progress=None, camera: CameraState | None = None, save_maps: str | Path | MapWriter | None = None,
-        stop: threading.Event | None = None) -> dict[str, Any]:
+        stop: threading.Event | None = None, clock: Callable[[], float] = time.monotonic) -> dict[str, Any]:
     """Process ``source`` until it ends, ``max_frames`` or ``stop`` is set; returns the summary.
 
     Every frame is warped into the model camera by ``camera`` (a :class:`CameraState`: the
@@ -70,7 +71,8 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
     ``<name>_depth.png``, 16-bit metres x 256, 0 = none; a folder or a :class:`MapWriter`) are in
     the raw frame's own pixels.
     Whatever ends the run, the last cycle on every bus says UNAVAILABLE, and the summary's
-    ``source_failure`` says whether the source failed.
+    ``source_failure`` says whether the source failed. The frame rate on the bus and the overlay
+    is the one achieved, counted on ``clock`` (a file's frame times say how fast it was recorded).
     """
     cfg = cfg or RuntimeConfig()
     camera = camera or CameraState(engine.card)
@@ -78,7 +80,8 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
     maps = save_maps if isinstance(save_maps, MapWriter) or save_maps is None else MapWriter(save_maps)
     machines = [SectorState(cfg.alerts) for _ in range(3)]
     health = Health(cfg.health)
-    emitter = CycleEmitter(senders, health, cfg.cycle_s)
+    wall = None if source.live else clock        # a live source's frame times are the processing clock
+    emitter = CycleEmitter(senders, health, cfg.cycle_s, wall)
     engine.warmup(cfg.warmup)
     stage_s = dict.fromkeys(STAGES, 0.0)
     latency = LatencyStats()
@@ -131,9 +134,10 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                     for m, r in zip(machines, readings, strict=True):
                         score, level = m.update(cap.t, r.score)
                         sectors.append(SectorAlert(score, level, r.distance_m))
-                    health.valid(cap.t)
+                    now = None if wall is None else wall()
+                    health.valid(cap.t, now)
                     valid += 1
-                    state, fps_now, faults = health.snapshot(cap.t)
+                    state, fps_now, faults = health.snapshot(cap.t, now)
                     alert = AlertFrame(cap.t, *sectors, state, fps_now, faults)
                     emitter.publish(alert)
                     t3 = time.perf_counter()
@@ -164,12 +168,12 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
         if heartbeat is not None:
             heartbeat.close()
         emitter.final(time.monotonic() if source.live else last_t + cfg.cycle_s)
-    wall = time.perf_counter() - t_start
+    elapsed = time.perf_counter() - t_start
     total = sum(stage_s.values()) or 1.0
     sender_stats = {s.name: vars(s.stats) for s in senders}
     card = engine.card
-    return {"frames": frames, "valid_frames": valid, "dropped": source.dropped, "seconds": round(wall, 3),
-            "fps": frames / wall if wall else 0.0, **latency.percentiles(),
+    return {"frames": frames, "valid_frames": valid, "dropped": source.dropped, "seconds": round(elapsed, 3),
+            "fps": frames / elapsed if elapsed else 0.0, **latency.percentiles(),
             "stage_ms": {k: 1e3 * v / max(frames, 1) for k, v in stage_s.items()},
             "stage_share": {k: v / total for k, v in stage_s.items()},
             "faults": health.faults, "cycles_sent": emitter.sent_cycles, "senders": sender_stats,

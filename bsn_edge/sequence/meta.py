@@ -54,7 +54,8 @@ class SequenceMeta:
     def read(cls, seq_dir: str | os.PathLike) -> SequenceMeta:
         path = Path(seq_dir) / META_NAME
         if not path.is_file():
-            raise FileNotFoundError(f"{seq_dir}: not a sequence folder (no {META_NAME})")
+            raise FileNotFoundError(f"{seq_dir}: not a sequence folder (no {META_NAME}); bsn-synth makes one, and "
+                                    "bsn-adapt imports your own videos as sequence folders")
         try:
             d = json.loads(path.read_text())
         except json.JSONDecodeError as e:

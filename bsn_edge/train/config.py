@@ -32,7 +32,10 @@ class DataConfig:
     split_seed: int = 0
     train_styles: tuple[str, ...] = ()       # empty: all styles
     fraction: float = 1.0                    # share of the training clips used (fine-tuning: 0.2)
-    workers: int = 0
+    workers: int = 0                         # loader processes when the cache is off
+    # decoded, warped samples kept once for the whole run (bsn_edge.data.cache): "auto" (the user's
+    # cache folder, or $BSN_EDGE_CACHE), "memory", "off" (decode every sample every step) or a folder
+    cache: str = "auto"
     # the model camera every clip is warped into (written on the model card): horizontal field of
     # view at ``size``, reference height above the road and pitch (down positive)
     camera_hfov_deg: float = 80.0
@@ -44,6 +47,8 @@ class DataConfig:
             raise ValueError(f"data.size must be two multiples of 32 (H, W), got {self.size}")
         if not 0 < self.fraction <= 1:
             raise ValueError(f"data.fraction must be in (0, 1], got {self.fraction}")
+        if not self.cache.strip():
+            raise ValueError('data.cache must be "auto", "memory", "off" or a folder, got an empty string')
         self.model_camera()   # validates the camera
 
     def model_camera(self) -> tuple[Intrinsics, Mounting]:
@@ -71,6 +76,12 @@ class TrainConfig:
     device: str = "cpu"                      # cpu, cuda or auto (cuda when torch sees a GPU)
     checkpoint_every: int = 100
     init: str = ""                           # start from this run's weights (fine-tuning)
+    # arithmetic of the forward and backward passes: fp32, bf16 (autocast; weights and losses stay
+    # fp32) or auto (bf16 where the CPU has native bf16: AMX or AVX-512 BF16; CUDA: fp32)
+    precision: str = "auto"
+    channels_last: bool = True               # NHWC activations (oneDNN's native layout on CPUs)
+    eval_every: int = 0                      # steps between validation records in the run's history (0: off)
+    eval_frames: int = 256                   # validation frames per record (evenly spaced over the split)
 
     def __post_init__(self) -> None:
         if self.steps < 1 or self.batch_size < 1:
@@ -81,6 +92,10 @@ class TrainConfig:
             raise ValueError("train.depth_object_weight must be positive, train.depth_grad_scales in 0..6")
         if self.device not in ("cpu", "cuda", "auto"):
             raise ValueError(f"train.device must be cpu, cuda or auto, got {self.device!r}")
+        if self.precision not in ("fp32", "bf16", "auto"):
+            raise ValueError(f"train.precision must be fp32, bf16 or auto, got {self.precision!r}")
+        if self.eval_every < 0 or self.eval_frames < 1:
+            raise ValueError("train.eval_every must be >= 0 and train.eval_frames >= 1")
 
 
 @dataclass(frozen=True)
@@ -93,6 +108,7 @@ class TeacherConfig:
     scale: float = 0.5                       # the teacher sees the frame at this scale (its features
                                              # are pooled to a coarse grid for distillation anyway)
     checkpoint: str = ""                     # a trained teacher's folder; empty trains one first
+    eval_every: int = 0                      # steps between held-out mIoU records in the run's history (0: off)
 
     def __post_init__(self) -> None:
         if not 0.1 <= self.scale <= 1.0:

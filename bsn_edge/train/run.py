@@ -7,6 +7,7 @@
     RUN/checkpoint.json    {"card": the model card, "step", clips, validation metrics, ...}
     RUN/state.pt           what resuming needs, in one file: weights, optimizer, schedule, step
     RUN/teacher/teacher.pt the segmentation teacher
+    RUN/history.jsonl      one JSON record per line: losses and validation figures along the way
 
 Nothing is unpickled beyond tensors and numbers. A save writes ``state.pt`` first (one atomic
 file holding the weights with their sha256 and the optimizer state of the same step), then
@@ -53,6 +54,7 @@ class Run:
     """One run folder: where each file is, and the only code that reads or writes them."""
 
     MODEL, CHECKPOINT, STATE, CONFIG, TEACHER = "model.pt", "checkpoint.json", "state.pt", "config.json", "teacher"
+    HISTORY = "history.jsonl"
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
@@ -79,6 +81,10 @@ class Run:
     @property
     def teacher_path(self) -> Path:
         return self.path / self.TEACHER / "teacher.pt"
+
+    @property
+    def history_path(self) -> Path:
+        return self.path / self.HISTORY
 
     def exists(self) -> bool:
         """Whether anything of a run is already here."""
@@ -159,6 +165,20 @@ class Run:
         state["weights"] = _from_bytes(state["weights"], self.state_path)
         return state
 
+    def history(self) -> list[dict[str, Any]]:
+        """The run's records in the order written (a torn last line, from a kill, is left out)."""
+        if not self.history_path.is_file():
+            return []
+        out = []
+        for line in self.history_path.read_text().splitlines():
+            try:
+                rec = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if isinstance(rec, dict):
+                out.append(rec)
+        return out
+
     def load_teacher_state(self) -> dict[str, torch.Tensor] | None:
         return _from_bytes(self.teacher_path.read_bytes(), self.teacher_path) if self.teacher_path.is_file() else None
 
@@ -167,6 +187,17 @@ class Run:
     def write_config(self, config: dict[str, Any]) -> None:
         self.path.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(self.config_path, (json.dumps(config, indent=2) + "\n").encode())
+
+    def append_history(self, record: dict[str, Any]) -> None:
+        """Add one record (flushed at once: a kill loses no record written before it)."""
+        self.path.mkdir(parents=True, exist_ok=True)
+        with open(self.history_path, "a") as f:
+            f.write(json.dumps(record) + "\n")
+
+    def trim_history(self, phase: str, step: int) -> None:
+        """Drop ``phase`` records after ``step`` (written after the checkpoint a resume starts from)."""
+        kept = [r for r in self.history() if not (r.get("phase") == phase and r.get("step", 0) > step)]
+        atomic_write_bytes(self.history_path, "".join(json.dumps(r) + "\n" for r in kept).encode())
 
     def save_teacher(self, state: dict[str, torch.Tensor]) -> None:
         self.teacher_path.parent.mkdir(parents=True, exist_ok=True)

@@ -26,6 +26,7 @@ from tqdm import tqdm
 from bsn_edge import semantics as sm
 from bsn_edge.card import UNCHOSEN_THRESHOLD, ModelCard
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
+from bsn_edge.data.cache import SampleCache, default_cache_root
 from bsn_edge.evaluate.metrics import ThresholdSweep
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, create_model, create_teacher, get_spec
@@ -85,6 +86,48 @@ def batch_stream(ds, batch: int, world: int, rank: int, seed: int, workers: int,
 
 def _to(batch: dict, device: torch.device) -> dict:
     return {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
+
+
+def sample_cache(cfg: Config, ds, progress: bool = False, desc: str = "caching samples") -> SampleCache | None:
+    """The decoded, warped samples of ``ds`` as ``data.cache`` asks (None when it is "off")."""
+    where = cfg.data.cache
+    if where == "off":
+        return None
+    root = None if where == "memory" else default_cache_root() if where == "auto" else Path(where)
+    return SampleCache.for_dataset(ds, root, progress, desc)
+
+
+def training_batches(ds, cache: SampleCache | None, batch: int, world: int, rank: int, seed: int, workers: int,
+                     start: int = 0, device: torch.device | None = None) -> Iterator[dict]:
+    """The stream of :class:`BatchStream` as batches: gathered from ``cache`` (augmented as a batch),
+    or loaded sample by sample from ``ds`` when there is no cache. Both give the same samples."""
+    if cache is None:
+        return batch_stream(ds, batch, world, rank, seed, workers, start, device)
+    stream = BatchStream(len(cache), batch, seed, start, world, rank)
+    dev = device or torch.device("cpu")
+    return (_to(cache.batch(picks, ds.augment, ds.seed), dev) for picks in stream)
+
+
+def cpu_has_native_bf16() -> bool:
+    """Whether this CPU multiplies bf16 natively (AMX tiles or AVX-512 BF16)."""
+    return any(getattr(torch.cpu, name, lambda: False)() for name in ("_is_amx_tile_supported",
+                                                                       "_is_avx512_bf16_supported"))
+
+
+def autocast_dtype(cfg: Config, device: torch.device) -> torch.dtype | None:
+    """The autocast dtype of ``train.precision`` on ``device`` (None: fp32)."""
+    want = cfg.train.precision
+    if want == "auto":
+        want = "bf16" if device.type == "cpu" and cpu_has_native_bf16() else "fp32"
+    return torch.bfloat16 if want == "bf16" else None
+
+
+def _autocast(device: torch.device, dtype: torch.dtype | None):
+    return torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None)
+
+
+def _layout(x: torch.Tensor, channels_last: bool) -> torch.Tensor:
+    return x.contiguous(memory_format=torch.channels_last) if channels_last else x
 
 
 def train_device(cfg: Config) -> torch.device:
@@ -152,8 +195,44 @@ def _depth_weights(semantic: torch.Tensor, object_weight: float) -> torch.Tensor
     return 1.0 + (object_weight - 1.0) * obj.to(torch.float32)
 
 
-def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool) -> torch.nn.Module:
-    """The segmentation teacher, trained on the dataset's semantics (or loaded)."""
+TEACHER_CLASSES = {"road": (sm.ROAD,), "sidewalk": (sm.SIDEWALK,), "vehicle": sm.VEHICLES,
+                   "person": sm.VULNERABLE}
+
+
+@torch.no_grad()
+def teacher_miou(teacher: torch.nn.Module, cache: SampleCache, scale: float, frames: int,
+                 dtype: torch.dtype | None = None) -> dict[str, float]:
+    """IoU of the teacher's road, sidewalk, vehicle and person (classes grouped) on up to ``frames``
+    evenly spaced samples of ``cache``, and their mean ``miou``."""
+    was = teacher.training
+    teacher.eval()
+    dev = next(teacher.parameters()).device
+    inter = dict.fromkeys(TEACHER_CLASSES, 0)
+    union = dict.fromkeys(TEACHER_CLASSES, 0)
+    idx = np.unique(np.linspace(0, len(cache) - 1, min(frames, len(cache))).round().astype(int))
+    for lo in range(0, len(idx), 8):
+        b = cache.batch([(int(k), 0) for k in idx[lo:lo + 8]], augment=False, seed=0)
+        with _autocast(dev, dtype):
+            logits, _ = teacher(scaled(b["image"].to(dev), scale))
+        pred = F.interpolate(logits.float(), size=b["semantic"].shape[1:], mode="bilinear",
+                             align_corners=False).argmax(1).cpu()
+        sem = b["semantic"]
+        known = sem != sm.IGNORE
+        for name, ids in TEACHER_CLASSES.items():
+            t = torch.isin(sem, torch.tensor(ids)) & known
+            q = torch.isin(pred, torch.tensor(ids)) & known
+            inter[name] += int((t & q).sum())
+            union[name] += int((t | q).sum())
+    teacher.train(was)
+    out = {name: inter[name] / union[name] if union[name] else float("nan") for name in TEACHER_CLASSES}
+    out["miou"] = float(np.nanmean(list(out.values())))
+    return out
+
+
+def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool,
+                  cache: SampleCache | None = None, val_cache: SampleCache | None = None) -> torch.nn.Module:
+    """The segmentation teacher, trained on the dataset's semantics (or loaded). With ``val_cache``
+    and ``teacher.eval_every``, its held-out mIoU is recorded in the run's history."""
     t = cfg.teacher
     dev = train_device(cfg)
     teacher = create_teacher(t.encoder, t.width)
@@ -169,24 +248,40 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         teacher.load_state_dict(state)
         return teacher.to(dev).eval()
     teacher.to(dev)
+    cl = cfg.train.channels_last
+    teacher.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
+    dtype = autocast_dtype(cfg, dev)
     model = torch.nn.parallel.DistributedDataParallel(teacher) if world > 1 else teacher
     opt = _adam(model.parameters(), t.lr, cfg)
     sched = _poly(opt, t.steps, cfg.train.poly_power)
-    batches = batch_stream(ds, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers, device=dev)
+    batches = training_batches(ds, cache, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers, device=dev)
     bar = tqdm(range(t.steps), desc="teacher", disable=True if (not progress or rank) else None, unit="step")
+    if rank == 0:
+        run.trim_history("teacher", 0)
     model.train()
-    for _ in bar:
+    losses: list[float] = []
+    t0 = time.perf_counter()
+    for step in bar:
         b = next(batches)
-        logits, _ = model(scaled(b["image"], t.scale))
+        with _autocast(dev, dtype):
+            logits, _ = model(_layout(scaled(b["image"], t.scale), cl))
         target = scaled(b["semantic"][:, None].float(), t.scale, "nearest")[:, 0].long()
-        loss = F.cross_entropy(logits, target, ignore_index=sm.IGNORE)
+        loss = F.cross_entropy(logits.float(), target, ignore_index=sm.IGNORE)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
         sched.step()
-        bar.set_postfix(ce=f"{loss.item():.3f}")
+        losses.append(loss.item())
+        bar.set_postfix(ce=f"{losses[-1]:.3f}")
+        done = step + 1
+        if rank == 0 and val_cache is not None and t.eval_every and (done % t.eval_every == 0 or done == t.steps):
+            run.append_history({"phase": "teacher", "step": done, "samples": done * t.batch_size * world,
+                                "seconds": round(time.perf_counter() - t0, 1), "ce": float(np.mean(losses)),
+                                **{f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, t.scale,
+                                                                           cfg.train.eval_frames, dtype).items()}})
+            losses = []
     if rank == 0:
-        run.save_teacher(teacher.state_dict())
+        run.save_teacher({k: v.contiguous() for k, v in teacher.state_dict().items()})
     return teacher.eval()
 
 
@@ -217,12 +312,67 @@ def prepare_run(out: str | Path, resume: bool = False, force: bool = False) -> R
     return run
 
 
+def losses(net: torch.nn.Module, b: dict[str, torch.Tensor], teacher: torch.nn.Module | None, cfg: Config,
+           dtype: torch.dtype | None) -> tuple[torch.Tensor, ...]:
+    """``(loss, bce, distillation, depth)`` of one batch: BCE inside V, D's depth loss, and lambda x the
+    pairwise-similarity distillation against the batch's cached ``teacher_grid`` or, without one,
+    a pass of ``teacher``. The networks run under ``dtype`` autocast; the losses are fp32."""
+    cl = cfg.train.channels_last
+    dev = b["image"].device
+    with _autocast(dev, dtype):
+        logits, depth, feats = net(_layout(b["image"], cl))
+    logits, depth, feats = logits.float(), depth.float(), feats.float()
+    l_bce = masked_bce(logits, b["blindspot"], b["visibility"])
+    l_depth = depth_loss(depth, b["depth"], b["sky"], _depth_weights(b["semantic"], cfg.train.depth_object_weight),
+                         cfg.train.depth_grad_scales)
+    loss = l_bce + cfg.train.depth_weight * l_depth
+    l_kd = torch.zeros((), device=dev)
+    if teacher is not None:
+        if "teacher_grid" in b:
+            t_feats = b["teacher_grid"]
+        else:
+            with torch.no_grad(), _autocast(dev, dtype):
+                _, t_feats = teacher(_layout(scaled(b["image"], cfg.teacher.scale), cl))
+        l_kd = distillation_loss(feats, t_feats.float(), cfg.train.distill_grid)
+        loss = loss + cfg.distill_weight * l_kd
+    return loss, l_bce, l_kd, l_depth
+
+
+@torch.no_grad()
+def validate(model: torch.nn.Module, cache: SampleCache, frames: int, dtype: torch.dtype | None = None,
+             channels_last: bool = False) -> dict[str, float]:
+    """Validation figures on up to ``frames`` evenly spaced samples of ``cache``: IoU inside V at the
+    best threshold of the sweep, and D's depth AbsRel (pixels with depth, sky left out)."""
+    was = model.training
+    model.eval()
+    dev = next(model.parameters()).device
+    sweep = ThresholdSweep()
+    err, n = 0.0, 0
+    idx = np.unique(np.linspace(0, len(cache) - 1, min(frames, len(cache))).round().astype(int))
+    for lo in range(0, len(idx), 8):
+        b = cache.batch([(int(k), 0) for k in idx[lo:lo + 8]], augment=False, seed=0)
+        with _autocast(dev, dtype):
+            logits, depth, _ = model(_layout(b["image"].to(dev), channels_last))
+        sweep.add(torch.sigmoid(logits.float()).cpu().numpy(), b["blindspot"].numpy() > 0.5,
+                  b["visibility"].numpy() > 0.5)
+        gt = b["depth"]
+        ok = (gt >= MIN_DEPTH_M) & (gt <= MAX_DEPTH_M) & ~b["sky"]
+        err += float(((depth.float().cpu() - gt).abs() / gt.clamp_min(MIN_DEPTH_M))[ok].sum())
+        n += int(ok.sum())
+    model.train(was)
+    threshold, metrics = sweep.best()
+    return {"iou": metrics["iou"], "threshold": threshold, "abs_rel": err / max(n, 1)}
+
+
 def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = False,
-          progress: bool = True, force: bool = False) -> dict[str, Any]:
+          progress: bool = True, force: bool = False, stop_after: float | None = None) -> dict[str, Any]:
     """Train per ``cfg`` on the labelled clips under ``data_dir``; write the run to ``out``.
 
     An existing run is refused unless ``resume`` (continue it: verified state, same data stream)
-    or ``force`` (start again)."""
+    or ``force`` (start again). ``stop_after`` (seconds) ends this piece of a longer training at
+    the first step past it (counted from this call, the teacher and the caches included), with a
+    checkpoint to resume from; the learning-rate schedule spans ``train.steps``, whatever the pieces."""
+    piece_start = time.perf_counter()
     rank, world = _dist()
     run = prepare_run(out, resume, force) if rank == 0 else Run(out)
     if world > 1:
@@ -239,8 +389,19 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     data = datasets(cfg, data_dir)
     if rank == 0:
         run.write_config(cfg.to_dict())
+    show = progress and rank == 0
+    cache = sample_cache(cfg, data["train_ds"], show, "caching training samples")
+    val_cache = None
+    if data["val_ds"] is not None and cfg.data.cache != "off":
+        val_cache = sample_cache(cfg, data["val_ds"], show, "caching validation samples")
     lam = cfg.distill_weight
-    teacher = train_teacher(cfg, data["train_ds"], run, rank, world, progress) if lam > 0 else None
+    teacher = train_teacher(cfg, data["train_ds"], run, rank, world, progress, cache, val_cache) if lam > 0 else None
+    dev = train_device(cfg)
+    dtype = autocast_dtype(cfg, dev)
+    cl = cfg.train.channels_last
+    if teacher is not None and cache is not None:
+        cache.attach_teacher(teacher, cfg.teacher.scale, cfg.train.distill_grid, progress=show,
+                             resize=lambda x, sc: _layout(scaled(x, sc), cl))
 
     model = create_model(cfg.model.name)
     if cfg.train.init:
@@ -249,57 +410,73 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             raise ValueError(f"train.init {cfg.train.init} holds a {init_card.variant!r} model, "
                              f"not {cfg.model.name!r}")
         model.load_state_dict(init.state_dict())
-    dev = train_device(cfg)
     model.to(dev)
-    start = 0
+    start, seconds_before = 0, 0.0
     opt = _adam(model.parameters(), cfg.train.lr, cfg)
     sched = _poly(opt, cfg.train.steps, cfg.train.poly_power)
     if state is not None:
         model.load_state_dict(state["weights"])
         opt.load_state_dict(state["optimizer"])
         start = int(state["step"])
+        seconds_before = float(state.get("seconds", 0.0))
         if "scheduler" in state:
             sched.load_state_dict(state["scheduler"])
+    model.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
-    batches = batch_stream(data["train_ds"], cfg.train.batch_size, world, rank, cfg.train.seed, cfg.data.workers, start,
-                      device=dev)
+    batches = training_batches(data["train_ds"], cache, cfg.train.batch_size, world, rank, cfg.train.seed,
+                               cfg.data.workers, start, device=dev)
     if state is not None and "torch_rng" in state:
         # dropout draws go on where they stopped (after the loader, which takes a draw of its own)
         torch.set_rng_state(state["torch_rng"])
+    if rank == 0:
+        run.trim_history("train", start)
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
                disable=True if (not progress or rank) else None)
-    history = []
+    history: list[list[float]] = []
+    since: list[list[float]] = []
     t0 = time.perf_counter()
+    done = start
     net.train()
     for step in bar:
         b = next(batches)
-        logits, depth, feats = net(b["image"])
-        l_bce = masked_bce(logits, b["blindspot"], b["visibility"])
-        l_depth = depth_loss(depth, b["depth"], b["sky"], _depth_weights(b["semantic"], cfg.train.depth_object_weight),
-                             cfg.train.depth_grad_scales)
-        loss = l_bce + cfg.train.depth_weight * l_depth
-        l_kd = torch.zeros((), device=dev)
-        if teacher is not None:
-            with torch.no_grad():
-                _, t_feats = teacher(scaled(b["image"], cfg.teacher.scale))
-            l_kd = distillation_loss(feats, t_feats, cfg.train.distill_grid)
-            loss = loss + lam * l_kd
+        loss, l_bce, l_kd, l_depth = losses(net, b, teacher, cfg, dtype)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
         sched.step()
         history.append([loss.item(), l_bce.item(), l_kd.item(), l_depth.item()])
+        since.append(history[-1])
         bar.set_postfix(loss=f"{loss.item():.3f}", bce=f"{l_bce.item():.3f}", kd=f"{l_kd.item():.4f}",
                         depth=f"{l_depth.item():.3f}")
         done = step + 1
-        if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps):
+        seconds = seconds_before + time.perf_counter() - t0
+        out_of_time = stop_after is not None and time.perf_counter() - piece_start >= stop_after \
+            and done < cfg.train.steps
+        if rank == 0 and cfg.train.eval_every and (done % cfg.train.eval_every == 0 or done == cfg.train.steps):
+            mean = np.mean(since, axis=0)
+            rec = {"phase": "train", "step": done, "samples": done * cfg.train.batch_size * world,
+                   "seconds": round(seconds, 1), "loss": float(mean[0]), "bce": float(mean[1]),
+                   "kd": float(mean[2]), "depth": float(mean[3])}
+            if val_cache is not None:
+                rec.update({f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
+                                                                cl).items()})
+            run.append_history(rec)
+            since = []
+        if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps or out_of_time):
             _save(run, model, cfg, data, done, threshold=None,
                   resume_state={"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "step": done,
-                                "torch_rng": torch.get_rng_state()})
+                                "torch_rng": torch.get_rng_state(), "seconds": seconds})
+        if out_of_time:
+            break
     elapsed = time.perf_counter() - t0
-    summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "seconds": round(elapsed, 1),
-                               "final_loss": history[-1] if history else None,
+    summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "steps_run": done - start,
+                               "seconds": round(elapsed, 1), "final_loss": history[-1] if history else None,
                                "skipped_clips": [f"{name}: {why}" for name, why in data["skipped"]]}
+    if done < cfg.train.steps:
+        summary["stopped_at"] = done
+        if world > 1:
+            dist.barrier()
+        return summary
     if rank == 0:
         threshold, val = UNCHOSEN_THRESHOLD, {}
         if data["val_ds"] is not None:

@@ -18,6 +18,7 @@ from bsn_edge.cli import run as run_cli
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.sources import ImageFolderSource
 from tests.fakes import FullBus, GonePort
+from tests.runtime.conftest import mounted
 
 
 def test_video_to_can_log_that_both_decoders_read(setup, tmp_path, capsys):
@@ -240,3 +241,30 @@ def test_a_narrow_camera_reads_no_blind_spot_in_the_mirrored_border():
     cols = np.nonzero(mask.any(axis=0))[0]
     half = model.fx * np.tan(np.radians(20.0))
     assert cols.min() == pytest.approx(256 - half, abs=1.5) and cols.max() == pytest.approx(256 + half, abs=1.5)
+
+
+class SlowEngine(Engine):
+    """An engine whose every inference takes 0.25 s on a fake processing clock."""
+
+    now = 0.0
+
+    def infer(self, batch):
+        SlowEngine.now += 0.25
+        return super().infer(batch)
+
+
+def test_the_bus_and_overlay_carry_the_rate_achieved_not_the_files(setup, tmp_path):
+    model, clip = setup
+    SlowEngine.now = 0.0
+    with can.Bus(interface="virtual", channel="bsn-rt-rate") as rx, CanSender("virtual", "bsn-rt-rate") as tx:
+        run(SlowEngine(model), open_source(str(clip / "video.mp4")), [tx], RuntimeConfig(cycle_s=0.1),
+            camera=mounted(Engine(model), clip), clock=lambda: SlowEngine.now)
+        msgs = []
+        while (m := rx.recv(timeout=0.2)) is not None:
+            msgs.append(decode(m.arbitration_id, m.data))
+    status = [d.signals for d in msgs if d.name == "BSN_Status"]
+    running = [s for s in status if s["System_State"] != SystemState.UNAVAILABLE]
+    assert running, "some cycles were sent while the model ran"
+    # the clip is 10 frames/s; this engine manages 4 on its clock: the bus says 4, and DEGRADED (floor 8)
+    assert all(3.5 <= s["Frame_Rate"] <= 4.5 for s in running[3:]), [s["Frame_Rate"] for s in running]
+    assert all(s["System_State"] == SystemState.DEGRADED for s in running[3:])

@@ -264,3 +264,27 @@ def test_clips_without_labels_are_named(data, tmp_path, capsys):
                            "--set", "train.steps=1"]) == 0
     err = capsys.readouterr().err
     assert "skipped" in err and "unlabelled" in err and "run bsn-label" in err
+
+
+def test_a_training_in_pieces_is_the_uninterrupted_run(data, uninterrupted, tmp_path):
+    """--stop-after ends a piece with a checkpoint; each --resume goes on from the step it stopped at (never
+    from zero), the schedule spans all the steps, and the history has each step once."""
+    from bsn_edge.train.trainer import train
+    cfg = load_config(SMOKE, ["data.label=\"T2s\"", "train.distill_weight=0", "train.steps=6",
+                              "train.checkpoint_every=3", "train.eval_every=1"])
+    run = tmp_path / "run"
+    first = train(cfg, data, run, progress=False, stop_after=1e-9)
+    assert first["stopped_at"] == 1 and first["steps_run"] == 1 and first["resumed_from"] == 0
+    second = train(cfg, data, run, resume=True, progress=False, stop_after=1e-9)
+    assert second["resumed_from"] == 1 and second["steps_run"] == 1 and second["stopped_at"] == 2
+    last = train(cfg, data, run, resume=True, progress=False)
+    assert last["resumed_from"] == 2 and last["steps_run"] == 4 and "stopped_at" not in last
+    assert [r["step"] for r in Run(run).history() if r["phase"] == "train"] == [1, 2, 3, 4, 5, 6]
+    assert_same_weights(run, uninterrupted)
+
+
+def test_train_cli_says_how_to_go_on_after_a_piece(data, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--stop-after", "1e-9"]) == 0
+    assert "--resume" in capsys.readouterr().err
+    assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--stop-after", "-1"]) == 2

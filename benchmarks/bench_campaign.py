@@ -1,0 +1,133 @@
+"""The training campaign's curves, from a run's history.
+
+    python -m benchmarks.bench_campaign --run RUN [--name default] [--out benchmarks/results]
+
+Reads ``RUN/history.jsonl`` (``bsn-train`` with ``train.eval_every`` / ``teacher.eval_every``) and
+draws the teacher's held-out IoU (road, sidewalk, vehicle, person), B's validation IoU (threshold
+swept), D's depth AbsRel and the losses against the samples seen, into ``campaign_NAME.png``, with
+a table. It says whether the curve has flattened: the last fifth of the steps recorded gained less
+than ``--flat`` IoU (0.01).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: before pyplot is imported
+import matplotlib.pyplot as plt
+
+from benchmarks.common import write_result
+from bsn_edge.train import Run
+
+FLAT_IOU = 0.01
+
+
+def flattened(records: list[dict[str, Any]], key: str = "val_iou", share: float = 0.2) -> dict[str, Any] | None:
+    """Gain of ``key`` over the last ``share`` of the steps recorded: the best value in that stretch
+    against the best before it. None with fewer than three records."""
+    recs = [r for r in records if key in r]
+    if len(recs) < 3:
+        return None
+    last = recs[-1]["step"]
+    cut = last - share * last
+    before = [r[key] for r in recs if r["step"] <= cut]
+    after = [r[key] for r in recs if r["step"] > cut]
+    if not before or not after:
+        return None
+    gain = max(after) - max(before)
+    return {"from_step": int(cut), "to_step": int(last), "gain": gain, "flat": gain < FLAT_IOU}
+
+
+def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> None:
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4))
+    if teacher:
+        x = [r["samples"] for r in teacher]
+        for k in ("road", "sidewalk", "vehicle", "person", "miou"):
+            axes[0].plot(x, [r[f"val_{k}"] for r in teacher], label=k, lw=2 if k == "miou" else 1)
+        axes[0].set_title("teacher: held-out IoU")
+        axes[0].set_xlabel("samples")
+        axes[0].legend(fontsize=8)
+    if student:
+        x = [r["samples"] for r in student]
+        if any("val_iou" in r for r in student):
+            axes[1].plot(x, [r.get("val_iou") for r in student], label="B: validation IoU (swept)")
+            ax2 = axes[1].twinx()
+            ax2.plot(x, [r.get("val_abs_rel") for r in student], color="tab:red", label="D: depth AbsRel")
+            ax2.set_ylabel("AbsRel", color="tab:red")
+        axes[1].set_title("student: validation")
+        axes[1].set_xlabel("samples")
+        axes[1].set_ylabel("IoU")
+        for k in ("loss", "bce", "kd", "depth"):
+            axes[2].plot(x, [r[k] for r in student], label=k)
+        axes[2].set_yscale("log")
+        axes[2].set_title("student: training losses (mean since the last record)")
+        axes[2].set_xlabel("samples")
+        axes[2].legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--run", required=True, help="a bsn-train run folder with history.jsonl")
+    p.add_argument("--name", default="default")
+    p.add_argument("--out", default="benchmarks/results")
+    args = p.parse_args(argv)
+    run = Run(args.run)
+    hist = run.history()
+    if not hist:
+        print(f"{run.path}: no history.jsonl records (train with train.eval_every > 0)")
+        return 2
+    cfg = run.config()
+    teacher = [r for r in hist if r.get("phase") == "teacher"]
+    student = [r for r in hist if r.get("phase") == "train"]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    png = f"campaign_{args.name}.png"
+    total = cfg.get("train", {}).get("steps")
+    plot(teacher, student, out / png, f"{cfg.get('model', {}).get('name', '?')}: {len(student)} records, "
+                                      f"step {student[-1]['step'] if student else 0} of {total}")
+    flat = flattened(student)
+    t_flat = flattened(teacher, "val_miou")
+    hours = (student[-1]["seconds"] if student else 0.0) / 3600
+    t_hours = (teacher[-1]["seconds"] if teacher else 0.0) / 3600
+    lines = [f"# Training campaign: {args.name}", "",
+             f"Run `{run.path.name}`: `{cfg.get('model', {}).get('name', '?')}`, {total} steps of batch "
+             f"{cfg.get('train', {}).get('batch_size')} planned; teacher {len(teacher)} records "
+             f"({t_hours:.2f} h), student {len(student)} records ({hours:.2f} h of training so far).", "",
+             f"![curves]({png})", ""]
+    if teacher:
+        lines += ["| teacher step | samples | road | sidewalk | vehicle | person | mIoU |",
+                  "|---|---|---|---|---|---|---|"]
+        lines += [f"| {r['step']} | {r['samples']} | {r['val_road']:.3f} | {r['val_sidewalk']:.3f} | "
+                  f"{r['val_vehicle']:.3f} | {r['val_person']:.3f} | {r['val_miou']:.3f} |" for r in teacher]
+        if t_flat:
+            lines.append(f"\nTeacher over its last fifth (steps {t_flat['from_step']}-{t_flat['to_step']}): mIoU "
+                         f"{t_flat['gain']:+.3f}: {'flat' if t_flat['flat'] else 'still rising'}.")
+        lines.append("")
+    if student:
+        lines += ["| step | samples | hours | loss | BCE | KD | depth loss | val IoU | threshold | val AbsRel |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        lines += [f"| {r['step']} | {r['samples']} | {r['seconds'] / 3600:.2f} | {r['loss']:.3f} | {r['bce']:.3f} | "
+                  f"{r['kd']:.4f} | {r['depth']:.3f} | {r.get('val_iou', float('nan')):.3f} | "
+                  f"{r.get('val_threshold', float('nan')):.2f} | {r.get('val_abs_rel', float('nan')):.3f} |"
+                  for r in student]
+        if flat:
+            lines.append(f"\nOver the last fifth (steps {flat['from_step']}-{flat['to_step']}) the validation IoU "
+                         f"gained {flat['gain']:+.3f}: {'flattened' if flat['flat'] else 'still rising'} "
+                         f"(flat: under {FLAT_IOU}).")
+    result = {"run": run.path.name, "config": cfg, "teacher": teacher, "student": student, "flattened": flat,
+              "teacher_flattened": t_flat, "figure": png}
+    write_result(out, f"campaign_{args.name}", result, "\n".join(lines))
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
