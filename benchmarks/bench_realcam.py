@@ -288,6 +288,7 @@ def main(argv: list[str] | None = None) -> int:
             ("ddad_other", "DDAD other cameras (LiDAR)", ddad_samples("other"), ("object", "car distance")),
             ("udacity", "Udacity (lane geometry)", uda, ("road",))]
     out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {"models": {}, "udacity_camera": uda_info,
                                "frames": {title: len(samples) for _, title, samples, _ in sets}}
     lines = ["# Real cameras: depth before and after the model camera", "",
@@ -336,7 +337,7 @@ def main(argv: list[str] | None = None) -> int:
                   " ".join(f"![{name} {title}](realcam_{name}_{key}.png)" for key, title, samples, _ in sets
                            if samples), "",
                   "Frames: " + "; ".join(sorted({licence("ddad" if key.startswith("ddad") else key)
-                                                 for key, _, samples, _ in sets if samples})) + ".", ""]
+                                                 for key, _, samples, _ in sets if samples})).rstrip(".") + ".", ""]
     write_result(out, "realcam", results, "\n".join(lines))
     print("\n".join(lines))
     return 0

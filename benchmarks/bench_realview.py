@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         result["sources"][src.name] = {"frames": src.shown, "camera": src.what, "figure": fname}
         shown = ", ".join(map(str, src.shown))
         lines += [f"## {src.name} ({src.what}; frames {shown})", "", f"![{src.name}]({fname})", "",
-                  f"Frames: {licence(src.name)}.", ""]
+                  f"Frames: {licence(src.name).rstrip('.')}.", ""]
     write_result(out, "realview", result, "\n".join(lines))
     print("\n".join(lines))
     return 0

@@ -2,6 +2,7 @@
 and ranges checked before any work, messages without Python in them."""
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -146,3 +147,63 @@ def test_bsn_run_ends_with_a_short_summary_and_keeps_the_json_for_summary(tmp_pa
     assert any(line.strip() == "faults: none" for line in out)
     assert any(str(log) in line and str(summ) in line for line in out)
     assert not any(line.lstrip().startswith(("{", "\"")) for line in out), "no JSON on the terminal"
+
+
+def test_eval_with_nothing_held_out_says_the_way_out(tmp_path, capsys):
+    from bsn_edge.cli import eval as eval_cli
+    from bsn_edge.cli import label as label_cli
+    from bsn_edge.cli import synth as synth_cli
+    from bsn_edge.cli import train as train_cli
+    data = tmp_path / "data"
+    assert synth_cli.main([str(data / "town_0"), "--frames", "30", "--size", "64x128", "--no-video"]) == 0
+    assert label_cli.main([str(data / "town_0"), "--T", "2", "--jobs", "1"]) == 0
+    smoke = str(ROOT / "configs" / "smoke.toml")
+    assert train_cli.main(["--config", smoke, "--data", str(data), "--out", str(tmp_path / "run"), "--quiet",
+                           "--set", "data.label=\"T2s\"", "--set", "train.steps=1", "--set", "teacher.steps=1"]) == 0
+    capsys.readouterr()
+    assert eval_cli.main(["--run", str(tmp_path / "run"), "--data", str(data), "--out", str(tmp_path / "e.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--clips all" in err and "held-out" in err
+
+
+def test_training_on_labels_of_another_horizon_names_the_one_there(tmp_path):
+    from bsn_edge.cli import label as label_cli
+    from bsn_edge.cli import synth as synth_cli
+    from bsn_edge.data import find_clips
+    assert synth_cli.main([str(tmp_path / "town_0"), "--frames", "30", "--size", "64x128", "--no-video"]) == 0
+    assert label_cli.main([str(tmp_path / "town_0"), "--T", "2", "--jobs", "1"]) == 0
+    with pytest.raises(ValueError, match=re.escape('data.label="T2s"')):
+        find_clips(tmp_path, "T5s")
+
+
+def test_online_calibration_says_how_far_it_got():
+    import numpy as np
+
+    from bsn_edge.card import ModelCard
+    from bsn_edge.runtime.camera_state import CameraState
+    from tests.cards import card_for
+    card: ModelCard = card_for((128, 256))
+    state = CameraState(card, None)
+    assert state.calibrating
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        state.frame_for(rng.integers(0, 255, (96, 192, 3), np.uint8))
+    text = state.progress()
+    assert text.startswith("calibrating:") and "forward driving" in text
+
+
+def test_the_readme_installs_torch_from_its_cpu_index_before_the_extras():
+    readme = (ROOT / "README.md").read_text()
+    blocks = readme.split("```bash\n")
+    second = next(b.split("```")[0] for b in blocks[1:] if "pytest" in b.split("```")[0])
+    cpu = second.find("--index-url https://download.pytorch.org/whl/cpu")
+    extras = second.find('-e ".[full,dev]"')
+    assert 0 <= cpu < extras, "the CPU build must be installed before [full] pulls torch from the plain index"
+
+
+def test_the_readme_lists_every_config_and_its_durations_match_the_files():
+    readme = (ROOT / "README.md").read_text()
+    for cfg in sorted((ROOT / "configs").glob("*.toml")):
+        assert f"configs/{cfg.name}" in readme, f"{cfg.name} is not in the README"
+    quick = (ROOT / "configs" / "quick.toml").read_text().splitlines()[0]
+    assert "20 minutes" in quick and "quick.toml` (about 20 minutes" in readme

@@ -38,7 +38,7 @@ def test_camera_file_round_trip_and_files_from_before_mountings(tmp_path):
     del old["mounting"], old["mounting_report"]
     (tmp_path / "old.json").write_text(json.dumps(old))
     assert Calibration.read(tmp_path / "old.json").mounting is None
-    bad = dict(old, mounting={"height_m": 9.0})
+    bad = dict(old, mounting={"height_m": 9.0, "pitch_deg": 0.0, "yaw_deg": 0.0, "roll_deg": 0.0})
     (tmp_path / "bad.json").write_text(json.dumps(bad))
     with pytest.raises(ValueError, match=r"bad\.json.*height_m"):
         Calibration.read(tmp_path / "bad.json")
