@@ -11,27 +11,31 @@ frame (the picture is only resized): the overlay and summary say so.
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from bsn_edge.calibration.camera_file import Calibration
-from bsn_edge.calibration.mount_fit import MountFit
 from bsn_edge.card import ModelCard
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.mounting import Mounting
+from bsn_edge.runtime.calibrator import OnlineCalibrator
 
 
 class CameraState:
     """Owns the model frame of the current frame size; refits online while calibrating.
 
-    ``calibrate_every``: online, a frame in this many is fed to the estimator (it tracks at
-    640 pixels wide; every frame would cost more than the model)."""
+    Online, about ``CALIBRATE_HZ`` frames a second are fed to the estimator (one in
+    ``calibrate_every``; by default chosen from the source's frame rate, :meth:`use_frame_rate`),
+    which runs on a thread of its own (:class:`OnlineCalibrator`; ``background=False`` runs it on
+    the caller's). ``close()`` stops that thread."""
+
+    CALIBRATE_HZ = 8.0
 
     def __init__(self, card: ModelCard, calibration: Calibration | None = None, height_m: float | None = None,
-                 save_to: str | Path | None = None, calibrate_every: int = 2) -> None:
+                 save_to: str | Path | None = None, calibrate_every: int | None = None,
+                 background: bool = True) -> None:
         self.card = card
         self.calibration = calibration
         self.save_to = Path(save_to) if save_to else None
@@ -41,16 +45,27 @@ class CameraState:
         self.mounting: Mounting | None = calibration.mounting if calibration is not None else None
         if self.mounting is not None and height_m:
             self.mounting = Mounting(height_m, self.mounting.pitch_deg, self.mounting.yaw_deg, self.mounting.roll_deg)
-        self.calibrate_every = max(1, int(calibrate_every))
+        self.calibrate_every = None if calibrate_every is None else max(1, int(calibrate_every))
+        self.background = background
         self.report: dict[str, Any] = {"source": "camera file" if self.mounting else "online"}
-        self._fit: MountFit | None = None
+        self._calibrator: OnlineCalibrator | None = None
         self._frames: dict[tuple[int, int], ModelFrame] = {}
         self._seen = 0
-        self._lock = threading.Lock()
 
     @property
     def calibrating(self) -> bool:
         return self.mounting is None
+
+    def use_frame_rate(self, fps: float) -> None:
+        """The source's frame rate: online calibration then feeds about ``CALIBRATE_HZ`` frames a second
+        (unless ``calibrate_every`` was given)."""
+        if self.calibrate_every is None and self._calibrator is None and fps > 0:
+            self.calibrate_every = max(1, round(fps / self.CALIBRATE_HZ))
+
+    def close(self) -> None:
+        """Stop online calibration's thread (idempotent)."""
+        if self._calibrator is not None:
+            self._calibrator.close()
 
     def camera_file(self, width: int, height: int) -> Calibration:
         if self.calibration is not None:
@@ -79,21 +94,20 @@ class CameraState:
     def _calibrate(self, frame: np.ndarray) -> None:
         h, w = frame.shape[:2]
         cam = self.camera_file(w, h)
-        if self._fit is None:
-            self._fit = MountFit(cam.intrinsics, cam.dist)
+        if self._calibrator is None:
+            self._calibrator = OnlineCalibrator(cam.intrinsics.scaled(w, h), cam.dist, self.height_m,
+                                                self.calibrate_every or 1, background=self.background)
         self._seen += 1
-        if self._seen % self.calibrate_every:
-            return
-        if not self._fit.add(frame):
-            return
-        m, report = self._fit.estimate(self.height_m)
-        self.report = {"source": "online", **report}
-        if m is not None and report["converged"]:
-            with self._lock:
-                self.mounting = m
+        self._calibrator.feed(frame)
+        m, report = self._calibrator.result()
+        if report:
+            self.report = {"source": "online", **report}
+        if m is not None:
+            self.mounting = m
             if self.save_to is not None:
                 cam.with_mounting(m, **report).write(self.save_to)
                 self.report["saved"] = str(self.save_to)
+            self._calibrator.close()
 
     def progress(self) -> str:
         """Where online calibration stands, in a line: pairs used and the standard errors of pitch and
@@ -101,7 +115,7 @@ class CameraState:
         if not self.calibrating:
             return ""
         r = self.report or {}
-        need = self._fit.cfg if self._fit is not None else None
+        need = self._calibrator.fit.cfg if self._calibrator is not None else None
         if need is None or not r.get("pairs"):
             return f"calibrating: {self._seen} frames seen, no usable frame pair yet (needs forward driving)"
         text = f"calibrating: {r['used']} of {r['pairs']} frame pairs used (needs {need.min_pairs})"

@@ -57,7 +57,7 @@ class CycleEmitter:
 
     def _send(self, t: float) -> None:
         h = self.health
-        state, fps, faults = h.snapshot(t, None if self.clock is None else self.clock())
+        state, fps, faults = h.snapshot(t) if self.clock is None else h.snapshot(t, self.clock())
         base = self.latest if self.latest is not None and state != SystemState.UNAVAILABLE \
             else AlertFrame.unavailable(t)
         frame = replace(base, t=t, state=state, fps=fps, faults=faults)

@@ -90,6 +90,8 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
     last_t = 0.0
     t_start = time.perf_counter()
     with ExitStack() as stack:
+        stack.callback(camera.close)
+        camera.use_frame_rate(getattr(source, "fps", 0.0) or 0.0)
         heartbeat = stack.enter_context(Heartbeat(emitter)) if source.live else None
         writer = None
         if overlay is not None:

@@ -95,3 +95,38 @@ def test_online_estimate_converges_on_a_steady_drive(drive):
             converged_at = i
     assert converged_at is not None and converged_at < 60
     assert np.isfinite(m.pitch_deg)
+
+
+@pytest.fixture(scope="module")
+def long_drive(tmp_path_factory):
+    """A 150-frame drive (15 s at 10 frames/s) with the rig of ``drive``."""
+    out = tmp_path_factory.mktemp("long_drive") / "clip"
+    write_clip(SynthConfig(frames=150, seed=3, parked=0.3, traffic=0.3), out, video=False)
+    return out
+
+
+def test_online_calibration_on_its_thread_is_the_estimate_of_the_same_frames_inline(long_drive):
+    """The runtime's calibrator runs off the frame path; fed the same frames it reaches the same
+    estimate as the estimator run inline, and that estimate is the clip's true mounting."""
+    from bsn_edge.runtime.camera_state import CameraState
+    from tests.cards import card_for
+    truth = Calibration.read(long_drive / "calibration.json")
+    intr_only = Calibration.of(truth.intrinsics, truth.dist, None)
+    got = {}
+    for background in (True, False):
+        state = CameraState(card_for((128, 256)), intr_only, height_m=truth.mounting.height_m, background=background)
+        state.use_frame_rate(10.0)
+        converged_at = None
+        for i, f in enumerate(frames(long_drive)):
+            state.frame_for(f)
+            if background:
+                state._calibrator.drain()       # the test waits for each frame; the runtime does not
+            if not state.calibrating and converged_at is None:
+                converged_at = i
+        state.close()
+        assert converged_at is not None, state.progress()
+        got[background] = (converged_at, state.mounting)
+    assert got[True][1] == got[False][1], "the same frames give the same estimate"
+    assert 0 <= got[True][0] - got[False][0] <= 1, "taken up at the frame after the worker finished"
+    m = got[True][1]
+    assert abs(m.pitch_deg - truth.mounting.pitch_deg) < 0.3 and abs(m.yaw_deg - truth.mounting.yaw_deg) < 0.3

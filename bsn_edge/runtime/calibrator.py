@@ -1,0 +1,108 @@
+"""Online calibration off the frame path: :class:`OnlineCalibrator`.
+
+The estimator (:class:`~bsn_edge.calibration.mount_fit.MountFit`: corners, optical flow and an
+essential matrix per frame pair) costs more than a frame's warp. It runs on a thread of its own,
+fed one frame in ``every``: the frame loop only copies that frame into a slot of one. When the
+estimator is still busy with the previous one, the loop waits for it (so which frames are used
+does not depend on timing, and the estimator never takes more than one frame's work in ``every``
+frames of the loop's time); with ``every`` frames between, it is done long before.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import numpy as np
+
+from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
+from bsn_edge.camera import Intrinsics
+from bsn_edge.mounting import Mounting
+
+
+class OnlineCalibrator:
+    """Feeds frames to a :class:`MountFit` on a worker thread; :meth:`result` is the latest estimate.
+
+    ``background=False`` runs the estimator in :meth:`feed` itself (tests, benchmarks of the
+    estimate alone)."""
+
+    def __init__(self, intrinsics: Intrinsics, dist: tuple[float, ...], height_m: float, every: int = 3,
+                 cfg: MountFitConfig | None = None, background: bool = True) -> None:
+        if every < 1:
+            raise ValueError(f"every must be >= 1, got {every}")
+        self.fit = MountFit(intrinsics, dist, cfg or MountFitConfig())
+        self.height_m, self.every, self.background = height_m, int(every), background
+        self.seen = 0
+        self.error = ""
+        self._mounting: Mounting | None = None
+        self._report: dict[str, Any] = {}
+        self._lock = threading.Lock()
+        self._slot: np.ndarray | None = None
+        self._has_work = threading.Condition(self._lock)
+        self._closed = False
+        self._thread: threading.Thread | None = None
+        if background:
+            self._thread = threading.Thread(target=self._work, name="online-calibration", daemon=True)
+            self._thread.start()
+
+    def feed(self, frame: np.ndarray) -> None:
+        """Offer the loop's next frame; one in ``every`` goes to the estimator (copied: the caller may
+        reuse its buffer)."""
+        self.seen += 1
+        if (self.seen - 1) % self.every:
+            return
+        if not self.background:
+            self._step(frame)
+            return
+        with self._has_work:
+            while self._slot is not None and not self._closed:
+                self._has_work.wait()
+            if self._closed:
+                return
+            self._slot = frame.copy()
+            self._has_work.notify_all()
+
+    def result(self) -> tuple[Mounting | None, dict[str, Any]]:
+        """The converged mounting (None until then) and the latest report."""
+        with self._lock:
+            return self._mounting, dict(self._report)
+
+    def drain(self) -> None:
+        """Wait until the frame handed over last has been used (tests, the end of a file)."""
+        with self._has_work:
+            while self._slot is not None and not self._closed:
+                self._has_work.wait()
+
+    def close(self) -> None:
+        """Stop the worker; idempotent."""
+        with self._has_work:
+            self._closed = True
+            self._has_work.notify_all()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+
+    def _work(self) -> None:
+        while True:
+            with self._has_work:
+                while self._slot is None and not self._closed:
+                    self._has_work.wait()
+                if self._closed:
+                    return
+                frame = self._slot
+            try:
+                self._step(frame)
+            except Exception as e:
+                with self._lock:
+                    self.error = f"{type(e).__name__}: {e}"
+            with self._has_work:
+                self._slot = None
+                self._has_work.notify_all()
+
+    def _step(self, frame: np.ndarray) -> None:
+        if not self.fit.add(frame):
+            return
+        m, report = self.fit.estimate(self.height_m)
+        with self._lock:
+            self._report = report
+            if m is not None and report["converged"] and self._mounting is None:
+                self._mounting = m
