@@ -84,14 +84,26 @@ def decode(frame_id: int, data: bytes) -> Decoded | None:
     return Decoded(msg.name, dict(sig), ok, int(sig[_counter_signal(msg)]))
 
 
+LEVEL_NAMES = ("NONE", "CAUTION", "WARNING")
+
+
+def invalid_fields(d: Decoded) -> list[str]:
+    """Signals whose raw value the DBC's value table does not define (e.g. a level of 3)."""
+    if d.name != HAZARD:
+        return []
+    return [f"{side}_Level={int(d.signals[f'{side}_Level'])}" for side in ("Left", "Centre", "Right")
+            if not 0 <= int(d.signals[f"{side}_Level"]) < len(LEVEL_NAMES)]
+
+
 def to_alert_text(d: Decoded) -> str:
-    """One line a person can read."""
+    """One line a person can read (a field outside its value table reads ``LEVEL?N``)."""
     s = d.signals
     flag = "" if d.crc_ok else "  CRC MISMATCH"
     if d.name == HAZARD:
         parts = []
         for side in ("Left", "Centre", "Right"):
-            lv = ("NONE", "CAUTION", "WARNING")[int(s[f"{side}_Level"])]
+            v = int(s[f"{side}_Level"])
+            lv = LEVEL_NAMES[v] if 0 <= v < len(LEVEL_NAMES) else f"LEVEL?{v}"
             dist = s[f"{side}_Distance"]
             where = "" if dist >= NO_DISTANCE else f" {dist:.1f} m"
             parts.append(f"{side.upper()} {lv} {s[f'{side}_Score']:.2f}{where}")

@@ -9,7 +9,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from bsn_edge.alerts.can_codec import decode, to_alert_text
+from bsn_edge.alerts.can_codec import decode, invalid_fields, to_alert_text
 from bsn_edge.alerts.e2e import counter_gap
 from bsn_edge.alerts.serial_codec import FrameDecoder
 from bsn_edge.cli.common import fail
@@ -38,7 +38,7 @@ class Printer:
 
     def __init__(self, out=None) -> None:
         self.out, self.last = out, {}
-        self.frames = self.bad_crc = self.lost = self.repeated = self.bad_lines = 0
+        self.frames = self.bad_crc = self.lost = self.repeated = self.bad_lines = self.bad_fields = 0
 
     def __call__(self, frame_id: int, data: bytes, where: str = "") -> None:
         try:
@@ -50,17 +50,21 @@ class Printer:
             return
         self.frames += 1
         note = ""
+        bad = invalid_fields(d)
+        if bad and d.crc_ok:
+            self.bad_fields += 1
+            note = f"  (undefined {', '.join(bad)})"
         if not d.crc_ok:
             self.bad_crc += 1   # its counter cannot be trusted: the counter state stays
         else:
             prev = self.last.get(d.name)
             if prev == d.counter:
                 self.repeated += 1
-                note = "  (repeated)"
+                note += "  (repeated)"
             else:
                 gap = counter_gap(prev, d.counter)
                 self.lost += gap
-                note = f"  ({gap} lost)" if gap else ""
+                note += f"  ({gap} lost)" if gap else ""
             self.last[d.name] = d.counter
         print(to_alert_text(d) + note, file=self.out or sys.stdout)
 
@@ -70,7 +74,12 @@ class Printer:
 
     @property
     def ok(self) -> bool:
-        return not (self.bad_crc or self.repeated or self.bad_lines)
+        """Nothing wrong: no bad CRC, repeat, loss, undefined field or unreadable line."""
+        return not (self.bad_crc or self.repeated or self.lost or self.bad_fields or self.bad_lines)
+
+    def summary(self) -> str:
+        return (f"{self.frames} frames, {self.bad_crc} with a bad CRC, {self.lost} lost, {self.repeated} repeated, "
+                f"{self.bad_fields} with an undefined field, {self.bad_lines} unreadable lines")
 
 
 def candump_lines(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]:
@@ -144,17 +153,19 @@ def main(argv: list[str] | None = None) -> int:
         else:
             import serial
             dec = FrameDecoder()
-            with serial.serial_for_url(args.serial, timeout=0.2) as port:
-                while more():
-                    for fid, data in dec.feed(port.read(256)):
-                        show(fid, data)
-            show.bad_crc += dec.errors
+            try:
+                with serial.serial_for_url(args.serial, timeout=0.2) as port:
+                    while more():
+                        for fid, data in dec.feed(port.read(256)):
+                            show(fid, data)
+            finally:                  # SIGINT included: the frames whose CRC failed are counted
+                show.bad_crc += dec.errors
     except KeyboardInterrupt:
         pass
     except Exception as e:
+        print(show.summary(), file=sys.stderr)
         return fail(PROG, f"{type(e).__name__}: {e}")
-    print(f"{show.frames} frames, {show.bad_crc} with a bad CRC, {show.lost} lost, {show.repeated} repeated, "
-          f"{show.bad_lines} unreadable lines", file=sys.stderr)
+    print(show.summary(), file=sys.stderr)
     return 0 if show.ok else 1
 
 

@@ -70,3 +70,60 @@ def test_a_repeat_is_a_repeat_and_a_bad_crc_does_not_move_the_counter(tmp_path, 
     assert listen_cli.main(["--can-log", str(log)]) == 1
     err = capsys.readouterr().err
     assert "5 frames, 1 with a bad CRC, 0 lost, 1 repeated" in err
+
+
+def test_a_level_outside_the_value_table_is_counted_not_a_crash(tmp_path, capsys):
+    from bsn_edge.alerts.e2e import e2e_crc
+    fs = frames(25)
+    hid, data = fs[40]                        # frame 20's hazard message
+    bad = bytearray(data)
+    bad[0] |= 0x03                            # Left_Level (bits 0-1) = 3, a value the DBC does not define
+    bad[7] = e2e_crc(bytes(bad[:7]), hid)     # with a valid CRC: only the field is wrong
+    fs[40] = (hid, bytes(bad))
+    log = tmp_path / "lv.log"
+    log.write_text("".join(candump(f, d, i * 0.05) for i, (f, d) in enumerate(fs)))
+    assert listen_cli.main(["--can-log", str(log)]) == 1
+    out = capsys.readouterr()
+    assert "LEFT LEVEL?3" in out.out and "undefined Left_Level=3" in out.out
+    assert "50 frames" in out.err and "1 with an undefined field" in out.err
+    assert out.out.count("hazard #") == 25, "every frame after it is still decoded"
+
+
+def test_lost_frames_make_a_non_zero_exit(tmp_path, capsys):
+    fs = frames(12)
+    kept = fs[:8] + fs[20:]                   # 6 cycles missing: 6 hazard and 6 status frames
+    log = tmp_path / "lost.log"
+    log.write_text("".join(candump(f, d, i * 0.05) for i, (f, d) in enumerate(kept)))
+    assert listen_cli.main(["--can-log", str(log)]) == 1
+    err = capsys.readouterr().err
+    assert "12 lost" in err
+
+
+def test_listen_stopped_by_sigint_keeps_its_bad_crc_count(monkeypatch, capsys):
+    import serial
+
+    from bsn_edge.alerts.serial_codec import encode_frame
+    good = [encode_frame(f, d) for f, d in frames(2)]
+    broken = bytearray(good[2])
+    broken[3] ^= 0x10                          # inside the COBS body: the frame's CRC-16 fails
+
+    class Port:
+        """Two good frames, one damaged, one good; then the user presses Ctrl-C."""
+
+        chunks = [good[0] + good[1], bytes(broken), good[3]]
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def read(self, n):
+            if not self.chunks:
+                raise KeyboardInterrupt
+            return self.chunks.pop(0)
+
+    monkeypatch.setattr(serial, "serial_for_url", lambda url, timeout=None: Port())
+    assert listen_cli.main(["--serial", "loop://"]) == 1
+    err = capsys.readouterr().err
+    assert "3 frames, 1 with a bad CRC" in err
