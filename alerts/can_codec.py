@@ -15,6 +15,7 @@ DBC_PATH = Path(__file__).with_name("bsn_alerts.dbc")
 HAZARD, STATUS = "BSN_Hazard", "BSN_Status"
 NO_DISTANCE = 63.5
 SAT = 255
+SINK_SAT = 63
 
 
 @lru_cache(maxsize=1)
@@ -58,7 +59,8 @@ class CanEncoder:
               "Decode_Errors": min(f.get("decode_errors", 0) + f.get("size_changes", 0), SAT),
               "Dropped_Frames": min(f.get("dropped_frames", 0), SAT),
               "Invalid_Outputs": min(f.get("nan_outputs", 0), SAT),
-              "Tx_Errors": min(f.get("tx_errors", 0) + f.get("tx_full", 0) + f.get("serial_errors", 0), SAT)}
+              "Tx_Errors": min(f.get("tx_errors", 0) + f.get("tx_full", 0) + f.get("serial_errors", 0), SAT),
+              "Sink_Errors": min(f.get("sink_errors", 0), SINK_SAT)}
         return [self._encode(HAZARD, hz), self._encode(STATUS, st)]
 
 
@@ -111,4 +113,4 @@ def to_alert_text(d: Decoded) -> str:
     state = SystemState(int(s["System_State"])).name
     return (f"status #{d.counter}: {state} {s['Frame_Rate']:.1f} fps, decode errors {int(s['Decode_Errors'])}, "
             f"dropped {int(s['Dropped_Frames'])}, invalid outputs {int(s['Invalid_Outputs'])}, "
-            f"tx errors {int(s['Tx_Errors'])}" + flag)
+            f"tx errors {int(s['Tx_Errors'])}, sink errors {int(s.get('Sink_Errors', 0))}" + flag)

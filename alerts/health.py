@@ -21,7 +21,10 @@ class SystemState(IntEnum):
 
 
 FAULTS = ("decode_errors", "size_changes", "nan_outputs", "dropped_frames", "tx_errors", "tx_full",
-          "serial_errors", "source_reconnects", "heartbeat_errors")
+          "serial_errors", "source_reconnects", "heartbeat_errors", "sink_errors")
+# faults that degrade the system for the rest of the run, whatever the frame rate: an output beside
+# the bus (a log, the overlay, the maps) that failed
+DEGRADING = ("sink_errors",)
 
 
 @dataclass(frozen=True)
@@ -112,7 +115,8 @@ class Health:
             return SystemState.UNAVAILABLE
         if self._calibrating:
             return SystemState.CALIBRATING
-        return SystemState.DEGRADED if self._fps(wall) < self.cfg.fps_floor else SystemState.OK
+        slow = self._fps(wall) < self.cfg.fps_floor
+        return SystemState.DEGRADED if slow or any(self._faults[f] for f in DEGRADING) else SystemState.OK
 
     def state(self, t: float, wall: float | None = None) -> SystemState:
         with self._lock:

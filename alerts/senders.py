@@ -21,6 +21,8 @@ class SenderStats:
     full: int = 0
     reconnects: int = 0
     last_error: str = ""
+    log_errors: int = 0          # the sender's log (``--can-log``) failed: it is given up, the bus goes on
+    log_error: str = ""
 
 
 class Sender(ABC):
@@ -71,7 +73,10 @@ class Sender(ABC):
 
 class CanSender(Sender):
     """python-can on any interface (``socketcan``, ``virtual``, vendor ones), loaded lazily.
-    Optionally logs every sent frame to ``.asc`` / ``.blf`` through python-can's writers."""
+    Optionally logs every sent frame (``.log`` candump, ``.asc``, ``.blf``) through python-can's
+    writers, flushed every cycle so that a crash loses at most the cycle in flight. The log is an
+    output beside the bus: when it fails (a full disk) it is given up and counted in
+    ``stats.log_errors``; the frames still go out."""
 
     name = "can"
 
@@ -95,12 +100,42 @@ class CanSender(Sender):
                 if "buffer" in str(e).lower() or "full" in str(e).lower():
                     self.stats.full += 1
                 raise
-            if self.logger is not None:
-                self.logger.on_message_received(msg)
+            self._log(msg)
+        self._flush_log()
+
+    def _log(self, msg) -> None:
+        if self.logger is None:
+            return
+        try:
+            self.logger.on_message_received(msg)
+        except Exception as e:
+            self._log_failed(e)
+
+    def _flush_log(self) -> None:
+        if self.logger is None:
+            return
+        try:
+            f = getattr(self.logger, "file", None)
+            if f is not None and not getattr(f, "closed", False):
+                f.flush()
+        except Exception as e:
+            self._log_failed(e)
+
+    def _log_failed(self, e: Exception) -> None:
+        self.stats.log_errors += 1
+        self.stats.log_error = f"{type(e).__name__}: {e}"
+        logger, self.logger = self.logger, None
+        with contextlib.suppress(Exception):
+            logger.stop()
 
     def _close(self) -> None:
         if self.logger is not None:
-            self.logger.stop()
+            try:
+                self.logger.stop()
+            except Exception as e:
+                self.stats.log_errors += 1
+                self.stats.log_error = f"{type(e).__name__}: {e}"
+            self.logger = None
         self.bus.shutdown()
 
 

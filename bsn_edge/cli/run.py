@@ -100,8 +100,11 @@ def make_senders(args) -> list[Sender]:
                 senders.append(SerialSender(args.serial))
             except Exception as e:
                 raise ValueError(f"cannot open serial port {args.serial!r}: {type(e).__name__}: {e}") from None
-    except ValueError:
+    except BaseException:
+        # a second output that cannot be opened (or Ctrl-C meanwhile): what is open already says so
+        frame = AlertFrame.unavailable(0.0)
         for s in senders:
+            s.send(frame)
             s.close()
         raise
     return senders
@@ -120,14 +123,21 @@ class StopOnSignal:
     """SIGINT and SIGTERM (how a service manager stops a process) both end the run cleanly: the
     loop finishes its frame, logs are closed, the summary is written, UNAVAILABLE is sent."""
 
-    def __init__(self, source) -> None:
+    def __init__(self, source=None) -> None:
         self.source, self.event, self.signal = source, threading.Event(), None
         self._old: dict[int, Any] = {}
 
     def _handle(self, signum, _frame) -> None:
         self.signal = signal.Signals(signum).name
         self.event.set()
-        self.source.stop()
+        if self.source is not None:
+            self.source.stop()
+
+    def watch(self, source) -> None:
+        """The source to stop on a signal (start-up is watched before there is one)."""
+        self.source = source
+        if self.event.is_set():
+            source.stop()
 
     def __enter__(self) -> StopOnSignal:
         if threading.current_thread() is threading.main_thread():
@@ -167,52 +177,83 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.max_frames is not None and args.max_frames < 1:
         return fail(PROG, "--max-frames must be >= 1")
-    try:
-        senders = make_senders(args)
-    except ValueError as e:
-        return fail(PROG, str(e))
-    try:
-        calibration = Calibration.read(args.calib) if args.calib else None
-        if args.height is not None:
-            check_height(args.height, "--height")
-        if args.save_calib and Path(args.save_calib).exists() and not args.force:
-            raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
-        maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
-        engine = Engine(args.model, args.threads, not args.no_spin)
-        camera = CameraState(engine.card, calibration, args.height, args.save_calib)
-        source = open_source(args.source, pace=args.pace)
-    except (FileNotFoundError, ValueError, OSError) as e:
-        return refuse(senders, str(e))
-    try:
-        total = args.max_frames or getattr(source, "total", None)
-        with StopOnSignal(source) as stopper, \
-                tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
-            def tick(n: int) -> None:
-                bar.update(n)
-                if camera.calibrating and bar.n % 25 == 0:
-                    bar.set_postfix_str(camera.progress(), refresh=False)
+    # from here on a signal stops the run cleanly; once the outputs are open, every way out ends with
+    # UNAVAILABLE on the bus, signals during start-up included
+    with StopOnSignal() as stopper:
+        try:
+            senders = make_senders(args)
+        except ValueError as e:
+            return fail(PROG, str(e))
+        try:
+            calibration = Calibration.read(args.calib) if args.calib else None
+            if args.height is not None:
+                check_height(args.height, "--height")
+            if args.save_calib and Path(args.save_calib).exists() and not args.force:
+                raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
+            maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
+            engine = Engine(args.model, args.threads, not args.no_spin)
+            camera = CameraState(engine.card, calibration, args.height, args.save_calib)
+            source = open_source(args.source, pace=args.pace)
+        except (FileNotFoundError, ValueError, OSError) as e:
+            return refuse(senders, str(e))
+        if stopper.event.is_set():
+            source.close()
+            refuse(senders, f"stopped by {stopper.signal} during start-up")
+            return 130 if stopper.signal == "SIGINT" else 0
+        stopper.watch(source)
+        try:
+            total = args.max_frames or getattr(source, "total", None)
+            with tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
+                def tick(n: int) -> None:
+                    bar.update(n)
+                    if camera.calibrating and bar.n % 25 == 0:
+                        bar.set_postfix_str(camera.progress(), refresh=False)
 
-            summary = run(engine, source, senders, RuntimeConfig(cycle_s=args.cycle), overlay=args.overlay,
-                          log=args.log, max_frames=args.max_frames, progress=tick, camera=camera,
-                          save_maps=maps, stop=stopper.event)
-    finally:
-        source.close()
-        for s in senders:
-            s.close()
+                summary = run(engine, source, senders, RuntimeConfig(cycle_s=args.cycle), overlay=args.overlay,
+                              log=args.log, max_frames=args.max_frames, progress=tick, camera=camera,
+                              save_maps=maps, stop=stopper.event)
+        except OSError as e:            # an output that could not be opened: the bus has had UNAVAILABLE
+            return fail(PROG, f"{e} (UNAVAILABLE sent)" if senders else str(e))
+        except Exception as e:          # a fault of the runtime itself: the bus has had UNAVAILABLE
+            return fail(PROG, f"the runtime stopped on {type(e).__name__}: {e}"
+                              + (" (UNAVAILABLE sent)" if senders else ""), 1)
+        finally:
+            source.close()
+            for s in senders:
+                s.close()
     summary["signal"] = stopper.signal
+    summary_error = ""
     if args.summary:
-        atomic_write_bytes(args.summary, (json.dumps(summary, indent=1) + "\n").encode())
+        try:
+            atomic_write_bytes(args.summary, (json.dumps(summary, indent=1) + "\n").encode())
+        except OSError as e:
+            summary_error = f"cannot write the summary {args.summary}: {e}"
     print(human_summary(summary, args, camera))
+    if summary_error:
+        print(f"{PROG}: error: {summary_error}", file=sys.stderr)
     for s in senders:
         if s.stats.errors:
             print(f"{PROG}: warning: {s.name} failed {s.stats.errors} times ({s.stats.last_error})", file=sys.stderr)
+    for name, sink in summary["sinks"].items():
+        if sink["failure"]:
+            f = sink["failure"]
+            print(f"{PROG}: warning: the {name} output failed at frame {f['frame']} ({f['error']}); the alerts went "
+                  "on, DEGRADED", file=sys.stderr)
+    for s in senders:
+        if s.stats.log_errors:
+            print(f"{PROG}: warning: the CAN log failed ({s.stats.log_error}); the bus went on, DEGRADED",
+                  file=sys.stderr)
     if summary["source_failure"]:
         print(f"{PROG}: error: the source failed: {summary['source_failure']}", file=sys.stderr)
+        return 1
+    if summary["frames"] and not summary["valid_frames"]:
+        print(f"{PROG}: error: none of the {summary['frames']} frames gave a valid inference (see the faults)",
+              file=sys.stderr)
         return 1
     if stopper.signal == "SIGINT":
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
-    return 0
+    return 1 if summary_error else 0
 
 
 if __name__ == "__main__":

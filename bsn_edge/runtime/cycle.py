@@ -62,12 +62,14 @@ class CycleEmitter:
             else AlertFrame.unavailable(t)
         frame = replace(base, t=t, state=state, fps=fps, faults=faults)
         for s in self.senders:
-            before_err, before_full = s.stats.errors, s.stats.full
+            before_err, before_full, before_log = s.stats.errors, s.stats.full, s.stats.log_errors
             s.send(frame)
             if s.stats.errors > before_err:
                 h.fault("serial_errors" if s.name == "serial" else "tx_errors", s.stats.errors - before_err)
             if s.stats.full > before_full:
                 h.fault("tx_full", s.stats.full - before_full)
+            if s.stats.log_errors > before_log:
+                h.fault("sink_errors", s.stats.log_errors - before_log)
         self.sent_cycles += 1
 
 

@@ -11,7 +11,6 @@ import json
 import threading
 import time
 from collections.abc import Callable
-from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,6 +34,7 @@ from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.runtime.overlay import OverlayWriter, draw
+from bsn_edge.runtime.sinks import GuardedSink, SinkFailure
 from bsn_edge.runtime.sources import Source
 from bsn_edge.runtime.stats import LatencyStats
 from bsn_edge.sequence.folder import frame_name
@@ -89,18 +89,28 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
     last_shape = None
     last_t = 0.0
     t_start = time.perf_counter()
-    with ExitStack() as stack:
-        stack.callback(camera.close)
+
+    def sink_fault(_: SinkFailure) -> None:
+        health.fault("sink_errors")
+
+    sinks: dict[str, GuardedSink] = {}
+    heartbeat = None
+    try:
         camera.use_frame_rate(getattr(source, "fps", 0.0) or 0.0)
-        heartbeat = stack.enter_context(Heartbeat(emitter)) if source.live else None
-        writer = None
+        if source.live:
+            heartbeat = Heartbeat(emitter).__enter__()
+        # outputs that cannot be opened refuse the run (the user asked for them); later failures degrade it
         if overlay is not None:
             writer = OverlayWriter(overlay, getattr(source, "fps", 10.0))
-            stack.callback(writer.close)
-        logf = None
+            sinks["overlay"] = GuardedSink("overlay", writer.write, writer.close, sink_fault)
         if log is not None:
             Path(log).parent.mkdir(parents=True, exist_ok=True)
-            logf = stack.enter_context(open(log, "w", buffering=1))  # line by line: readable while it runs
+            # line-buffered: readable while it runs, and every line whole after a kill
+            logf = open(log, "w", buffering=1)  # noqa: SIM115 - closed by its sink
+            sinks["log"] = GuardedSink("log", lambda rec: logf.write(json.dumps(rec) + "\n"), logf.close, sink_fault)
+        if maps is not None:
+            sinks["maps"] = GuardedSink("maps", maps.write, None, sink_fault)
+        overlay_sink, log_sink, maps_sink = sinks.get("overlay"), sinks.get("log"), sinks.get("maps")
         for cap in source:
             t0 = time.perf_counter()
             frames += 1
@@ -147,24 +157,30 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                     rec.update(levels=[s.level.name for s in sectors], scores=[round(s.score, 3) for s in sectors],
                                distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in sectors],
                                state=alert.state.name)
-                    if writer is not None:
-                        writer.write(draw(cap.frame, mf, mask, alert, geometry))
-                    if maps is not None:
-                        maps.write(cap.name or frame_name(cap.index, ""), mf.to_raw(prob), mf.depth_to_raw(depth))
+                    if overlay_sink is not None and overlay_sink.ok:
+                        overlay_sink.write(cap.index, draw(cap.frame, mf, mask, alert, geometry))
+                    if maps_sink is not None and maps_sink.ok:
+                        maps_sink.write(cap.index, cap.name or frame_name(cap.index, ""), mf.to_raw(prob),
+                                        mf.depth_to_raw(depth))
             t4 = time.perf_counter()
             if not source.live:
                 emitter.emit(cap.t)
             t5 = time.perf_counter()
             stage_s["send"] += t5 - t4
             latency.add(t5 - t0 + cap.decode_s)
-            if logf is not None:
+            if log_sink is not None:
                 rec["latency_ms"] = round(1e3 * (t5 - t0 + cap.decode_s), 2)
-                logf.write(json.dumps(rec) + "\n")
+                log_sink.write(cap.index, rec)
             if progress:
                 progress(1)
             if (max_frames is not None and frames >= max_frames) or (stop is not None and stop.is_set()):
                 break
-        # no valid inference is coming any more: the last word on every bus is UNAVAILABLE
+    finally:
+        # whatever ended the run (the source, a signal, an exception): outputs are finished, then the
+        # last word on every bus is UNAVAILABLE, since no valid inference is coming any more
+        for sink in sinks.values():
+            sink.close(frames)
+        camera.close()
         health.set_fault("source_reconnects", source.reconnects)
         health.unavailable()
         if heartbeat is not None:
@@ -182,5 +198,7 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
             "source_failure": source.failure, "stopped": bool(stop is not None and stop.is_set()),
             "heartbeat_error": heartbeat.last_error if heartbeat is not None else "",
             "camera": camera.summary(), "maps_written": 0 if maps is None else maps.written,
+            "sinks": {name: {"written": k.written, "failure": None if k.ok else vars(k.failure)}
+                      for name, k in sinks.items()},
             "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
                       "quantization": card.quantization, "self_test": engine.self_test}}

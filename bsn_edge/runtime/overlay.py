@@ -65,6 +65,14 @@ class OverlayWriter:
         self.writer.write(img)
 
     def close(self) -> None:
-        if self.writer is not None:
-            self.writer.release()
-            self.writer = None
+        """Finish the file and read it back: OpenCV's writer does not report a full disk, so an overlay
+        that cannot be played is an ``OSError`` here, not a file left for the user to find broken."""
+        if self.writer is None:
+            return
+        self.writer.release()
+        self.writer = None
+        cap = cv2.VideoCapture(str(self.path))
+        ok = cap.isOpened() and cap.read()[0]
+        cap.release()
+        if not ok:
+            raise OSError(f"{self.path} cannot be played back (the disk may be full or the file was removed)")

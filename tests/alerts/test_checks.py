@@ -110,7 +110,8 @@ def test_listen_stopped_by_sigint_keeps_its_bad_crc_count(monkeypatch, capsys):
     class Port:
         """Two good frames, one damaged, one good; then the user presses Ctrl-C."""
 
-        chunks = [good[0] + good[1], bytes(broken), good[3]]
+        def __init__(self) -> None:
+            self.chunks = [good[0] + good[1], bytes(broken), good[3]]
 
         def __enter__(self):
             return self

@@ -1,0 +1,215 @@
+"""Outputs beside the bus that fail: the alerts go on, the status says DEGRADED, the summary says which
+output failed and from which frame, and whatever ends the run, the last word on the bus is UNAVAILABLE.
+
+Full disks are real ones: writes to ``/dev/full`` fail with ENOSPC, as a full file system's do.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from bsn_edge.alerts import SystemState
+from bsn_edge.alerts.can_codec import decode
+from bsn_edge.cli import run as run_cli
+from bsn_edge.cli.common import CHECKOUT
+
+FULL = Path("/dev/full")
+needs_dev_full = pytest.mark.skipif(not FULL.exists(), reason="this system has no /dev/full")
+
+
+def bus_frames(rx) -> list:
+    out = []
+    while (m := rx.recv(timeout=0.2)) is not None:
+        d = decode(m.arbitration_id, m.data)
+        if d is not None:
+            assert d.crc_ok
+            out.append(d)
+    return out
+
+
+def run_on_bus(channel: str, argv: list[str]) -> tuple[int, list]:
+    with can.Bus(interface="virtual", channel=channel) as rx:
+        code = run_cli.main([*argv, "--can", f"virtual:{channel}"])
+        return code, bus_frames(rx)
+
+
+@needs_dev_full
+def test_a_frame_log_on_a_full_disk_degrades_and_the_alerts_go_on(setup, tmp_path, capsys):
+    model, clip = setup
+    summ = tmp_path / "s.json"
+    code, got = run_on_bus("bsn-sink-log", ["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                                            str(clip / "calibration.json"), "--log", str(FULL),
+                                            "--summary", str(summ)])
+    assert code == 0
+    status = [d.signals for d in got if d.name == "BSN_Status"]
+    hazards = [d for d in got if d.name == "BSN_Hazard"]
+    assert status[-1]["System_State"] == SystemState.UNAVAILABLE
+    assert all(s["System_State"] == SystemState.DEGRADED and s["Sink_Errors"] == 1 for s in status[1:-1])
+    assert len(hazards) == len(status), "a hazard frame every cycle, the log's failure notwithstanding"
+    failure = json.loads(summ.read_text())["sinks"]["log"]["failure"]
+    assert failure["frame"] == 0 and "No space left" in failure["error"]
+    assert "the log output failed at frame 0" in capsys.readouterr().err
+
+
+@needs_dev_full
+def test_a_can_log_on_a_full_disk_degrades_and_the_bus_goes_on(setup, tmp_path, capsys):
+    model, clip = setup
+    log = tmp_path / "alerts.log"
+    log.symlink_to(FULL)
+    code, got = run_on_bus("bsn-sink-canlog", ["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                                               str(clip / "calibration.json"), "--can-log", str(log)])
+    assert code == 0
+    status = [d.signals for d in got if d.name == "BSN_Status"]
+    assert status[-1]["System_State"] == SystemState.UNAVAILABLE and status[-1]["Sink_Errors"] == 1
+    assert status[0]["Tx_Errors"] == 0, "a log that fails is not a bus that fails"
+    assert "the CAN log failed" in capsys.readouterr().err
+
+
+def test_maps_that_cannot_be_written_degrade_from_the_frame_they_fail(setup, tmp_path, monkeypatch):
+    import bsn_edge.runtime.maps as maps_mod
+    model, clip = setup
+    real, calls = maps_mod.atomic_write_bytes, []
+
+    def write(path, data, durable=False):
+        calls.append(path)
+        if len(calls) > 6:                     # three frames' maps, then the disk is full
+            raise OSError(28, "No space left on device")
+        return real(path, data, durable)
+
+    monkeypatch.setattr(maps_mod, "atomic_write_bytes", write)
+    summ = tmp_path / "s.json"
+    code, got = run_on_bus("bsn-sink-maps", ["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                                             str(clip / "calibration.json"), "--save-maps", str(tmp_path / "maps"),
+                                             "--summary", str(summ)])
+    assert code == 0
+    sinks = json.loads(summ.read_text())["sinks"]
+    assert sinks["maps"]["written"] == 3 and sinks["maps"]["failure"]["frame"] == 3
+    assert len(list((tmp_path / "maps").glob("*_depth.png"))) == 3
+    status = [d.signals for d in got if d.name == "BSN_Status"]
+    assert SystemState.DEGRADED in [s["System_State"] for s in status] and status[-1]["Sink_Errors"] == 1
+
+
+def test_an_overlay_that_cannot_be_finished_is_reported(setup, tmp_path, capsys, monkeypatch):
+    """The disk fills as the video is finished: OpenCV's writer says nothing, the read-back does."""
+    import cv2
+
+    import bsn_edge.runtime.overlay as overlay_mod
+    model, clip = setup
+    real = cv2.VideoWriter
+
+    class FillingWriter:
+        def __init__(self, path, *a):
+            self.path, self.w = path, real(path, *a)
+
+        def __getattr__(self, name):
+            return getattr(self.w, name)
+
+        def release(self):
+            self.w.release()
+            with open(self.path, "r+b") as f:     # what a full disk leaves: the header, no index
+                f.truncate(64)
+
+    monkeypatch.setattr(overlay_mod.cv2, "VideoWriter", FillingWriter)
+    summ = tmp_path / "s.json"
+    code, got = run_on_bus("bsn-sink-ov", ["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                                           str(clip / "calibration.json"), "--overlay", str(tmp_path / "ov.mp4"),
+                                           "--summary", str(summ)])
+    assert code == 0
+    sink = json.loads(summ.read_text())["sinks"]["overlay"]
+    assert sink["written"] == 15 and "cannot be played back" in sink["failure"]["error"]
+    assert "the overlay output failed" in capsys.readouterr().err
+    assert got[-1].signals["System_State"] == SystemState.UNAVAILABLE and got[-1].signals["Sink_Errors"] == 1
+
+
+@needs_dev_full
+def test_an_overlay_on_a_full_disk_fails_at_its_first_frame_and_the_alerts_go_on(setup, tmp_path):
+    model, clip = setup
+    ov = tmp_path / "ov.mp4"
+    ov.symlink_to(FULL)
+    summ = tmp_path / "s.json"
+    code, got = run_on_bus("bsn-sink-ov2", ["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                                            str(clip / "calibration.json"), "--overlay", str(ov), "--summary",
+                                            str(summ)])
+    assert code == 0
+    assert json.loads(summ.read_text())["sinks"]["overlay"]["failure"]["frame"] == 0
+    hazards = [d for d in got if d.name == "BSN_Hazard"]
+    assert len(hazards) >= 15 and got[-1].signals["Sink_Errors"] == 1
+
+
+def test_an_output_that_cannot_be_opened_refuses_the_run_with_unavailable(setup, tmp_path, capsys):
+    model, clip = setup
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    code, got = run_on_bus("bsn-sink-open", ["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                                             str(clip / "calibration.json"), "--log", str(blocker / "log.jsonl")])
+    err = capsys.readouterr().err
+    assert code == 2 and "UNAVAILABLE sent" in err and "Traceback" not in err
+    assert got and got[-1].signals["System_State"] == SystemState.UNAVAILABLE
+
+
+def test_a_missing_serial_port_still_tells_the_can_bus(setup, tmp_path, capsys):
+    model, clip = setup
+    code, got = run_on_bus("bsn-sink-serial", ["--model", str(model), "--source", str(clip / "video.mp4"),
+                                               "--serial", str(tmp_path / "no_such_tty")])
+    assert code == 2 and "cannot open serial port" in capsys.readouterr().err
+    assert [d.signals["System_State"] for d in got if d.name == "BSN_Status"] == [SystemState.UNAVAILABLE]
+
+
+def test_a_folder_where_no_frame_decodes_is_an_error(setup, tmp_path, capsys):
+    model, _ = setup
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in range(4):
+        (folder / f"{i:06d}.png").write_bytes(b"not a picture" * 10)
+    code = run_cli.main(["--model", str(model), "--source", str(folder)])
+    assert code == 1 and "none of the 4 frames" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 0), (signal.SIGINT, 130)])
+def test_a_signal_at_any_moment_of_start_up_ends_with_unavailable_and_no_traceback(setup, tmp_path, sig, code):
+    model, clip = setup
+    env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
+    t0 = time.monotonic()
+    subprocess.run([sys.executable, "-c", "import bsn_edge.cli.run"], env=env, check=True)
+    imported = time.monotonic() - t0              # signals before main() runs are Python's, not the runtime's
+    for delay in (0.05, 0.4, 1.5):                # opening the outputs, loading the model, running
+        log = tmp_path / f"{sig.name}_{delay}.log"
+        proc = subprocess.Popen([sys.executable, "-m", "bsn_edge.cli.run", "--model", str(model), "--source",
+                                 str(clip / "video.mp4"), "--pace", "--can-log", str(log)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+        time.sleep(imported + delay)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+        assert "Traceback" not in err, err
+        assert proc.returncode == code, err
+        msgs = [decode(m.arbitration_id, bytes(m.data)) for m in can.LogReader(str(log))]
+        states = [d.signals["System_State"] for d in msgs if d is not None and d.name == "BSN_Status"]
+        assert states and states[-1] == SystemState.UNAVAILABLE, (delay, states)
+
+
+def test_the_json_lines_of_a_killed_run_are_whole(setup, tmp_path):
+    model, clip = setup
+    log, canlog = tmp_path / "a.jsonl", tmp_path / "a.log"
+    env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
+    proc = subprocess.Popen([sys.executable, "-m", "bsn_edge.cli.run", "--model", str(model), "--source",
+                             str(clip / "video.mp4"), "--pace", "--log", str(log), "--can-log", str(canlog)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (not log.exists() or len(log.read_text().splitlines()) < 5):
+        time.sleep(0.02)
+    proc.kill()
+    proc.wait(timeout=30)
+    lines = log.read_text().splitlines()
+    assert len(lines) >= 5 and all(json.loads(x)["frame"] == i for i, x in enumerate(lines))
+    # every cycle sent before the one in flight is in the CAN log
+    msgs = list(can.LogReader(str(canlog)))
+    assert len(msgs) >= 2 * (len(lines) - 1), (len(msgs), len(lines))
+    assert np.all(np.diff([m.timestamp for m in msgs]) >= 0)
