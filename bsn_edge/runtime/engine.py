@@ -62,6 +62,10 @@ class Engine:
         if shape != [1, h, w, 3] or kind != "tensor(uint8)":
             raise ModelError(f"{self.path}: the graph takes {kind} {shape}, its card says uint8 [1, {h}, {w}, 3] "
                              f"(input size {h}x{w})")
+        for o in outs:
+            if list(o.shape) != [1, 1, h, w] or o.type != "tensor(float)":
+                raise ModelError(f"{self.path}: output {o.name!r} is {o.type} {list(o.shape)}; a bsn-export model "
+                                 f"gives float [1, 1, {h}, {w}] (the card's input size)")
 
     @property
     def size(self) -> tuple[int, int]:
@@ -70,6 +74,10 @@ class Engine:
 
     def infer(self, batch: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         prob, depth = self.sess.run(None, {"frame": batch})
+        if prob.shape != (1, 1, *self.card.input_size) or depth.shape != prob.shape:
+            # a graph with symbolic dimensions can still answer in another shape at run time
+            raise ModelError(f"{self.path}: the graph answered {list(prob.shape)} and {list(depth.shape)}, not "
+                             f"[1, 1, {self.card.input_size[0]}, {self.card.input_size[1]}]")
         return prob[0, 0], depth[0, 0]
 
     def warmup(self, n: int = 3) -> None:

@@ -213,3 +213,34 @@ def test_the_json_lines_of_a_killed_run_are_whole(setup, tmp_path):
     msgs = list(can.LogReader(str(canlog)))
     assert len(msgs) >= 2 * (len(lines) - 1), (len(msgs), len(lines))
     assert np.all(np.diff([m.timestamp for m in msgs]) >= 0)
+
+
+def test_a_sealed_graph_with_the_wrong_output_ranks_is_refused_at_load(setup, tmp_path, capsys):
+    """Right names, a valid seal, but [H, W] outputs: refused with a message before any frame."""
+    import onnx
+    from onnx import TensorProto, helper
+
+    from bsn_edge.runtime.model_file import graph_digest
+    from export.seal import read_card, set_metadata
+    model, clip = setup
+    card = read_card(model)
+    h, w = card.input_size
+    nodes = [helper.make_node("Cast", ["frame"], ["f"], to=TensorProto.FLOAT),
+             helper.make_node("ReduceMean", ["f", "axes"], ["m"], keepdims=0),
+             helper.make_node("Sigmoid", ["m"], ["blindspot"]),
+             helper.make_node("Add", ["m", "one"], ["depth"])]
+    graph = helper.make_graph(nodes, "flat", [helper.make_tensor_value_info("frame", TensorProto.UINT8, [1, h, w, 3])],
+                              [helper.make_tensor_value_info("blindspot", TensorProto.FLOAT, [h, w]),
+                               helper.make_tensor_value_info("depth", TensorProto.FLOAT, [h, w])],
+                              [helper.make_tensor("axes", TensorProto.INT64, [2], [0, 3]),
+                               helper.make_tensor("one", TensorProto.FLOAT, [], [1.0])])
+    m = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 18)])
+    m.ir_version = 9
+    sealed = card.replace(graph_sha256=graph_digest(m.SerializeToString()))
+    set_metadata(m, sealed)
+    bad = tmp_path / "rank2.onnx"
+    onnx.save(m, str(bad))
+    code, got = run_on_bus("bsn-sink-rank", ["--model", str(bad), "--source", str(clip / "video.mp4")])
+    err = capsys.readouterr().err
+    assert code == 2 and "output 'blindspot' is tensor(float) [" in err and "Traceback" not in err
+    assert [d.signals["System_State"] for d in got if d.name == "BSN_Status"] == [SystemState.UNAVAILABLE]
