@@ -182,6 +182,8 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
             sink.close(frames)
         camera.close()
         health.set_fault("source_reconnects", source.reconnects)
+        if source.unread:
+            health.fault("decode_errors", source.unread)
         health.unavailable()
         if heartbeat is not None:
             heartbeat.close()

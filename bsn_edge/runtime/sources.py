@@ -38,6 +38,7 @@ class Source:
     live = False
     dropped = 0
     reconnects = 0
+    unread = 0                   # frames of a file that never decoded at its end (counted as decode errors)
     failure: str | None = None
 
     def __iter__(self) -> Iterator[Captured]:
@@ -51,9 +52,11 @@ class Source:
 
 
 class VideoFileSource(Source):
-    """A video file on its own clock. Damaged stretches are skipped frame by frame (each one a
-    ``None`` frame the loop counts) and reading goes on after them to the file's last frame; a
-    file that stops decoding for ``give_up`` frames in a row before its end has failed."""
+    """A video file on its own clock. Frames are known by their timestamps, not by counting reads:
+    where the decoder skips a damaged stretch (OpenCV jumps to the next keyframe, often without a
+    failed read) the frames it skipped are counted there, as ``None`` frames the loop counts, and the
+    frames after it keep their true times and indices. A file that stops decoding for ``give_up``
+    frames in a row before its end has failed."""
 
     def __init__(self, path: str | Path, pace: bool = False, give_up: int = 250) -> None:
         self.path = Path(path)
@@ -63,45 +66,56 @@ class VideoFileSource(Source):
         self.fps = self.cap.get(cv2.CAP_PROP_FPS) or 10.0
         self.total = int(self.cap.get(cv2.CAP_PROP_FRAME_COUNT)) or None
         self.pace, self.give_up = pace, give_up
+        self.skipped = 0                 # frames the decoder jumped over or could not decode
         self._stop = threading.Event()
 
     def stop(self) -> None:
         self._stop.set()
 
+    def _index_of_frame_read(self, expected: int) -> int:
+        """The index of the frame just read, from its timestamp (``expected`` when there is none)."""
+        ms = self.cap.get(cv2.CAP_PROP_POS_MSEC)
+        if ms is None or ms <= 0:
+            return expected
+        return max(expected, round(ms * self.fps / 1000.0))
+
     def __iter__(self) -> Iterator[Captured]:
         start = time.monotonic()
-        i = 0
-        failures = 0
+        i = 0            # the index the next frame should have
+        failures = 0     # failed reads since the last frame
         while not self._stop.is_set():
             t0 = time.perf_counter()
             ok, frame = self.cap.read()
             dt = time.perf_counter() - t0
             if not ok:
-                if self.total is not None and i >= self.total:
-                    if failures:
-                        self.failure = f"{self.path}: the last {failures} of {self.total} frames do not decode"
-                    return  # the end of the file
                 failures += 1
-                if failures > self.give_up or (self.total is None and failures > 1):
-                    # the first failure of a file of unknown length is taken as its end
-                    if self.total is not None:
-                        self.failure = (f"{self.path}: no frame decodes after frame {i - failures}; "
-                                        f"{self.total - i + failures} of {self.total} frames unread")
+                if (self.total is not None and i + failures > self.total) or failures > self.give_up \
+                        or (self.total is None and failures > 1):
+                    self._end(i, failures)
                     return
-                yield Captured(i / self.fps, None, i, dt)
-                i += 1
                 continue
+            k = self._index_of_frame_read(i)
+            for j in range(i, k):          # skipped: by the decoder's jump, or by reads that failed
+                self.skipped += 1
+                yield Captured(j / self.fps, None, j, 0.0)
             failures = 0
-            t = i / self.fps
+            t = k / self.fps
             if self.pace:
                 wait = start + t - time.monotonic()
                 if wait > 0:
                     time.sleep(wait)
-            yield Captured(t, frame, i, dt)
-            i += 1
+            yield Captured(t, frame, k, dt)
+            i = k + 1
 
-    def close(self) -> None:
-        self.cap.release()
+    def _end(self, i: int, failures: int) -> None:
+        """The reads have stopped at index ``i``: the file's end, or frames before its end that do not
+        decode (a failure; a file of unknown length ends at its first failed read)."""
+        if self.total is None or i >= self.total:
+            return
+        self.skipped += self.total - i
+        self.unread = self.total - i
+        self.failure = (f"{self.path}: no frame decodes after frame {i - 1}; {self.total - i} of {self.total} "
+                        "frames unread")
 
 
 class ImageFolderSource(Source):

@@ -244,3 +244,37 @@ def test_a_sealed_graph_with_the_wrong_output_ranks_is_refused_at_load(setup, tm
     err = capsys.readouterr().err
     assert code == 2 and "output 'blindspot' is tensor(float) [" in err and "Traceback" not in err
     assert [d.signals["System_State"] for d in got if d.name == "BSN_Status"] == [SystemState.UNAVAILABLE]
+
+
+def test_frames_after_a_damaged_stretch_keep_their_true_times(tmp_path):
+    """A video with its middle zeroed: OpenCV's decoder jumps to the next keyframe; the frames it
+    skipped are counted where they were, and every later frame has the time it has in the intact file."""
+    import cv2
+
+    from bsn_edge.runtime.sources import VideoFileSource
+    intact, broken = tmp_path / "intact.mp4", tmp_path / "broken.mp4"
+    w = cv2.VideoWriter(str(intact), cv2.VideoWriter_fourcc(*"mp4v"), 25, (192, 96))
+    for i in range(120):
+        w.write(np.full((96, 192, 3), 2 * i, np.uint8))     # the frame's number, in its grey level
+    w.release()
+    data = bytearray(intact.read_bytes())
+    a, b = int(len(data) * 0.45), int(len(data) * 0.60)
+    data[a:b] = bytes(b - a)
+    broken.write_bytes(bytes(data))
+
+    def frames(path):
+        src = VideoFileSource(path)
+        got = [(c.index, c.t, None if c.frame is None else round(float(c.frame.mean()) / 2)) for c in src]
+        src.close()
+        return got, src
+
+    clean, _ = frames(intact)
+    by_index = {i: (t, n) for i, t, n in clean}
+    got, src = frames(broken)
+    skipped = [i for i, _, n in got if n is None]
+    assert skipped, "the damage was seen"
+    after = [(i, t, n) for i, t, n in got if n is not None and i > max(skipped)]
+    # the decoder restarts at a keyframe: the frames after it are the intact file's, at the intact file's times
+    assert len(after) > 20 and all(by_index[i] == (t, n) for i, t, n in after), after[:5]
+    assert [i for i, _, _ in got] == list(range(len(got))), "every index once, skipped ones where they were"
+    assert src.failure is None and src.skipped == len(skipped)
