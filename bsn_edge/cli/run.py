@@ -49,6 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
     p.add_argument("--no-spin", action="store_true", help="do not let idle onnxruntime threads spin")
     p.add_argument("--pace", action="store_true", help="play files at their own frame rate")
+    p.add_argument("--stall", type=float, default=2.0, metavar="SECONDS",
+                   help="a camera or stream that delivers no frame for this long is lost: the bus says "
+                        "UNAVAILABLE and it is reopened with back-off (default 2)")
     p.add_argument("--cycle", type=float, default=0.1, help="send cycle in seconds (default 0.1)")
     p.add_argument("--summary", metavar="OUT.json", help="also write the summary here")
     p.add_argument("--calib", metavar="CALIB.json",
@@ -193,7 +196,9 @@ def main(argv: list[str] | None = None) -> int:
             maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
             engine = Engine(args.model, args.threads, not args.no_spin)
             camera = CameraState(engine.card, calibration, args.height, args.save_calib)
-            source = open_source(args.source, pace=args.pace)
+            if not args.stall > 0:
+                raise ValueError(f"--stall must be a positive number of seconds, got {args.stall:g}")
+            source = open_source(args.source, pace=args.pace, stall_s=args.stall)
         except (FileNotFoundError, ValueError, OSError) as e:
             return refuse(senders, str(e))
         if stopper.event.is_set():

@@ -162,6 +162,17 @@ class Reconnect:
             raise ValueError("reconnect: max_tries must be >= 0 or None")
 
 
+def open_capture(target: int | str, stall_s: float) -> cv2.VideoCapture:
+    """A capture whose open and reads give up after ``stall_s``. Stream URLs go through FFmpeg with the
+    timeouts passed at open, the one way its backend honours them (set after opening, a stalled read
+    waits FFmpeg's default 30 s)."""
+    if isinstance(target, str):
+        ms = round(stall_s * 1000)
+        return cv2.VideoCapture(target, cv2.CAP_FFMPEG, [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, ms,
+                                                         cv2.CAP_PROP_READ_TIMEOUT_MSEC, ms])
+    return cv2.VideoCapture(target)
+
+
 class LiveSource(Source):
     """A camera index or a stream URL, read by a thread that keeps only the newest frame.
 
@@ -172,9 +183,9 @@ class LiveSource(Source):
 
     live = True
 
-    def __init__(self, target: int | str, reconnect: Reconnect | None = None,
-                 opener=cv2.VideoCapture) -> None:
-        self.target, self.policy, self._opener = target, reconnect or Reconnect(), opener
+    def __init__(self, target: int | str, reconnect: Reconnect | None = None, opener=None) -> None:
+        self.target, self.policy = target, reconnect or Reconnect()
+        self._opener = opener or (lambda t: open_capture(t, self.policy.stall_s))
         self.cap = self._open()
         if self.cap is None:
             raise ValueError(f"cannot open camera or stream {target!r}")
@@ -189,9 +200,6 @@ class LiveSource(Source):
 
     def _open(self):
         cap = self._opener(self.target)
-        if hasattr(cap, "set") and hasattr(cv2, "CAP_PROP_READ_TIMEOUT_MSEC"):
-            # bound a stalled stream's read (OpenCV's FFmpeg default is 30 s)
-            cap.set(cv2.CAP_PROP_READ_TIMEOUT_MSEC, self.policy.stall_s * 1000)
         if not cap.isOpened():
             cap.release()
             return None
@@ -264,12 +272,13 @@ class LiveSource(Source):
             self.cap.release()
 
 
-def open_source(spec: str, pace: bool = False, fps: float = 10.0) -> Source:
-    """``VIDEO`` file, image ``DIR``, camera index (``0``), or stream ``URL`` (``rtsp://...``)."""
+def open_source(spec: str, pace: bool = False, fps: float = 10.0, stall_s: float = Reconnect.stall_s) -> Source:
+    """``VIDEO`` file, image ``DIR``, camera index (``0``), or stream ``URL`` (``rtsp://...``); a camera
+    or stream that delivers nothing for ``stall_s`` is taken as lost and reopened."""
     if spec.isdigit():
-        return LiveSource(int(spec))
+        return LiveSource(int(spec), Reconnect(stall_s=stall_s))
     if "://" in spec:
-        return LiveSource(spec)
+        return LiveSource(spec, Reconnect(stall_s=stall_s))
     p = Path(spec)
     if p.is_dir():
         return ImageFolderSource(p, fps)
