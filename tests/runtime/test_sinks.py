@@ -278,3 +278,23 @@ def test_frames_after_a_damaged_stretch_keep_their_true_times(tmp_path):
     assert len(after) > 20 and all(by_index[i] == (t, n) for i, t, n in after), after[:5]
     assert [i for i, _, _ in got] == list(range(len(got))), "every index once, skipped ones where they were"
     assert src.failure is None and src.skipped == len(skipped)
+
+
+@pytest.mark.slow
+def test_sigkill_at_twenty_random_moments_loses_nothing_the_bus_carried(setup, tmp_path):
+    """The kill test above at 20 random moments (start-up, the first frames, mid-run)."""
+    model, clip = setup
+    rng = np.random.default_rng(7)
+    env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
+    for k in range(20):
+        log, canlog = tmp_path / f"{k}.jsonl", tmp_path / f"{k}.log"
+        proc = subprocess.Popen([sys.executable, "-m", "bsn_edge.cli.run", "--model", str(model), "--source",
+                                 str(clip / "video.mp4"), "--pace", "--log", str(log), "--can-log", str(canlog)],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+        time.sleep(float(rng.uniform(0.2, 3.0)))
+        proc.kill()
+        proc.wait(timeout=30)
+        lines = log.read_text().splitlines() if log.exists() else []
+        assert all(json.loads(x)["frame"] == i for i, x in enumerate(lines)), k
+        msgs = list(can.LogReader(str(canlog))) if canlog.exists() and canlog.stat().st_size else []
+        assert len(msgs) >= 2 * (len(lines) - 1), (k, len(msgs), len(lines))
