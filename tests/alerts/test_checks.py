@@ -128,3 +128,38 @@ def test_listen_stopped_by_sigint_keeps_its_bad_crc_count(monkeypatch, capsys):
     assert listen_cli.main(["--serial", "loop://"]) == 1
     err = capsys.readouterr().err
     assert "3 frames, 1 with a bad CRC" in err
+
+
+def pack(fields: list[tuple[int, int, int]]) -> bytes:
+    """Little-endian (Intel) bit packing of (value, start bit, length) into 7 bytes, by hand."""
+    v = 0
+    for value, start, length in fields:
+        assert 0 <= value < 1 << length
+        v |= value << start
+    return v.to_bytes(7, "little")
+
+
+def test_can_frames_are_the_dbc_layout_to_the_bit_with_the_data_id_in_the_crc():
+    """Golden frames: the payload packed by hand from the DBC's start bits and scales, the CRC-8
+    (catalogue-checked above) over the data ID's two bytes and the payload."""
+    enc = CanEncoder()
+    f = AlertFrame(0.0, SectorAlert(1.0, Level.WARNING, 4.5), SectorAlert(0.0, Level.NONE, None),
+                   SectorAlert(0.3, Level.CAUTION, 20.0), SystemState.DEGRADED, 23.5,
+                   {"dropped_frames": 3, "decode_errors": 1, "nan_outputs": 2, "tx_errors": 4, "sink_errors": 5})
+    (hid, hz), (sid, st) = enc.encode(f)
+    assert (hid, sid) == (0x500, 0x501)
+    # levels 2 / 0 / 1; scores x127; distances x2 (63.5 = none); counter 0
+    want_hz = pack([(2, 0, 2), (0, 2, 2), (1, 4, 2), (127, 8, 7), (0, 15, 7), (38, 22, 7), (9, 29, 7),
+                    (127, 36, 7), (40, 43, 7), (0, 52, 4)])
+    want_st = pack([(1, 0, 2), (5, 2, 6), (47, 8, 8), (1, 16, 8), (3, 24, 8), (2, 32, 8), (4, 40, 8), (0, 52, 4)])
+    assert hz[:7] == want_hz and hz[7] == crc8_sae_j1850(bytes([0x00, 0x05]) + want_hz)
+    assert st[:7] == want_st and st[7] == crc8_sae_j1850(bytes([0x01, 0x05]) + want_st)
+    assert hz.hex() == "127f8029f1470189" and st.hex() == "152f0103020400b9"
+
+
+def test_a_hazard_payload_under_the_status_id_fails_its_crc():
+    from bsn_edge.alerts.can_codec import decode
+    none = SectorAlert(0.0, Level.NONE, None)
+    (hid, hz), (sid, _) = CanEncoder().encode(AlertFrame(0.0, none, none, none, SystemState.OK, 10.0, {}))
+    assert decode(hid, hz).crc_ok
+    assert not decode(sid, hz).crc_ok, "the data ID is in the CRC: a frame cannot pass for another message"

@@ -51,6 +51,17 @@ def test_kitti_poses_roundtrip(tmp_path):
     np.testing.assert_allclose(read_poses(tmp_path / "p.txt"), poses, atol=1e-8)
 
 
+def test_kitti_poses_read_a_literal_line_row_major(tmp_path):
+    """KITTI: 12 numbers, the 3x4 [R | t] row by row. A rotation that is not symmetric (90 degrees
+    about z) catches a transposed reader or writer, which a round trip would not."""
+    (tmp_path / "p.txt").write_text("0 -1 0 1.5 1 0 0 2.5 0 0 1 3.5\n")
+    pose = read_kitti_poses(tmp_path / "p.txt")[0]
+    np.testing.assert_array_equal(pose[:3, :3], [[0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    np.testing.assert_array_equal(pose[:3, 3], [1.5, 2.5, 3.5])
+    write_kitti_poses(tmp_path / "q.txt", pose[None])
+    assert [float(x) for x in (tmp_path / "q.txt").read_text().split()] == [0, -1, 0, 1.5, 1, 0, 0, 2.5, 0, 0, 1, 3.5]
+
+
 def test_kitti_bad_line_says_where(tmp_path):
     (tmp_path / "p.txt").write_text("1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0\n")
     with pytest.raises(ValueError, match=r"p.txt:2: .*12 numbers"):

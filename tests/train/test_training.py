@@ -200,8 +200,10 @@ class KilledError(Exception):
     pass
 
 
-def test_a_resumed_run_is_the_uninterrupted_run(data, uninterrupted, tmp_path, monkeypatch):
-    """KilledError after the checkpoint at step 3: resuming sees the same data stream and ends equal."""
+def test_a_resumed_run_is_the_uninterrupted_run(data, uninterrupted, tmp_path, monkeypatch, capsys):
+    """KilledError after the checkpoint at step 3: resuming sees the same data stream and ends equal
+    (a resume that silently started again from step 0 with the same seed would end equal too: the
+    steps it ran are checked)."""
     run = tmp_path / "run"
     real = Run.save
 
@@ -215,11 +217,14 @@ def test_a_resumed_run_is_the_uninterrupted_run(data, uninterrupted, tmp_path, m
         train_cli.main([*FAST, "--data", str(data), "--out", str(run)])
     monkeypatch.setattr(Run, "save", real)
     assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
+    capsys.readouterr()
     assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--resume"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["resumed_from"] == 3 and summary["steps_run"] == 3
     assert_same_weights(run, uninterrupted)
 
 
-def test_a_kill_between_weights_and_state_resumes_consistently(data, uninterrupted, tmp_path, monkeypatch):
+def test_a_kill_between_weights_and_state_resumes_consistently(data, uninterrupted, tmp_path, monkeypatch, capsys):
     """state.pt of step 6 written, then killed before model.pt: the run resumes from the state."""
     import bsn_edge.train.run as run_mod
 
@@ -240,7 +245,10 @@ def test_a_kill_between_weights_and_state_resumes_consistently(data, uninterrupt
     monkeypatch.setattr(run_mod, "atomic_write_bytes", real)
     assert torch.load(run / Run.STATE, weights_only=True)["step"] == 6
     assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
+    capsys.readouterr()
     assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--resume"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["resumed_from"] == 6 and summary["steps_run"] == 0, "from the state of step 6, not model.pt's 3"
     assert_same_weights(run, uninterrupted)
 
 
