@@ -197,7 +197,7 @@ def test_the_readme_installs_torch_from_its_cpu_index_before_the_extras():
     blocks = readme.split("```bash\n")
     second = next(b.split("```")[0] for b in blocks[1:] if "pytest" in b.split("```")[0])
     cpu = second.find("--index-url https://download.pytorch.org/whl/cpu")
-    extras = second.find('-e ".[full,dev]"')
+    extras = second.find('-e ".[full,dev,ray]"')
     assert 0 <= cpu < extras, "the CPU build must be installed before [full] pulls torch from the plain index"
 
 

@@ -186,11 +186,13 @@ def test_opencv_dnn_runs_the_fp32_model(run, tmp_path):
     size = (128, 256)
     p = tmp_path / "m.onnx"
     to_onnx(model, p, card_for(size))
+    if not hasattr(cv2, "dnn"):
+        pytest.skip("this OpenCV build has no DNN module")
     try:
         net = cv2.dnn.readNetFromONNX(str(p))
-    except cv2.error as e:
+    except cv2.error as e:       # a parse failure is a portability regression, not a reason to skip
         ops = sorted({n.op_type for n in onnx.load(str(p)).graph.node})
-        pytest.skip(f"OpenCV cannot parse the graph ({str(e).splitlines()[-1][:200]}); ops used: {ops}")
+        pytest.fail(f"OpenCV cannot parse the graph ({str(e).splitlines()[-1][:200]}); ops used: {ops}")
     frame = cv2.resize(cv2.imread(str(clip / "rgb" / "000002.png")), size[::-1])[None]
     net.setInput(frame, "frame")
     names = list(net.getUnconnectedOutLayersNames())
