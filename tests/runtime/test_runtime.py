@@ -1,6 +1,8 @@
 """The edge loop end to end on tiny data, with every fault injected and survived."""
 
 import json
+import threading
+import time
 from pathlib import Path
 
 import can
@@ -212,20 +214,53 @@ def test_real_dashcam_clip(setup, tmp_path):
     assert listen_cli.main(["--can-log", str(tmp_path / "a.log")]) == 0
 
 
-def test_live_source_keeps_the_newest_frame_and_counts_drops(setup):
-    """A reader thread that outruns a slow consumer: stale frames are dropped and counted."""
-    import time as _time
+class GatedCamera:
+    """A camera whose frame ``i`` comes only when the test opens gate ``i``: which frames the reader
+    has delivered is decided by the test, not by how the threads are scheduled."""
 
+    def __init__(self, frames: int) -> None:
+        self.gates = [threading.Event() for _ in range(frames)]
+        self.i = 0
+
+    def isOpened(self):
+        return True
+
+    def read(self):
+        if self.i >= len(self.gates):
+            return False, None
+        self.gates[self.i].wait(10)
+        self.i += 1
+        return True, np.full((8, 8, 3), self.i - 1, np.uint8)
+
+    def release(self):
+        pass
+
+
+def wait_for(cond, timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.001)
+
+
+def test_live_source_keeps_the_newest_frame_and_counts_drops():
+    """A reader thread that outruns a slow consumer: stale frames are dropped and counted."""
     from bsn_edge.runtime.sources import LiveSource, Reconnect
-    _, clip = setup
-    src = LiveSource(str(clip / "video.mp4"), Reconnect(max_tries=0))   # a file read as if it were a camera
-    seen = []
-    for cap in src:
-        seen.append(cap.index)
-        _time.sleep(0.05)
+    cam = GatedCamera(6)
+    src = LiveSource("camera", Reconnect(max_tries=0), opener=lambda _: cam)
+    it = iter(src)
+    cam.gates[0].set()
+    assert int(next(it).frame[0, 0, 0]) == 0
+    for g in cam.gates[1:4]:                 # three frames arrive while the consumer is busy
+        g.set()
+    wait_for(lambda: src.dropped == 2)       # 1 and 2 were replaced before anyone took them
+    assert int(next(it).frame[0, 0, 0]) == 3, "the newest frame, never a stale one"
+    cam.gates[4].set()
+    assert int(next(it).frame[0, 0, 0]) == 4
+    cam.gates[5].set()
+    seen = [int(c.frame[0, 0, 0]) for c in it]      # 5, then the camera ends
     src.close()
-    assert seen == sorted(seen) and len(set(seen)) == len(seen), "never a stale frame twice"
-    assert src.dropped + len(seen) == 15 and src.dropped > 0
+    assert seen == [5] and src.dropped == 2
 
 
 def test_a_narrow_camera_reads_no_blind_spot_in_the_mirrored_border():
