@@ -9,6 +9,7 @@ from bsn_edge.cli.common import fail, glue_values, parse_size
 from bsn_edge.export.pipeline import export_run
 from bsn_edge.export.quantize import METHODS, TYPES, QuantConfig
 from bsn_edge.export.seal import read_card, seal
+from bsn_edge.train.run import Run
 
 PROG = "bsn-export"
 
@@ -42,7 +43,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="instead of exporting: seal a model exported before models were sealed (writes its card "
                         "with the graph's sha256 and a self-test answer to --out). Only for a file you trust: "
                         "sealing cannot tell whether it was damaged before")
-    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    p.add_argument("--ship-run", metavar="DIR",
+                   help="also write the run itself beside the model: D and B weights and the teacher in fp16, "
+                        "each with its sha256, the card, config and history (no optimizer state), so users can "
+                        "fine-tune (bsn-train --set train.init=DIR), adapt (bsn-adapt --run DIR), evaluate and "
+                        "export it without a training run of their own")
+    p.add_argument("--force", action="store_true", help="overwrite --out (and --ship-run) if it exists")
     return p
 
 
@@ -68,6 +74,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, "--checkpoint RUN is required (or --reseal MODEL.onnx)")
     if args.int8 and not args.calib:
         return fail(PROG, "--int8 needs --calib DIR_OR_VIDEO (frames to calibrate activation ranges on)")
+    if args.ship_run and Run(args.ship_run).exists() and not args.force:
+        return fail(PROG, f"--ship-run {args.ship_run} already holds a run; pass --force to replace it")
     try:
         qcfg = QuantConfig(args.method, args.activations, args.weights, not args.per_tensor, not args.quantize_heads,
                            args.reduce_range)
@@ -83,6 +91,13 @@ def main(argv: list[str] | None = None) -> int:
               f"{100 * c['mask_agreement']:.2f} %, depth median rel. diff {100 * c['depth_median_rel']:.2f} %; "
               f"{len(summary['quantization']['float_nodes'])} nodes kept float (the frame's preparation and the "
               "output heads; reasons in the summary)")
+    if args.ship_run:
+        try:
+            shipped = Run(args.checkpoint).ship(args.ship_run, force=args.force)
+        except (FileNotFoundError, ValueError) as e:
+            return fail(PROG, str(e))
+        size = sum(f.stat().st_size for f in shipped.path.rglob("*") if f.is_file())
+        print(f"wrote the run to {shipped.path} ({size / 1e6:.1f} MB, fp16 weights and teacher)")
     return 0
 
 

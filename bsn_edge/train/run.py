@@ -180,7 +180,55 @@ class Run:
         return out
 
     def load_teacher_state(self) -> dict[str, torch.Tensor] | None:
-        return _from_bytes(self.teacher_path.read_bytes(), self.teacher_path) if self.teacher_path.is_file() else None
+        """The teacher's weights (None if the run has none); checked against the sha256 the run's
+        ``checkpoint.json`` records for it, where it records one (shipped runs do)."""
+        if not self.teacher_path.is_file():
+            return None
+        data = self.teacher_path.read_bytes()
+        if self.checkpoint_path.is_file():
+            want = self.info().get("teacher_sha256")
+            if want and hashlib.sha256(data).hexdigest() != want:
+                raise RunError(f"{self.teacher_path}: the teacher does not match {self.CHECKPOINT} (sha256 differs): "
+                               "the file is damaged or was replaced")
+        return _from_bytes(data, self.teacher_path)
+
+    def ship(self, dest: str | Path, dtype: torch.dtype = torch.float16, force: bool = False) -> Run:
+        """A copy of this run to hand out: the weights and the teacher in ``dtype`` (half the size in
+        fp16), the card re-digested for them and the teacher's sha256 recorded, the config and the
+        history; no optimizer state. Fine-tuning (``train.init``), ``bsn-adapt``, ``bsn-eval`` and
+        ``bsn-export`` take it as they take the run."""
+        out = Run(dest)
+        if out.path.resolve() == self.path.resolve():
+            raise RunError(f"{dest}: shipping a run onto itself")
+        if out.exists() and not force:
+            raise RunError(f"{out.path} already holds a run; pass force to replace it")
+        info = self.info()
+        model, card = self.load_model()
+
+        def cast(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+            return {k: (v.detach().to(dtype) if v.is_floating_point() else v.detach()).contiguous()
+                    for k, v in state.items()}
+
+        out.path.mkdir(parents=True, exist_ok=True)
+        if force:
+            out.teacher_path.unlink(missing_ok=True)
+        weights = _to_bytes(cast(model.state_dict()))
+        record = {k: v for k, v in info.items() if k != "card"}
+        record.update(card=card.replace(weights_sha256=hashlib.sha256(weights).hexdigest()).to_dict(),
+                      weights_dtype=str(dtype).removeprefix("torch."), shipped_from=self.path.name)
+        teacher = self.load_teacher_state()
+        if teacher is not None:
+            tdata = _to_bytes(cast(teacher))
+            out.teacher_path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(out.teacher_path, tdata)
+            record["teacher_sha256"] = hashlib.sha256(tdata).hexdigest()
+        atomic_write_bytes(out.model_path, weights)
+        for f in (self.config_path, self.history_path):
+            if f.is_file():
+                atomic_write_bytes(out.path / f.name, f.read_bytes())
+        out.state_path.unlink(missing_ok=True)
+        atomic_write_bytes(out.checkpoint_path, (json.dumps(record, indent=2) + "\n").encode())
+        return out
 
     # -- writing ---------------------------------------------------------------------------------
 

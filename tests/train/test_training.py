@@ -296,3 +296,50 @@ def test_train_cli_says_how_to_go_on_after_a_piece(data, tmp_path, capsys):
     assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--stop-after", "1e-9"]) == 0
     assert "--resume" in capsys.readouterr().err
     assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--stop-after", "-1"]) == 2
+
+
+@pytest.fixture(scope="module")
+def taught(data, tmp_path_factory):
+    """A smoke run with its teacher."""
+    run = tmp_path_factory.mktemp("taught") / "run"
+    assert train_cli.main(["--config", SMOKE, "--quiet", "--data", str(data), "--out", str(run),
+                           "--set", "data.label=\"T2s\"", "--set", "train.steps=2"]) == 0
+    return run
+
+
+def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tmp_path, capsys):
+    from bsn_edge.cli import export as export_cli
+    from bsn_edge.train import RunError
+    shipped = tmp_path / "default"
+    out = tmp_path / "m.onnx"
+    assert export_cli.main(["--checkpoint", str(taught), "--out", str(out), "--ship-run", str(shipped)]) == 0
+    src, dst = Run(taught), Run(shipped)
+    assert dst.model_path.stat().st_size < 0.6 * src.model_path.stat().st_size
+    assert dst.teacher_path.stat().st_size < 0.6 * src.teacher_path.stat().st_size
+    assert not dst.state_path.exists() and dst.config() == src.config()
+    state = torch.load(dst.model_path, weights_only=True)
+    assert {v.dtype for v in state.values() if v.is_floating_point()} == {torch.float16}
+    # the same model, to fp16's precision
+    a, _ = src.load_model()
+    b, card = dst.load_model()
+    x = torch.randn(1, 3, 64, 128)
+    with torch.no_grad():
+        (pa, da, _), (pb, db, _) = a(x), b(x)
+    assert torch.allclose(torch.sigmoid(pa), torch.sigmoid(pb), atol=1e-2)
+    assert torch.allclose(da, db, rtol=1e-2) and card.threshold == src.card().threshold
+    # every tool takes it: fine-tuning from it (its teacher too), evaluation, export
+    assert train_cli.main(["--config", SMOKE, "--quiet", "--data", str(data), "--out", str(tmp_path / "ft"),
+                           "--set", "data.label=\"T2s\"", "--set", "train.steps=1",
+                           "--set", f"train.init=\"{shipped}\"", "--set", f"teacher.checkpoint=\"{shipped}\""]) == 0
+    assert eval_cli.main(["--run", str(shipped), "--data", str(data), "--clips", "all", "--out",
+                          str(tmp_path / "e.json"), "--no-baselines"]) == 0
+    assert export_cli.main(["--checkpoint", str(shipped), "--out", str(tmp_path / "again.onnx")]) == 0
+    capsys.readouterr()
+    # shipping over it again is refused without --force; a replaced teacher is caught by its digest
+    assert export_cli.main(["--checkpoint", str(taught), "--out", str(tmp_path / "x.onnx"), "--ship-run",
+                            str(shipped)]) == 2
+    data_ = bytearray(dst.teacher_path.read_bytes())
+    data_[-10] ^= 0xFF
+    dst.teacher_path.write_bytes(bytes(data_))
+    with pytest.raises(RunError, match="teacher does not match"):
+        dst.load_teacher_state()
