@@ -179,9 +179,11 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
             raw = tomllib.loads(p.read_text())
         except tomllib.TOMLDecodeError as e:
             raise ValueError(f"{p}: invalid TOML: {e}") from None
+    from_override: set[tuple[str, str]] = set()
     for ov in overrides:
         section, key, value = parse_override(ov)
         raw.setdefault(section, {})[key] = value
+        from_override.add((section, key))
     parts = {}
     for section, values in raw.items():
         if section not in SECTIONS:
@@ -191,5 +193,28 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
         bad = sorted(set(values) - names)
         if bad:
             raise ValueError(f"unknown key(s) {bad} in [{section}]; valid: {', '.join(sorted(names))}")
-        parts[section] = cls(**{k: _coerce(cls, k, v) for k, v in values.items()})
+        try:
+            coerced = {k: _coerce(cls, k, v) for k, v in values.items()}
+        except ValueError:
+            bad = next(k for k, v in values.items() if not _coerces(cls, k, v))
+            where = "--set" if (section, bad) in from_override else str(path)
+            kind = KINDS.get(type(_default(cls, bad)), type(_default(cls, bad)).__name__)
+            raise ValueError(f"{section}.{bad} = {values[bad]!r} ({where}) must be {kind}") from None
+        parts[section] = cls(**coerced)
     return Config(**parts)
+
+
+KINDS = {int: "a whole number", float: "a number", str: "a string", bool: "true or false", tuple: "a list"}
+
+
+def _default(cls, key: str) -> Any:
+    f = {f.name: f for f in dataclasses.fields(cls)}[key]
+    return f.default if f.default is not dataclasses.MISSING else None
+
+
+def _coerces(cls, key: str, value: Any) -> bool:
+    try:
+        _coerce(cls, key, value)
+    except ValueError:
+        return False
+    return True

@@ -207,3 +207,13 @@ def test_the_readme_lists_every_config_and_its_durations_match_the_files():
         assert f"configs/{cfg.name}" in readme, f"{cfg.name} is not in the README"
     quick = (ROOT / "configs" / "quick.toml").read_text().splitlines()[0]
     assert "20 minutes" in quick and "quick.toml` (about 20 minutes" in readme
+
+
+def test_a_config_value_of_the_wrong_kind_names_the_key_and_where_it_came_from(tmp_path):
+    from bsn_edge.train import load_config
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[train]\nlr = "fast"\n')
+    with pytest.raises(ValueError, match=r"train\.lr = 'fast' \(.*bad\.toml\) must be a number"):
+        load_config(bad)
+    with pytest.raises(ValueError, match=r"train\.steps = 'abc' \(--set\) must be a whole number"):
+        load_config(ROOT / "configs" / "smoke.toml", ["train.steps=abc"])
