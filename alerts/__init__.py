@@ -7,9 +7,9 @@ a CAN bus (DBC ``bsn_alerts.dbc``, alive counter and CRC in every frame) or a se
 """
 
 from bsn_edge.alerts.frame import AlertFrame, SectorAlert
-from bsn_edge.alerts.health import Health, HealthConfig, SystemState
+from bsn_edge.alerts.health import Fault, Health, HealthConfig, SystemState
 from bsn_edge.alerts.sectors import SECTORS, SectorConfig, SectorGeometry, SectorReading
 from bsn_edge.alerts.state_machine import AlertConfig, Level, LevelRule, SectorState
 
-__all__ = ["SECTORS", "AlertConfig", "AlertFrame", "Health", "HealthConfig", "Level", "LevelRule", "SectorAlert",
-           "SectorConfig", "SectorGeometry", "SectorReading", "SectorState", "SystemState"]
+__all__ = ["SECTORS", "AlertConfig", "AlertFrame", "Fault", "Health", "HealthConfig", "Level", "LevelRule",
+           "SectorAlert", "SectorConfig", "SectorGeometry", "SectorReading", "SectorState", "SystemState"]

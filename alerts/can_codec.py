@@ -9,12 +9,14 @@ from typing import Any
 
 from bsn_edge.alerts.e2e import AliveCounter, e2e_crc
 from bsn_edge.alerts.frame import AlertFrame
-from bsn_edge.alerts.health import SystemState
+from bsn_edge.alerts.health import Fault, SystemState
+from bsn_edge.alerts.sectors import SECTORS
 
 DBC_PATH = Path(__file__).with_name("bsn_alerts.dbc")
 HAZARD, STATUS = "BSN_Hazard", "BSN_Status"
 NO_DISTANCE = 63.5
 SAT = 255
+SIDES = tuple(name.title() for name in SECTORS)   # the DBC's signal prefixes: Left, Centre, Right
 SINK_SAT = 63
 
 
@@ -50,17 +52,17 @@ class CanEncoder:
 
     def encode(self, frame: AlertFrame) -> list[tuple[int, bytes]]:
         hz: dict[str, Any] = {}
-        for name, s in zip(("Left", "Centre", "Right"), frame.sectors, strict=True):
+        for name, s in zip(SIDES, frame.sectors, strict=True):
             hz[f"{name}_Level"] = int(s.level)
             hz[f"{name}_Score"] = round(min(max(s.score, 0.0), 1.0) * 127) / 127
             hz[f"{name}_Distance"] = NO_DISTANCE if s.distance_m is None else min(round(s.distance_m * 2) / 2, 63.0)
         f = frame.faults
         st = {"System_State": int(frame.state), "Frame_Rate": min(round(frame.fps * 2) / 2, 127.5),
-              "Decode_Errors": min(f.get("decode_errors", 0) + f.get("size_changes", 0), SAT),
-              "Dropped_Frames": min(f.get("dropped_frames", 0), SAT),
-              "Invalid_Outputs": min(f.get("nan_outputs", 0), SAT),
-              "Tx_Errors": min(f.get("tx_errors", 0) + f.get("tx_full", 0) + f.get("serial_errors", 0), SAT),
-              "Sink_Errors": min(f.get("sink_errors", 0), SINK_SAT)}
+              "Decode_Errors": min(f.get(Fault.DECODE_ERRORS, 0) + f.get(Fault.SIZE_CHANGES, 0), SAT),
+              "Dropped_Frames": min(f.get(Fault.DROPPED_FRAMES, 0), SAT),
+              "Invalid_Outputs": min(f.get(Fault.NAN_OUTPUTS, 0), SAT),
+              "Tx_Errors": min(sum(f.get(k, 0) for k in (Fault.TX_ERRORS, Fault.TX_FULL, Fault.SERIAL_ERRORS)), SAT),
+              "Sink_Errors": min(f.get(Fault.SINK_ERRORS, 0), SINK_SAT)}
         return [self._encode(HAZARD, hz), self._encode(STATUS, st)]
 
 
@@ -93,7 +95,7 @@ def invalid_fields(d: Decoded) -> list[str]:
     """Signals whose raw value the DBC's value table does not define (e.g. a level of 3)."""
     if d.name != HAZARD:
         return []
-    return [f"{side}_Level={int(d.signals[f'{side}_Level'])}" for side in ("Left", "Centre", "Right")
+    return [f"{side}_Level={int(d.signals[f'{side}_Level'])}" for side in SIDES
             if not 0 <= int(d.signals[f"{side}_Level"]) < len(LEVEL_NAMES)]
 
 
@@ -103,7 +105,7 @@ def to_alert_text(d: Decoded) -> str:
     flag = "" if d.crc_ok else "  CRC MISMATCH"
     if d.name == HAZARD:
         parts = []
-        for side in ("Left", "Centre", "Right"):
+        for side in SIDES:
             v = int(s[f"{side}_Level"])
             lv = LEVEL_NAMES[v] if 0 <= v < len(LEVEL_NAMES) else f"LEVEL?{v}"
             dist = s[f"{side}_Distance"]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import threading
 from collections import deque
 from dataclasses import dataclass
-from enum import IntEnum
+from enum import IntEnum, StrEnum
 
 
 class SystemState(IntEnum):
@@ -20,11 +20,25 @@ class SystemState(IntEnum):
     CALIBRATING = 3
 
 
-FAULTS = ("decode_errors", "size_changes", "nan_outputs", "dropped_frames", "tx_errors", "tx_full",
-          "serial_errors", "source_reconnects", "heartbeat_errors", "sink_errors")
-# faults that degrade the system for the rest of the run, whatever the frame rate: an output beside
-# the bus (a log, the overlay, the maps) that failed
-DEGRADING = ("sink_errors",)
+class Fault(StrEnum):
+    """The fault counters: what the loop, the send cycle and the senders count, the status message
+    carries (``can_codec``) and the summary reports (by these names)."""
+
+    DECODE_ERRORS = "decode_errors"          # a frame that would not decode
+    SIZE_CHANGES = "size_changes"            # a frame of another size than the one before
+    NAN_OUTPUTS = "nan_outputs"              # the model answered NaN or infinity
+    DROPPED_FRAMES = "dropped_frames"        # a live source's frames the loop was too busy to take
+    TX_ERRORS = "tx_errors"                  # a CAN send that failed
+    TX_FULL = "tx_full"                      # the CAN transmit buffer was full
+    SERIAL_ERRORS = "serial_errors"          # a serial write that failed
+    SOURCE_RECONNECTS = "source_reconnects"  # a camera or stream reopened
+    HEARTBEAT_ERRORS = "heartbeat_errors"    # an exception in the heartbeat thread
+    SINK_ERRORS = "sink_errors"              # an output beside the bus (logs, overlay, maps) that failed
+
+
+FAULTS = tuple(Fault)
+# faults that degrade the system for the rest of the run, whatever the frame rate
+DEGRADING = (Fault.SINK_ERRORS,)
 
 
 @dataclass(frozen=True)
@@ -50,7 +64,7 @@ class Health:
 
     def __init__(self, cfg: HealthConfig | None = None) -> None:
         self.cfg = cfg or HealthConfig()
-        self._faults = dict.fromkeys(FAULTS, 0)
+        self._faults: dict[Fault, int] = dict.fromkeys(FAULTS, 0)
         self._valid: deque[float] = deque()
         self._work: deque[float] = deque()     # processing-clock times of the same inferences
         self._down = False
@@ -73,23 +87,23 @@ class Health:
             while self._work and self._work[0] < w - self.cfg.window_s:
                 self._work.popleft()
 
-    def fault(self, name: str, n: int = 1) -> None:
+    def fault(self, name: Fault, n: int = 1) -> None:
         with self._lock:
             self._check(name)
             self._faults[name] += n
 
-    def set_fault(self, name: str, n: int) -> None:
+    def set_fault(self, name: Fault, n: int) -> None:
         """Set a counter that another part keeps (e.g. the source's dropped frames)."""
         with self._lock:
             self._check(name)
             self._faults[name] = n
 
-    def _check(self, name: str) -> None:
+    def _check(self, name: Fault) -> None:
         if name not in self._faults:
             raise KeyError(f"unknown fault {name!r}; known: {', '.join(self._faults)}")
 
     @property
-    def faults(self) -> dict[str, int]:
+    def faults(self) -> dict[Fault, int]:
         """A copy of the fault counters."""
         with self._lock:
             return dict(self._faults)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 from bsn_edge.alerts.can_codec import CanEncoder
 from bsn_edge.alerts.frame import AlertFrame
+from bsn_edge.alerts.health import Fault
 from bsn_edge.alerts.serial_codec import encode_frame
 
 
@@ -29,6 +30,7 @@ class Sender(ABC):
     """Base class: ``send`` never raises; ``close`` is idempotent; usable as a context manager."""
 
     name = "sender"
+    tx_fault = Fault.TX_ERRORS       # what a failed send counts as
 
     def __init__(self) -> None:
         self.stats = SenderStats()
@@ -144,6 +146,7 @@ class SerialSender(Sender):
     A port that disappears is reopened with back-off (at most every ``retry_s``)."""
 
     name = "serial"
+    tx_fault = Fault.SERIAL_ERRORS
 
     def __init__(self, url: str, baudrate: int = 115200, port=None, retry_s: float = 1.0) -> None:
         super().__init__()

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from dataclasses import replace
 
 from bsn_edge.alerts.frame import AlertFrame
-from bsn_edge.alerts.health import Health, SystemState
+from bsn_edge.alerts.health import Fault, Health, SystemState
 from bsn_edge.alerts.senders import Sender
 
 
@@ -65,11 +65,11 @@ class CycleEmitter:
             before_err, before_full, before_log = s.stats.errors, s.stats.full, s.stats.log_errors
             s.send(frame)
             if s.stats.errors > before_err:
-                h.fault("serial_errors" if s.name == "serial" else "tx_errors", s.stats.errors - before_err)
+                h.fault(s.tx_fault, s.stats.errors - before_err)
             if s.stats.full > before_full:
-                h.fault("tx_full", s.stats.full - before_full)
+                h.fault(Fault.TX_FULL, s.stats.full - before_full)
             if s.stats.log_errors > before_log:
-                h.fault("sink_errors", s.stats.log_errors - before_log)
+                h.fault(Fault.SINK_ERRORS, s.stats.log_errors - before_log)
         self.sent_cycles += 1
 
 
@@ -90,7 +90,7 @@ class Heartbeat:
             except Exception as e:  # the bus must never go silent while the loop runs
                 self.last_error = f"{type(e).__name__}: {e}"
                 with contextlib.suppress(Exception):   # nothing more to do than to go on
-                    self.emitter.health.fault("heartbeat_errors")
+                    self.emitter.health.fault(Fault.HEARTBEAT_ERRORS)
             self._stop.wait(self.emitter.cycle_s / 2)
 
     def __enter__(self) -> Heartbeat:

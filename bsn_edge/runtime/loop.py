@@ -26,7 +26,7 @@ from bsn_edge.alerts import (
     SectorGeometry,
     SectorState,
 )
-from bsn_edge.alerts.health import Health
+from bsn_edge.alerts.health import Fault, Health
 from bsn_edge.alerts.senders import Sender
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CameraState
@@ -91,7 +91,7 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
     t_start = time.perf_counter()
 
     def sink_fault(_: SinkFailure) -> None:
-        health.fault("sink_errors")
+        health.fault(Fault.SINK_ERRORS)
 
     sinks: dict[str, GuardedSink] = {}
     heartbeat = None
@@ -115,16 +115,16 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
             t0 = time.perf_counter()
             frames += 1
             last_t = cap.t
-            health.set_fault("dropped_frames", source.dropped)  # live sources drop while we work
-            health.set_fault("source_reconnects", source.reconnects)
+            health.set_fault(Fault.DROPPED_FRAMES, source.dropped)  # live sources drop while we work
+            health.set_fault(Fault.SOURCE_RECONNECTS, source.reconnects)
             stage_s["decode"] += cap.decode_s
             rec: dict[str, Any] = {"frame": cap.index, "t": round(cap.t, 4)}
             if cap.frame is None:
-                health.fault("decode_errors")
+                health.fault(Fault.DECODE_ERRORS)
                 rec["fault"] = "decode_error"
             else:
                 if last_shape is not None and cap.frame.shape != last_shape:
-                    health.fault("size_changes")
+                    health.fault(Fault.SIZE_CHANGES)
                     rec["fault"] = "size_change"
                 last_shape = cap.frame.shape
                 mf = camera.frame_for(cap.frame)
@@ -137,7 +137,7 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
                 stage_s["preprocess"] += t1 - t0
                 stage_s["inference"] += t2 - t1
                 if not (np.isfinite(prob).all() and np.isfinite(depth).all()):
-                    health.fault("nan_outputs")
+                    health.fault(Fault.NAN_OUTPUTS)
                     rec["fault"] = "nan_output"
                 else:
                     mask = blind_spots(prob, engine.card.threshold, mf)
@@ -181,9 +181,9 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
         for sink in sinks.values():
             sink.close(frames)
         camera.close()
-        health.set_fault("source_reconnects", source.reconnects)
+        health.set_fault(Fault.SOURCE_RECONNECTS, source.reconnects)
         if source.unread:
-            health.fault("decode_errors", source.unread)
+            health.fault(Fault.DECODE_ERRORS, source.unread)
         health.unavailable()
         if heartbeat is not None:
             heartbeat.close()
