@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bsn_edge.camera import Intrinsics
-from bsn_edge.mounting import Mounting
+from bsn_edge.mounting import REFERENCE_HEIGHT_M, Mounting
 
 CARD_VERSION = 1
 MODEL_NAME = "BlindSpotNet"
@@ -35,7 +35,7 @@ UNCHOSEN_THRESHOLD = 0.5
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 # Cards written before the model camera had a mounting come from the synthetic world of that time:
 # cameras 1.5 m above the road, pitched 0-3 degrees down (1.5 on average), no yaw or roll.
-EARLY_MOUNTING = Mounting(height_m=1.5, pitch_deg=1.5)
+EARLY_MOUNTING = Mounting(height_m=REFERENCE_HEIGHT_M, pitch_deg=1.5)
 
 
 @dataclass(frozen=True)

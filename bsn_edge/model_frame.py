@@ -75,6 +75,11 @@ class ModelFrame:
         """A camera that is the model camera at another size: the warp is a plain resize."""
         return cls(model.scaled(width, height), (), model_mounting, model, model_mounting)
 
+    @classmethod
+    def undistort_only(cls, camera: Intrinsics, dist: tuple[float, ...], mounting: Mounting) -> ModelFrame:
+        """The lens taken out and nothing else: the same pinhole camera, pose and size, undistorted."""
+        return cls(camera, dist, mounting, camera, mounting)
+
     @property
     def raw_size(self) -> tuple[int, int]:
         return self.raw.height, self.raw.width

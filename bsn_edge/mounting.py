@@ -24,6 +24,7 @@ import numpy as np
 from bsn_edge.camera import Intrinsics
 from bsn_edge.fields import number
 
+REFERENCE_HEIGHT_M = 1.5       # a car's dashcam: the model camera's height, and the height where none is known
 HEIGHT_RANGE_M = (0.2, 5.0)     # a camera's height above the road: every tool checks against this one range
 ANGLE_LIMIT_DEG = 30.0          # pitch, yaw and roll
 

@@ -10,7 +10,7 @@ from pathlib import Path
 from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.calibration.lane_height import LaneHeight
 from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
-from bsn_edge.mounting import check_height
+from bsn_edge.mounting import REFERENCE_HEIGHT_M, check_height
 from bsn_edge.sequence.media import read_video
 
 LANE_WIDTH_RANGE_M = (2.0, 6.0)   # marking centre to marking centre, narrow urban lanes to wide highway ones
@@ -51,7 +51,7 @@ def calibrate_mounting(video: str | os.PathLike, camera: Calibration, height_m: 
     fit = MountFit(intr, camera.dist, cfg or MountFitConfig())
     for f in frames:
         fit.add(f)
-    m, report = fit.estimate(height_m or 1.5)
+    m, report = fit.estimate(height_m or REFERENCE_HEIGHT_M)
     report["frames"] = len(frames)
     if m is None or not report["converged"]:
         raise MountingRefusedError(_why(report, fit.cfg))

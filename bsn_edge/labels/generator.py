@@ -24,12 +24,13 @@ from bsn_edge.labels.sources.base import ClipRejectedError, SegSource
 from bsn_edge.labels.sources.registry import make_depth, make_poses, make_seg
 from bsn_edge.labels.warp import Cloud, Warper, label_frame
 from bsn_edge.model_frame import ModelFrame
+from bsn_edge.mounting import REFERENCE_HEIGHT_M
 from bsn_edge.sequence import SequenceMeta, read_mask, write_mask
 from bsn_edge.sequence.folder import LabelSet, SequenceFolder
 from bsn_edge.sequence.frames import read_gray
 from bsn_edge.sequence.images import atomic_write_bytes
 
-DEFAULT_CAMERA_HEIGHT = 1.5  # metres, a car's dashcam
+DEFAULT_CAMERA_HEIGHT = REFERENCE_HEIGHT_M
 SEED_WINDOW = 5  # label frames either side: the seed VO's scale drifts too much for one fit per clip
 
 
@@ -172,7 +173,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         meta = dataclasses.replace(meta, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy)
         if cal.has_distortion:
             m = cal.mounting or EARLY_MOUNTING
-            lens = ModelFrame(k, cal.dist, m, k, m)
+            lens = ModelFrame.undistort_only(k, cal.dist, m)
     clip = ClipData(seq, meta, frame_count(seq), {"calibration": cal} if cal is not None else {})
     labels = SequenceFolder(seq).labels(cfg.name)
     out = labels.root

@@ -96,12 +96,12 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
     sinks: dict[str, GuardedSink] = {}
     heartbeat = None
     try:
-        camera.use_frame_rate(getattr(source, "fps", 0.0) or 0.0)
+        camera.use_frame_rate(source.fps)
         if source.live:
             heartbeat = Heartbeat(emitter).__enter__()
         # outputs that cannot be opened refuse the run (the user asked for them); later failures degrade it
         if overlay is not None:
-            writer = OverlayWriter(overlay, getattr(source, "fps", 10.0))
+            writer = OverlayWriter(overlay, source.fps)
             sinks["overlay"] = GuardedSink("overlay", writer.write, writer.close, sink_fault)
         if log is not None:
             Path(log).parent.mkdir(parents=True, exist_ok=True)

@@ -36,6 +36,7 @@ class Source:
     ``stop()`` ends the iteration early (safe to call from a signal handler)."""
 
     live = False
+    fps = 10.0                   # frames per second of the source's own clock (a file's, a folder's; nominal when live)
     dropped = 0
     reconnects = 0
     unread = 0                   # frames of a file that never decoded at its end (counted as decode errors)
@@ -189,6 +190,8 @@ class LiveSource(Source):
         self.cap = self._open()
         if self.cap is None:
             raise ValueError(f"cannot open camera or stream {target!r}")
+        if hasattr(self.cap, "get"):
+            self.fps = self.cap.get(cv2.CAP_PROP_FPS) or self.fps
         self._lock = threading.Lock()
         self._newest: Captured | None = None
         self._taken = True

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from bsn_edge.mounting import REFERENCE_HEIGHT_M
 from bsn_edge.synth.style import get_style
 
 CAMERAS = ("vary", "fixed")
@@ -24,7 +25,7 @@ class SynthConfig:
     seed: int = 0
     camera: str = "vary"           # "vary": each clip draws its own camera from its seed (synth.rig)
     hfov_deg: float = 80.0         # the camera of "fixed" clips
-    camera_height: float = 1.5
+    camera_height: float = REFERENCE_HEIGHT_M
     bs_range: float = 50.0        # R: blind spots count within this ground distance, metres
     far: float = 250.0            # nothing is rendered beyond this depth
     parked: float = 1.0

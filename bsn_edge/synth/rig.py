@@ -16,7 +16,7 @@ import numpy as np
 
 from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.camera import Intrinsics
-from bsn_edge.mounting import Mounting
+from bsn_edge.mounting import REFERENCE_HEIGHT_M, Mounting
 
 HFOV_DEG = (50.0, 110.0)
 HEIGHT_M = (1.1, 1.9)
@@ -34,7 +34,7 @@ class Rig:
     """How a synthetic clip's camera is built and mounted."""
 
     hfov_deg: float = 80.0
-    height_m: float = 1.5
+    height_m: float = REFERENCE_HEIGHT_M
     pitch_deg: float = 1.5
     yaw_deg: float = 0.0
     roll_deg: float = 0.0

@@ -12,7 +12,7 @@ from typing import Any
 
 from bsn_edge.camera import Intrinsics
 from bsn_edge.models import get_spec
-from bsn_edge.mounting import Mounting
+from bsn_edge.mounting import REFERENCE_HEIGHT_M, Mounting
 
 
 @dataclass(frozen=True)
@@ -39,7 +39,7 @@ class DataConfig:
     # the model camera every clip is warped into (written on the model card): horizontal field of
     # view at ``size``, reference height above the road and pitch (down positive)
     camera_hfov_deg: float = 80.0
-    camera_height_m: float = 1.5
+    camera_height_m: float = REFERENCE_HEIGHT_M
     camera_pitch_deg: float = 1.5
 
     def __post_init__(self) -> None:
