@@ -16,7 +16,7 @@ from typing import Any
 
 from benchmarks.common import write_result
 from bsn_edge.data import BlindSpotDataset, find_clips
-from bsn_edge.evaluate.metrics import Counts
+from bsn_edge.metrics import Counts
 from bsn_edge.runtime.engine import Engine
 
 

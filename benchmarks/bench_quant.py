@@ -20,9 +20,9 @@ import numpy as np
 
 from benchmarks.common import summary, time_calls, write_result
 from bsn_edge.data import find_clips
-from bsn_edge.evaluate.metrics import Counts
 from bsn_edge.export import QuantConfig, quantize, to_onnx
 from bsn_edge.export.calib_frames import load_frames
+from bsn_edge.metrics import Counts
 from bsn_edge.runtime.model_file import session
 from bsn_edge.sequence import read_mask
 from bsn_edge.sequence.folder import SequenceFolder

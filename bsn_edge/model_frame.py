@@ -24,9 +24,20 @@ import cv2
 import numpy as np
 
 from bsn_edge.camera import Intrinsics
-from bsn_edge.mounting import Mounting, inverse_maps, warp_maps
+from bsn_edge.mounting import REFERENCE_HEIGHT_M, Mounting, inverse_maps, warp_maps
 
 SHRINK_ABOVE = 1.5   # raw-to-model pixel ratio above which pictures are low-passed before the remap
+
+
+MODEL_HFOV_DEG = 80.0   # the model camera's horizontal field of view (training's default, on every card since)
+MODEL_PITCH_DEG = 1.5   # and its pitch, down
+
+
+def model_camera(size: tuple[int, int], hfov_deg: float = MODEL_HFOV_DEG, height_m: float = REFERENCE_HEIGHT_M,
+                 pitch_deg: float = MODEL_PITCH_DEG) -> tuple[Intrinsics, Mounting]:
+    """The model camera at ``size`` (H, W): its intrinsics and mounting (no yaw or roll)."""
+    h, w = size
+    return Intrinsics.from_fov(w, h, hfov_deg), Mounting(height_m, pitch_deg)
 
 
 class ModelFrame:

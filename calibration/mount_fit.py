@@ -24,8 +24,8 @@ import cv2
 import numpy as np
 
 from bsn_edge.camera import Intrinsics
-from bsn_edge.labels.tracks import detect, track
 from bsn_edge.mounting import Mounting, angles_of
+from bsn_edge.tracks import detect, track
 
 MAX_ROLL_DEG = 15.0        # a camera rolled further is not mounted for driving
 SLOW_ROAD = 0.4            # a low corner moving slower than this share of the median road rate is not road

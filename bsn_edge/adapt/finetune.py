@@ -8,7 +8,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from bsn_edge.adapt.config import AdaptConfig
-from bsn_edge.evaluate.metrics import ThresholdSweep
+from bsn_edge.metrics import ThresholdSweep
 from bsn_edge.models import BlindSpotNet
 from bsn_edge.train.losses import distillation_loss, masked_bce
 from bsn_edge.train.trainer import batch_stream, scaled

@@ -15,7 +15,7 @@ from bsn_edge import semantics as sm
 from bsn_edge.calibration.camera_file import clip_camera
 from bsn_edge.camera import Intrinsics
 from bsn_edge.labels.generator import label_camera
-from bsn_edge.model_frame import ModelFrame
+from bsn_edge.model_frame import ModelFrame, model_camera
 from bsn_edge.mounting import Mounting
 from bsn_edge.sequence import SequenceMeta, read_depth, read_mask
 from bsn_edge.sequence.folder import SequenceFolder
@@ -126,9 +126,7 @@ class BlindSpotDataset(Dataset):
             raise ValueError("dataset is empty")
         self.size = size
         if camera is None or mounting is None:
-            from bsn_edge.train.config import DataConfig
-
-            camera, mounting = DataConfig(size=tuple(size)).model_camera()
+            camera, mounting = model_camera(tuple(size))
         self.camera, self.mounting = camera, mounting
         if (self.camera.height, self.camera.width) != tuple(size):
             raise ValueError(f"model camera is {self.camera.height}x{self.camera.width}, the size {size[0]}x{size[1]}")

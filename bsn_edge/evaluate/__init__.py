@@ -1,5 +1,5 @@
 """Evaluation of blind-spot predictions: metrics, baselines, reports."""
 
-from bsn_edge.evaluate.metrics import Counts, ThresholdSweep
+from bsn_edge.metrics import Counts, ThresholdSweep
 
 __all__ = ["Counts", "ThresholdSweep"]

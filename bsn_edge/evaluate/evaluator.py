@@ -11,7 +11,7 @@ import torch
 from bsn_edge.card import ModelCard
 from bsn_edge.data import BlindSpotDataset, Clip
 from bsn_edge.evaluate.baselines import detection_2d, detection_3d, traversable_hidden
-from bsn_edge.evaluate.metrics import Counts
+from bsn_edge.metrics import Counts
 from bsn_edge.models import create_teacher
 from bsn_edge.sequence import read_kitti_poses
 from bsn_edge.sequence.folder import SequenceFolder

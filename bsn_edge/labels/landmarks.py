@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from bsn_edge.labels.tracks import detect, track, triangulate
+from bsn_edge.tracks import detect, track, triangulate
 
 BASELINE_S = 0.5   # look this many seconds ahead (or back at the clip's end) for parallax
 AGREE = 0.1        # depths from the full and the half baseline must agree this closely

@@ -16,7 +16,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from bsn_edge.labels.tracks import detect, track, triangulate
+from bsn_edge.tracks import detect, track, triangulate
 
 MIN_INLIERS = 20
 MAX_STEP_CHANGE = 0.5  # a step more than 50 % longer or shorter than the last is suspect

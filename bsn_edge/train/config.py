@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.model_frame import MODEL_HFOV_DEG, MODEL_PITCH_DEG, model_camera
 from bsn_edge.models import get_spec
 from bsn_edge.mounting import REFERENCE_HEIGHT_M, Mounting
 
@@ -38,9 +39,9 @@ class DataConfig:
     cache: str = "auto"
     # the model camera every clip is warped into (written on the model card): horizontal field of
     # view at ``size``, reference height above the road and pitch (down positive)
-    camera_hfov_deg: float = 80.0
+    camera_hfov_deg: float = MODEL_HFOV_DEG
     camera_height_m: float = REFERENCE_HEIGHT_M
-    camera_pitch_deg: float = 1.5
+    camera_pitch_deg: float = MODEL_PITCH_DEG
 
     def __post_init__(self) -> None:
         if len(self.size) != 2 or min(self.size) < 32 or any(s % 32 for s in self.size):
@@ -53,8 +54,7 @@ class DataConfig:
 
     def model_camera(self) -> tuple[Intrinsics, Mounting]:
         """The model camera: intrinsics at ``size`` and its mounting."""
-        h, w = self.size
-        return Intrinsics.from_fov(w, h, self.camera_hfov_deg), Mounting(self.camera_height_m, self.camera_pitch_deg)
+        return model_camera(self.size, self.camera_hfov_deg, self.camera_height_m, self.camera_pitch_deg)
 
 
 @dataclass(frozen=True)

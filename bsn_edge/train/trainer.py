@@ -27,8 +27,8 @@ from bsn_edge import semantics as sm
 from bsn_edge.card import UNCHOSEN_THRESHOLD, ModelCard
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
 from bsn_edge.data.cache import SampleCache, default_cache_root
-from bsn_edge.evaluate.metrics import ThresholdSweep
 from bsn_edge.labels.generator import label_camera
+from bsn_edge.metrics import ThresholdSweep
 from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, create_model, create_teacher, get_spec
 from bsn_edge.sequence import SequenceMeta
 from bsn_edge.sequence.folder import SequenceFolder
