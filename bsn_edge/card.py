@@ -33,8 +33,8 @@ FP32 = "none (fp32)"
 # used only when a run has no validation clips to choose the threshold on (the trainer says so)
 UNCHOSEN_THRESHOLD = 0.5
 _HEX64 = re.compile(r"[0-9a-f]{64}")
-# Cards written before the model camera had a mounting come from the synthetic world of that time:
-# cameras 1.5 m above the road, pitched 0-3 degrees down (1.5 on average), no yaw or roll.
+# A card without a mounting was trained in the fixed-camera world (bsn-synth --camera fixed): cameras at
+# the reference height, pitched 0-3 degrees down (1.5 on average), no yaw or roll.
 EARLY_MOUNTING = Mounting(height_m=REFERENCE_HEIGHT_M, pitch_deg=1.5)
 
 

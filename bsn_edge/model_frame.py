@@ -58,11 +58,11 @@ class ModelFrame:
         # Pictures: a raw frame much finer than the model camera is low-passed first (a bilinear
         # remap alone would alias: every model pixel would sample one raw pixel of many). From twice
         # the model's scale up it is area-shrunk by the whole factor k = floor(factor) over k x k
-        # blocks, OpenCV's fast area path (1280x720 by 3 in ~1 ms, where by 3.8 it took ~5), which
-        # leaves the remap between 1 and 1.5. Then, from SHRINK_ABOVE up, the binomial [1, 2, 1] / 4
-        # in both directions (OpenCV's fixed 3-tap kernel) removes what the remap would fold back (an
-        # odd k leaves a third of the finest stripes). On real frames this is within ~2-4 grey levels
-        # RMS (36-48 dB) of an exact area shrink to the model's scale, in a third of its time.
+        # blocks (OpenCV's area resize is fast for whole factors only), which leaves the remap
+        # between 1 and 1.5. Then, from SHRINK_ABOVE up, the binomial [1, 2, 1] / 4 in both
+        # directions (OpenCV's fixed 3-tap kernel) removes what the remap would fold back (an odd k
+        # leaves a third of the finest stripes). Its cost and its distance from an exact area shrink
+        # are in benchmarks/results/remap.md.
         factor = min(raw.fx / model.fx, raw.fy / model.fy)
         self.shrink = math.floor(factor) if factor >= 2 else 1
         self.prefilter = factor > SHRINK_ABOVE

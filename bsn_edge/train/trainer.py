@@ -13,6 +13,7 @@ import os
 import shutil
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +26,7 @@ from tqdm import tqdm
 
 from bsn_edge import semantics as sm
 from bsn_edge.card import UNCHOSEN_THRESHOLD, ModelCard
-from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
+from bsn_edge.data import BlindSpotDataset, Clip, find_clips, split_clips
 from bsn_edge.data.cache import SampleCache, default_cache_root
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.metrics import ThresholdSweep
@@ -161,9 +162,22 @@ def _adam(params, lr: float, cfg: Config) -> torch.optim.Optimizer:
     return torch.optim.Adam(params, lr=lr, betas=t.betas, eps=t.eps, weight_decay=t.weight_decay)
 
 
-def datasets(cfg: Config, data_dir: str | Path) -> dict[str, Any]:
-    """Clips split by clip, the training styles applied, and the datasets over them; ``skipped``
-    lists the sequence folders found without usable labels, with the reason."""
+@dataclass(frozen=True)
+class Datasets:
+    """What a training run reads: its clips split by clip (``clips``: train / val / test), the training
+    clips after the style and fraction settings, the validation clips, the datasets over them, and
+    the sequence folders found without usable labels (``(folder, reason)``)."""
+
+    clips: dict[str, list[Clip]]
+    train: list[Clip]
+    val: list[Clip]
+    skipped: list[tuple[str, str]]
+    train_ds: BlindSpotDataset
+    val_ds: BlindSpotDataset | None
+
+
+def datasets(cfg: Config, data_dir: str | Path) -> Datasets:
+    """Clips split by clip, the training styles applied, and the datasets over them."""
     skipped: list[tuple[str, str]] = []
     clips = find_clips(data_dir, cfg.data.label, skipped=skipped)
     split = split_clips(clips, cfg.data.val_fraction, cfg.data.test_fraction, cfg.data.split_seed)
@@ -177,12 +191,11 @@ def datasets(cfg: Config, data_dir: str | Path) -> dict[str, Any]:
         raise ValueError(f"no training clips (styles {styles or 'any'}) in {data_dir}")
     val = [c for c in split["val"] if not styles or c.style in styles]
     camera, mounting = cfg.data.model_camera()
-    return {"clips": split, "train": train, "val": val, "skipped": skipped,
-            "train_ds": BlindSpotDataset(train, cfg.data.size, augment=True, label_name=cfg.data.label,
-                                         camera=camera, mounting=mounting,
-                                         seed=cfg.train.seed),
-            "val_ds": BlindSpotDataset(val, cfg.data.size, label_name=cfg.data.label, camera=camera,
-                                       mounting=mounting) if val else None}
+    return Datasets(split, train, val, skipped,
+                    BlindSpotDataset(train, cfg.data.size, augment=True, label_name=cfg.data.label, camera=camera,
+                                     mounting=mounting, seed=cfg.train.seed),
+                    BlindSpotDataset(val, cfg.data.size, label_name=cfg.data.label, camera=camera,
+                                     mounting=mounting) if val else None)
 
 
 def _depth_weights(semantic: torch.Tensor, object_weight: float) -> torch.Tensor | None:
@@ -390,12 +403,12 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     if rank == 0:
         run.write_config(cfg.to_dict())
     show = progress and rank == 0
-    cache = sample_cache(cfg, data["train_ds"], show, "caching training samples")
+    cache = sample_cache(cfg, data.train_ds, show, "caching training samples")
     val_cache = None
-    if data["val_ds"] is not None and cfg.data.cache != "off":
-        val_cache = sample_cache(cfg, data["val_ds"], show, "caching validation samples")
+    if data.val_ds is not None and cfg.data.cache != "off":
+        val_cache = sample_cache(cfg, data.val_ds, show, "caching validation samples")
     lam = cfg.distill_weight
-    teacher = train_teacher(cfg, data["train_ds"], run, rank, world, progress, cache, val_cache) if lam > 0 else None
+    teacher = train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val_cache) if lam > 0 else None
     dev = train_device(cfg)
     dtype = autocast_dtype(cfg, dev)
     cl = cfg.train.channels_last
@@ -423,7 +436,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             sched.load_state_dict(state["scheduler"])
     model.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
-    batches = training_batches(data["train_ds"], cache, cfg.train.batch_size, world, rank, cfg.train.seed,
+    batches = training_batches(data.train_ds, cache, cfg.train.batch_size, world, rank, cfg.train.seed,
                                cfg.data.workers, start, device=dev)
     if state is not None and "torch_rng" in state:
         # dropout draws go on where they stopped (after the loader, which takes a draw of its own)
@@ -471,7 +484,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     elapsed = time.perf_counter() - t0
     summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "steps_run": done - start,
                                "seconds": round(elapsed, 1), "final_loss": history[-1] if history else None,
-                               "skipped_clips": [f"{name}: {why}" for name, why in data["skipped"]]}
+                               "skipped_clips": [f"{name}: {why}" for name, why in data.skipped]}
     if done < cfg.train.steps:
         summary["stopped_at"] = done
         if world > 1:
@@ -479,8 +492,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         return summary
     if rank == 0:
         threshold, val = UNCHOSEN_THRESHOLD, {}
-        if data["val_ds"] is not None:
-            threshold, val = choose_threshold(model, data["val_ds"])
+        if data.val_ds is not None:
+            threshold, val = choose_threshold(model, data.val_ds)
         else:
             summary["threshold_note"] = f"no validation clips: threshold left at {UNCHOSEN_THRESHOLD}"
         card = _save(run, model, cfg, data, cfg.train.steps, threshold=threshold, val=val, history=history)
@@ -490,11 +503,11 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     return summary
 
 
-def _save(run: Run, model, cfg: Config, data, step: int, threshold: float | None,
+def _save(run: Run, model, cfg: Config, data: Datasets, step: int, threshold: float | None,
           val: dict | None = None, history: list | None = None,
           resume_state: dict[str, Any] | None = None) -> ModelCard:
     """A checkpoint of ``model`` with its card; ``threshold`` None keeps the previous one (if any)."""
-    first = data["train"][0].path
+    first = data.train[0].path
     # the labels' camera (bsn-label --calib's calibration when one was given), else the clip's
     camera = label_camera(SequenceFolder(first).labels(cfg.data.label)) or SequenceMeta.read(first).intrinsics
     model_camera, model_mounting = cfg.data.model_camera()
@@ -511,8 +524,8 @@ def _save(run: Run, model, cfg: Config, data, step: int, threshold: float | None
     }
     info = {
         "step": step, "label": cfg.data.label, "distill_weight": cfg.distill_weight,
-        "train_clips": [c.path.name for c in data["train"]], "val_clips": [c.path.name for c in data["val"]],
-        "test_clips": [c.path.name for c in data["clips"]["test"]],
+        "train_clips": [c.path.name for c in data.train], "val_clips": [c.path.name for c in data.val],
+        "test_clips": [c.path.name for c in data.clips["test"]],
         "val": val if val is not None else prev.get("val", {}),
     }
     if history:
