@@ -24,7 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "that bsn-run checks before it starts. Checked with onnx.checker and against torch in "
                     "onnxruntime. With --int8, statically quantized (QDQ) on calibration frames.")
     p.add_argument("--checkpoint", metavar="RUN", help="training run folder (bsn-train --out)")
-    p.add_argument("--out", required=True, help="output .onnx path")
+    p.add_argument("--out", help="output .onnx path")
     p.add_argument("--size", type=parse_size, default=None, metavar="HxW",
                    help="input size (default: the size the run was trained at)")
     p.add_argument("--int8", action="store_true", help="quantize to int8 (needs --calib)")
@@ -48,8 +48,27 @@ def build_parser() -> argparse.ArgumentParser:
                         "each with its sha256, the card, config and history (no optimizer state), so users can "
                         "fine-tune (bsn-train --set train.init=DIR), adapt (bsn-adapt --run DIR), evaluate and "
                         "export it without a training run of their own")
+    p.add_argument("--sign", metavar="KEY.pem",
+                   help="sign the sealed model with this Ed25519 private key (bsn-run --trust KEY.pem.pub then "
+                        "refuses any model this key did not sign)")
+    p.add_argument("--new-key", metavar="KEY.pem",
+                   help="write a new Ed25519 key pair (KEY.pem, readable by you only, and KEY.pem.pub to hand out) "
+                        "and exit")
     p.add_argument("--force", action="store_true", help="overwrite --out (and --ship-run) if it exists")
     return p
+
+
+def signed(model: Path, key: str | None) -> int:
+    """Sign ``model`` with ``key`` when one is given; 0, or 2 with a message."""
+    if not key:
+        return 0
+    from bsn_edge.export.signing import sign
+    try:
+        kid = sign(model, key)
+    except (FileNotFoundError, ValueError) as e:
+        return fail(PROG, str(e))
+    print(f"signed {model} with key {kid}")
+    return 0
 
 
 def reseal(src: Path, out: Path) -> int:
@@ -65,11 +84,29 @@ def reseal(src: Path, out: Path) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(glue_values(argv))
+    if args.new_key:
+        from bsn_edge.export.signing import new_key
+        try:
+            priv, pub, kid = new_key(args.new_key, args.force)
+        except (FileExistsError, OSError) as e:
+            return fail(PROG, str(e))
+        print(f"wrote the private key {priv} (keep it: it signs your models) and the public key {pub} "
+              f"(key {kid}; give it to bsn-run --trust)")
+        return 0
+    if not args.out:
+        return fail(PROG, "--out MODEL.onnx is required (or --new-key KEY.pem)")
     out = Path(args.out)
+    if args.sign:
+        from bsn_edge.export.signing import load_private_key
+        try:
+            load_private_key(args.sign)     # a bad key is refused before any work
+        except (FileNotFoundError, ValueError) as e:
+            return fail(PROG, str(e))
     if out.exists() and not args.force:
         return fail(PROG, f"{out} exists; pass --force to overwrite it")
     if args.reseal:
-        return reseal(Path(args.reseal), out)
+        code = reseal(Path(args.reseal), out)
+        return code or signed(out, args.sign)
     if not args.checkpoint:
         return fail(PROG, "--checkpoint RUN is required (or --reseal MODEL.onnx)")
     if args.int8 and not args.calib:
@@ -91,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{100 * c['mask_agreement']:.2f} %, depth median rel. diff {100 * c['depth_median_rel']:.2f} %; "
               f"{len(summary['quantization']['float_nodes'])} nodes kept float (the frame's preparation and the "
               "output heads; reasons in the summary)")
+    if signed(out, args.sign):
+        return 2
     if args.ship_run:
         try:
             shipped = Run(args.checkpoint).ship(args.ship_run, force=args.force)

@@ -49,6 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
     p.add_argument("--no-spin", action="store_true", help="do not let idle onnxruntime threads spin")
     p.add_argument("--pace", action="store_true", help="play files at their own frame rate")
+    p.add_argument("--trust", metavar="KEYS",
+                   help="Ed25519 public key file (or a file or folder of several): refuse any model not signed by "
+                        "one of them (bsn-export --sign); without it, any intact model runs")
     p.add_argument("--stall", type=float, default=2.0, metavar="SECONDS",
                    help="a camera or stream that delivers no frame for this long is lost: the bus says "
                         "UNAVAILABLE and it is reopened with back-off (default 2)")
@@ -194,7 +197,11 @@ def main(argv: list[str] | None = None) -> int:
             if args.save_calib and Path(args.save_calib).exists() and not args.force:
                 raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
             maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
-            engine = Engine(args.model, args.threads, not args.no_spin)
+            trust = None
+            if args.trust:
+                from bsn_edge.runtime.trust import load_public_keys
+                trust = load_public_keys(args.trust)
+            engine = Engine(args.model, args.threads, not args.no_spin, trust=trust)
             camera = CameraState(engine.card, calibration, args.height, args.save_calib)
             if not args.stall > 0:
                 raise ValueError(f"--stall must be a positive number of seconds, got {args.stall:g}")

@@ -2,20 +2,24 @@
 
 At load, in this order, any failure raising :class:`ModelError` (the runtime then refuses to
 start): the file is read in chunks; its model card is read and validated; the digest of the
-graph and weights is compared with the card's; the session is built from the file; its
+graph and weights is compared with the card's; with trusted keys, the signature over both
+digests is checked (:mod:`bsn_edge.runtime.trust`); the session is built from the file; its
 input and outputs are checked against the card; the self-test frame is run and compared with the
 answer stored at export.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from bsn_edge.card import ModelCard
+from bsn_edge.card import CARD_SHA_KEY, ModelCard
 from bsn_edge.runtime import selftest
 from bsn_edge.runtime.model_file import ModelFile, session
+from bsn_edge.runtime.trust import UntrustedModelError, verify
 
 
 class ModelError(ValueError):
@@ -25,7 +29,10 @@ class ModelError(ValueError):
 class Engine:
     """Runs the model on its preallocated input buffer ``buf`` (the loop warps frames into it)."""
 
-    def __init__(self, model: str | Path, threads: int = 2, spinning: bool = True) -> None:
+    def __init__(self, model: str | Path, threads: int = 2, spinning: bool = True,
+                 trust: Mapping[str, Any] | None = None) -> None:
+        """``trust``: public keys by id (:func:`bsn_edge.runtime.trust.load_public_keys`); with them, a
+        model not signed by one of them is refused (``signer`` says which key signed)."""
         self.path = Path(model)
         mf = ModelFile.read(self.path)   # FileNotFoundError / ValueError name the file
         try:
@@ -40,6 +47,13 @@ class Engine:
             raise ModelError(f"{self.path}: the model file is damaged: the sha256 of its graph and weights "
                              f"({mf.graph_sha256[:12]}...) is not the one its export recorded "
                              f"({self.card.graph_sha256[:12]}...)")
+        self.signer = ""
+        if trust is not None:
+            try:
+                self.signer = verify(mf.metadata, mf.graph_sha256, mf.metadata.get(CARD_SHA_KEY, ""), trust,
+                                     str(self.path))
+            except UntrustedModelError as e:
+                raise ModelError(str(e)) from None
         try:
             self.sess = session(mf.path, threads, spinning)
         except Exception as e:

@@ -203,4 +203,4 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
             "sinks": {name: {"written": k.written, "failure": None if k.ok else vars(k.failure)}
                       for name, k in sinks.items()},
             "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
-                      "quantization": card.quantization, "self_test": engine.self_test}}
+                      "quantization": card.quantization, "self_test": engine.self_test, "signer": engine.signer}}
