@@ -95,5 +95,5 @@ def test_keys_are_never_overwritten_and_bad_keys_are_named(tmp_path, keys, capsy
     assert ours.read_bytes() == before and "not overwritten" in capsys.readouterr().err
     junk = tmp_path / "junk.pub"
     junk.write_text("not a key")
-    with pytest.raises(ValueError, match="junk.pub: no PEM public key"):
+    with pytest.raises(ValueError, match=r"junk\.pub: no PEM public key"):
         load_public_keys(junk)
