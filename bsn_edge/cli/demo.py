@@ -14,6 +14,7 @@ from bsn_edge.synth.style import STYLES
 
 PROG = "bsn-demo"
 DEFAULT_MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
+PROJECT_KEY = CHECKOUT / "models" / "bsn-edge-project.pub"   # the shipped default is signed with its pair
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -52,7 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     summary = out / "summary.json"
     rc = run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--overlay",
                        str(out / "overlay.mp4"), "--log", str(out / "alerts.jsonl"), "--can-log",
-                       str(out / "alerts.log"), "--summary", str(summary), "--calib", str(clip / "calibration.json")])
+                       str(out / "alerts.log"), "--summary", str(summary), "--calib", str(clip / "calibration.json"),
+                       *(["--trust", str(PROJECT_KEY)] if model.resolve() == DEFAULT_MODEL.resolve() else [])])
     if rc:
         return rc
     s = json.loads(summary.read_text())

@@ -97,3 +97,11 @@ def test_keys_are_never_overwritten_and_bad_keys_are_named(tmp_path, keys, capsy
     junk.write_text("not a key")
     with pytest.raises(ValueError, match=r"junk\.pub: no PEM public key"):
         load_public_keys(junk)
+
+
+def test_the_shipped_default_is_signed_with_the_projects_key():
+    from bsn_edge.cli.demo import DEFAULT_MODEL, PROJECT_KEY
+    if not DEFAULT_MODEL.is_file():
+        pytest.skip("the shipped model is not in this checkout")
+    engine = Engine(DEFAULT_MODEL, trust=load_public_keys(PROJECT_KEY))
+    assert engine.signer == next(iter(load_public_keys(PROJECT_KEY)))
