@@ -5,7 +5,9 @@ essential matrix per frame pair) costs more than a frame's warp. It runs on a th
 fed one frame in ``every``: the frame loop only copies that frame into a slot of one. When the
 estimator is still busy with the previous one, the loop waits for it (so which frames are used
 does not depend on timing, and the estimator never takes more than one frame's work in ``every``
-frames of the loop's time); with ``every`` frames between, it is done long before.
+frames of the loop's time); with ``every`` frames between, it is done long before. What the loop
+reads back (:meth:`result`) is the estimate from every frame fed before the last one, taken as that
+one is handed over: the frame at which the loop adopts a mounting does not depend on timing either.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ class OnlineCalibrator:
         self.error = ""
         self._mounting: Mounting | None = None
         self._report: dict[str, Any] = {}
+        self._settled: tuple[Mounting | None, dict[str, Any]] = (None, {})
         self._lock = threading.Lock()
         self._slot: np.ndarray | None = None
         self._has_work = threading.Condition(self._lock)
@@ -52,6 +55,7 @@ class OnlineCalibrator:
         if (self.seen - 1) % self.every:
             return
         if not self.background:
+            self._settled = (self._mounting, dict(self._report))
             self._step(frame)
             return
         with self._has_work:
@@ -59,19 +63,14 @@ class OnlineCalibrator:
                 self._has_work.wait()
             if self._closed:
                 return
+            self._settled = (self._mounting, dict(self._report))
             self._slot = frame.copy()
             self._has_work.notify_all()
 
     def result(self) -> tuple[Mounting | None, dict[str, Any]]:
-        """The converged mounting (None until then) and the latest report."""
+        """The converged mounting (None until then) and the report, from the frames fed before the last."""
         with self._lock:
-            return self._mounting, dict(self._report)
-
-    def drain(self) -> None:
-        """Wait until the frame handed over last has been used (tests, the end of a file)."""
-        with self._has_work:
-            while self._slot is not None and not self._closed:
-                self._has_work.wait()
+            return self._settled[0], dict(self._settled[1])
 
     def close(self) -> None:
         """Stop the worker; idempotent."""

@@ -35,7 +35,7 @@ from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.runtime.overlay import OverlayWriter, draw
 from bsn_edge.runtime.sinks import GuardedSink, SinkFailure
-from bsn_edge.runtime.sources import Source
+from bsn_edge.runtime.sources import Captured, Source
 from bsn_edge.runtime.stats import LatencyStats
 from bsn_edge.sequence.folder import frame_name
 
@@ -58,6 +58,231 @@ class RuntimeConfig:
     warmup: int = 3
 
 
+@dataclass
+class Outputs:
+    """What a run writes beside the bus: the overlay video, the per-frame JSON log, the maps."""
+
+    overlay: str | Path | None = None
+    log: str | Path | None = None
+    maps: MapWriter | None = None
+
+
+class StageTimer:
+    """Seconds spent per stage of the frame pipeline (``STAGES``), accumulated over the run."""
+
+    def __init__(self) -> None:
+        self.seconds = dict.fromkeys(STAGES, 0.0)
+
+    def add(self, stage: str, seconds: float) -> None:
+        self.seconds[stage] += seconds
+
+    def per_frame_ms(self, frames: int) -> dict[str, float]:
+        return {k: 1e3 * v / max(frames, 1) for k, v in self.seconds.items()}
+
+    def shares(self) -> dict[str, float]:
+        total = sum(self.seconds.values()) or 1.0
+        return {k: v / total for k, v in self.seconds.items()}
+
+
+class FramePipeline:
+    """The runtime's work on one source, stage by stage; :meth:`run` drives it, :func:`run` wires it.
+
+    Per frame: :meth:`read` (the source's frame and its faults), :meth:`warp` (into the model camera,
+    the engine's own input buffer), :meth:`infer`, :meth:`sectors` (mask and depth -> smoothed levels
+    -> the alert published to the send cycle), :meth:`emit` (cycles due by the frame's time, for
+    files) and :meth:`write` (the outputs beside the bus, each a :class:`GuardedSink`).
+    """
+
+    def __init__(self, engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig,
+                 camera: CameraState, outputs: Outputs, clock: Callable[[], float]) -> None:
+        self.engine, self.source, self.senders, self.cfg, self.camera = engine, source, senders, cfg, camera
+        self.outputs = outputs
+        self.geometry = SectorGeometry(engine.card.camera, cfg.sectors)
+        self.machines = [SectorState(cfg.alerts) for _ in range(3)]
+        self.health = Health(cfg.health)
+        self.wall = None if source.live else clock    # a live source's frame times are the processing clock
+        self.emitter = CycleEmitter(senders, self.health, cfg.cycle_s, self.wall)
+        self.timer = StageTimer()
+        self.latency = LatencyStats()
+        self.sinks: dict[str, GuardedSink] = {}
+        self.heartbeat: Heartbeat | None = None
+        self.frames = self.valid = 0
+        self.last_shape: tuple[int, ...] | None = None
+        self.last_t = 0.0
+
+    # -- the stages ------------------------------------------------------------------------------
+
+    def read(self, cap: Captured, rec: dict[str, Any]) -> bool:
+        """Count what the source says about this frame; False when there is no picture to use."""
+        h = self.health
+        self.frames += 1
+        self.last_t = cap.t
+        h.set_fault(Fault.DROPPED_FRAMES, self.source.dropped)   # live sources drop while we work
+        h.set_fault(Fault.SOURCE_RECONNECTS, self.source.reconnects)
+        self.timer.add("decode", cap.decode_s)
+        if cap.frame is None:
+            h.fault(Fault.DECODE_ERRORS)
+            rec["fault"] = "decode_error"
+            return False
+        if self.last_shape is not None and cap.frame.shape != self.last_shape:
+            h.fault(Fault.SIZE_CHANGES)
+            rec["fault"] = "size_change"
+        self.last_shape = cap.frame.shape
+        return True
+
+    def warp(self, frame: np.ndarray) -> ModelFrame:
+        """The frame into the model camera, written into the engine's input buffer."""
+        mf = self.camera.frame_for(frame)
+        self.health.calibrating(self.camera.calibrating)
+        mf.to_model(frame, dst=self.engine.buf[0])
+        return mf
+
+    def infer(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The model on its buffer; None (and counted) when it answers NaN or infinity."""
+        prob, depth = self.engine.infer(self.engine.buf)
+        if not (np.isfinite(prob).all() and np.isfinite(depth).all()):
+            self.health.fault(Fault.NAN_OUTPUTS)
+            return None
+        return prob, depth
+
+    def sectors(self, cap: Captured, mf: ModelFrame, prob: np.ndarray,
+                depth: np.ndarray) -> tuple[AlertFrame, np.ndarray]:
+        """Mask and depth -> sector readings -> smoothed levels -> the alert, published to the send cycle."""
+        mask = blind_spots(prob, self.engine.card.threshold, mf)
+        readings = self.geometry.read(mask, mf.depth_to_metres(depth))
+        sectors = []
+        for m, r in zip(self.machines, readings, strict=True):
+            score, level = m.update(cap.t, r.score)
+            sectors.append(SectorAlert(score, level, r.distance_m))
+        now = None if self.wall is None else self.wall()
+        self.health.valid(cap.t, now)
+        self.valid += 1
+        state, fps_now, faults = self.health.snapshot(cap.t, now)
+        alert = AlertFrame(cap.t, *sectors, state, fps_now, faults)
+        self.emitter.publish(alert)
+        return alert, mask
+
+    def emit(self, cap: Captured) -> None:
+        """Send the cycles due by the frame's time (a live source's heartbeat sends its own)."""
+        if not self.source.live:
+            self.emitter.emit(cap.t)
+
+    def write(self, cap: Captured, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame, prob: np.ndarray,
+              depth: np.ndarray) -> None:
+        """The overlay and the maps of one frame, in the raw frame's pixels."""
+        overlay, maps = self.sinks.get("overlay"), self.sinks.get("maps")
+        if overlay is not None and overlay.ok:
+            overlay.write(cap.index, draw(cap.frame, mf, mask, alert, self.geometry))
+        if maps is not None and maps.ok:
+            maps.write(cap.index, cap.name or frame_name(cap.index, ""), mf.to_raw(prob), mf.depth_to_raw(depth))
+
+    # -- the run ---------------------------------------------------------------------------------
+
+    def open(self) -> None:
+        """Start the heartbeat (live) and open the outputs; one that cannot be opened raises (the run is
+        refused: the user asked for it); later failures only degrade the run."""
+        self.camera.use_frame_rate(self.source.fps)
+        if self.source.live:
+            self.heartbeat = Heartbeat(self.emitter).__enter__()
+        out = self.outputs
+
+        def fault(_: SinkFailure) -> None:
+            self.health.fault(Fault.SINK_ERRORS)
+
+        if out.overlay is not None:
+            writer = OverlayWriter(out.overlay, self.source.fps)
+            self.sinks["overlay"] = GuardedSink("overlay", writer.write, writer.close, fault)
+        if out.log is not None:
+            Path(out.log).parent.mkdir(parents=True, exist_ok=True)
+            # line-buffered: readable while it runs, and every line whole after a kill
+            logf = open(out.log, "w", buffering=1)  # noqa: SIM115 - closed by its sink
+            self.sinks["log"] = GuardedSink("log", lambda rec: logf.write(json.dumps(rec) + "\n"), logf.close, fault)
+        if out.maps is not None:
+            self.sinks["maps"] = GuardedSink("maps", out.maps.write, None, fault)
+
+    def step(self, cap: Captured) -> None:
+        """One frame through every stage, timed."""
+        t0 = time.perf_counter()
+        rec: dict[str, Any] = {"frame": cap.index, "t": round(cap.t, 4)}
+        if self.read(cap, rec):
+            mf = self.warp(cap.frame)
+            t1 = time.perf_counter()
+            out = self.infer()
+            t2 = time.perf_counter()
+            self.timer.add("preprocess", t1 - t0)
+            self.timer.add("inference", t2 - t1)
+            if out is None:
+                rec["fault"] = "nan_output"
+            else:
+                prob, depth = out
+                alert, mask = self.sectors(cap, mf, prob, depth)
+                self.timer.add("postprocess", time.perf_counter() - t2)
+                rec.update(levels=[s.level.name for s in alert.sectors],
+                           scores=[round(s.score, 3) for s in alert.sectors],
+                           distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in alert.sectors],
+                           state=alert.state.name)
+                self.write(cap, mf, mask, alert, prob, depth)
+        t4 = time.perf_counter()
+        self.emit(cap)
+        t5 = time.perf_counter()
+        self.timer.add("send", t5 - t4)
+        self.latency.add(t5 - t0 + cap.decode_s)
+        log = self.sinks.get("log")
+        if log is not None:
+            rec["latency_ms"] = round(1e3 * (t5 - t0 + cap.decode_s), 2)
+            log.write(cap.index, rec)
+
+    def close(self) -> None:
+        """Whatever ended the run (the source, a signal, an exception): the outputs are finished, then
+        the last word on every bus is UNAVAILABLE, since no valid inference is coming any more."""
+        for sink in self.sinks.values():
+            sink.close(self.frames)
+        self.camera.close()
+        h = self.health
+        h.set_fault(Fault.SOURCE_RECONNECTS, self.source.reconnects)
+        if self.source.unread:
+            h.fault(Fault.DECODE_ERRORS, self.source.unread)
+        h.unavailable()
+        if self.heartbeat is not None:
+            self.heartbeat.close()
+        self.emitter.final(time.monotonic() if self.source.live else self.last_t + self.cfg.cycle_s)
+
+    def run(self, max_frames: int | None = None, progress: Callable[[int], Any] | None = None,
+            stop: threading.Event | None = None) -> dict[str, Any]:
+        """Process the source until it ends, ``max_frames`` or ``stop``; returns the summary."""
+        self.engine.warmup(self.cfg.warmup)
+        t_start = time.perf_counter()
+        try:
+            self.open()
+            for cap in self.source:
+                self.step(cap)
+                if progress:
+                    progress(1)
+                if (max_frames is not None and self.frames >= max_frames) or (stop is not None and stop.is_set()):
+                    break
+        finally:
+            self.close()
+        return self.summary(time.perf_counter() - t_start, stop)
+
+    def summary(self, elapsed: float, stop: threading.Event | None) -> dict[str, Any]:
+        card, frames = self.engine.card, self.frames
+        maps = self.outputs.maps
+        return {"frames": frames, "valid_frames": self.valid, "dropped": self.source.dropped,
+                "seconds": round(elapsed, 3), "fps": frames / elapsed if elapsed else 0.0,
+                **self.latency.percentiles(),
+                "stage_ms": self.timer.per_frame_ms(frames), "stage_share": self.timer.shares(),
+                "faults": self.health.faults, "cycles_sent": self.emitter.sent_cycles,
+                "senders": {s.name: vars(s.stats) for s in self.senders},
+                "source_failure": self.source.failure, "stopped": bool(stop is not None and stop.is_set()),
+                "heartbeat_error": self.heartbeat.last_error if self.heartbeat is not None else "",
+                "camera": self.camera.summary(), "maps_written": 0 if maps is None else maps.written,
+                "sinks": {name: {"written": k.written, "failure": None if k.ok else vars(k.failure)}
+                          for name, k in self.sinks.items()},
+                "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
+                          "quantization": card.quantization, "self_test": self.engine.self_test,
+                          "signer": self.engine.signer}}
+
+
 def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig | None = None,
         overlay: str | Path | None = None, log: str | Path | None = None, max_frames: int | None = None,
         progress=None, camera: CameraState | None = None, save_maps: str | Path | MapWriter | None = None,
@@ -74,133 +299,7 @@ def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfi
     ``source_failure`` says whether the source failed. The frame rate on the bus and the overlay
     is the one achieved, counted on ``clock`` (a file's frame times say how fast it was recorded).
     """
-    cfg = cfg or RuntimeConfig()
-    camera = camera or CameraState(engine.card)
-    geometry = SectorGeometry(engine.card.camera, cfg.sectors)
     maps = save_maps if isinstance(save_maps, MapWriter) or save_maps is None else MapWriter(save_maps)
-    machines = [SectorState(cfg.alerts) for _ in range(3)]
-    health = Health(cfg.health)
-    wall = None if source.live else clock        # a live source's frame times are the processing clock
-    emitter = CycleEmitter(senders, health, cfg.cycle_s, wall)
-    engine.warmup(cfg.warmup)
-    stage_s = dict.fromkeys(STAGES, 0.0)
-    latency = LatencyStats()
-    frames = valid = 0
-    last_shape = None
-    last_t = 0.0
-    t_start = time.perf_counter()
-
-    def sink_fault(_: SinkFailure) -> None:
-        health.fault(Fault.SINK_ERRORS)
-
-    sinks: dict[str, GuardedSink] = {}
-    heartbeat = None
-    try:
-        camera.use_frame_rate(source.fps)
-        if source.live:
-            heartbeat = Heartbeat(emitter).__enter__()
-        # outputs that cannot be opened refuse the run (the user asked for them); later failures degrade it
-        if overlay is not None:
-            writer = OverlayWriter(overlay, source.fps)
-            sinks["overlay"] = GuardedSink("overlay", writer.write, writer.close, sink_fault)
-        if log is not None:
-            Path(log).parent.mkdir(parents=True, exist_ok=True)
-            # line-buffered: readable while it runs, and every line whole after a kill
-            logf = open(log, "w", buffering=1)  # noqa: SIM115 - closed by its sink
-            sinks["log"] = GuardedSink("log", lambda rec: logf.write(json.dumps(rec) + "\n"), logf.close, sink_fault)
-        if maps is not None:
-            sinks["maps"] = GuardedSink("maps", maps.write, None, sink_fault)
-        overlay_sink, log_sink, maps_sink = sinks.get("overlay"), sinks.get("log"), sinks.get("maps")
-        for cap in source:
-            t0 = time.perf_counter()
-            frames += 1
-            last_t = cap.t
-            health.set_fault(Fault.DROPPED_FRAMES, source.dropped)  # live sources drop while we work
-            health.set_fault(Fault.SOURCE_RECONNECTS, source.reconnects)
-            stage_s["decode"] += cap.decode_s
-            rec: dict[str, Any] = {"frame": cap.index, "t": round(cap.t, 4)}
-            if cap.frame is None:
-                health.fault(Fault.DECODE_ERRORS)
-                rec["fault"] = "decode_error"
-            else:
-                if last_shape is not None and cap.frame.shape != last_shape:
-                    health.fault(Fault.SIZE_CHANGES)
-                    rec["fault"] = "size_change"
-                last_shape = cap.frame.shape
-                mf = camera.frame_for(cap.frame)
-                health.calibrating(camera.calibrating)
-                batch = engine.buf
-                mf.to_model(cap.frame, dst=batch[0])
-                t1 = time.perf_counter()
-                prob, depth = engine.infer(batch)
-                t2 = time.perf_counter()
-                stage_s["preprocess"] += t1 - t0
-                stage_s["inference"] += t2 - t1
-                if not (np.isfinite(prob).all() and np.isfinite(depth).all()):
-                    health.fault(Fault.NAN_OUTPUTS)
-                    rec["fault"] = "nan_output"
-                else:
-                    mask = blind_spots(prob, engine.card.threshold, mf)
-                    readings = geometry.read(mask, mf.depth_to_metres(depth))
-                    sectors = []
-                    for m, r in zip(machines, readings, strict=True):
-                        score, level = m.update(cap.t, r.score)
-                        sectors.append(SectorAlert(score, level, r.distance_m))
-                    now = None if wall is None else wall()
-                    health.valid(cap.t, now)
-                    valid += 1
-                    state, fps_now, faults = health.snapshot(cap.t, now)
-                    alert = AlertFrame(cap.t, *sectors, state, fps_now, faults)
-                    emitter.publish(alert)
-                    t3 = time.perf_counter()
-                    stage_s["postprocess"] += t3 - t2
-                    rec.update(levels=[s.level.name for s in sectors], scores=[round(s.score, 3) for s in sectors],
-                               distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in sectors],
-                               state=alert.state.name)
-                    if overlay_sink is not None and overlay_sink.ok:
-                        overlay_sink.write(cap.index, draw(cap.frame, mf, mask, alert, geometry))
-                    if maps_sink is not None and maps_sink.ok:
-                        maps_sink.write(cap.index, cap.name or frame_name(cap.index, ""), mf.to_raw(prob),
-                                        mf.depth_to_raw(depth))
-            t4 = time.perf_counter()
-            if not source.live:
-                emitter.emit(cap.t)
-            t5 = time.perf_counter()
-            stage_s["send"] += t5 - t4
-            latency.add(t5 - t0 + cap.decode_s)
-            if log_sink is not None:
-                rec["latency_ms"] = round(1e3 * (t5 - t0 + cap.decode_s), 2)
-                log_sink.write(cap.index, rec)
-            if progress:
-                progress(1)
-            if (max_frames is not None and frames >= max_frames) or (stop is not None and stop.is_set()):
-                break
-    finally:
-        # whatever ended the run (the source, a signal, an exception): outputs are finished, then the
-        # last word on every bus is UNAVAILABLE, since no valid inference is coming any more
-        for sink in sinks.values():
-            sink.close(frames)
-        camera.close()
-        health.set_fault(Fault.SOURCE_RECONNECTS, source.reconnects)
-        if source.unread:
-            health.fault(Fault.DECODE_ERRORS, source.unread)
-        health.unavailable()
-        if heartbeat is not None:
-            heartbeat.close()
-        emitter.final(time.monotonic() if source.live else last_t + cfg.cycle_s)
-    elapsed = time.perf_counter() - t_start
-    total = sum(stage_s.values()) or 1.0
-    sender_stats = {s.name: vars(s.stats) for s in senders}
-    card = engine.card
-    return {"frames": frames, "valid_frames": valid, "dropped": source.dropped, "seconds": round(elapsed, 3),
-            "fps": frames / elapsed if elapsed else 0.0, **latency.percentiles(),
-            "stage_ms": {k: 1e3 * v / max(frames, 1) for k, v in stage_s.items()},
-            "stage_share": {k: v / total for k, v in stage_s.items()},
-            "faults": health.faults, "cycles_sent": emitter.sent_cycles, "senders": sender_stats,
-            "source_failure": source.failure, "stopped": bool(stop is not None and stop.is_set()),
-            "heartbeat_error": heartbeat.last_error if heartbeat is not None else "",
-            "camera": camera.summary(), "maps_written": 0 if maps is None else maps.written,
-            "sinks": {name: {"written": k.written, "failure": None if k.ok else vars(k.failure)}
-                      for name, k in sinks.items()},
-            "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
-                      "quantization": card.quantization, "self_test": engine.self_test, "signer": engine.signer}}
+    pipeline = FramePipeline(engine, source, senders, cfg or RuntimeConfig(), camera or CameraState(engine.card),
+                             Outputs(overlay, log, maps), clock)
+    return pipeline.run(max_frames, progress, stop)
