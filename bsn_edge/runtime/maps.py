@@ -7,6 +7,7 @@ the source image's stem, or the frame number for a video or a camera.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import cv2
@@ -34,6 +35,9 @@ class MapWriter:
                 raise FileExistsError(f"--save-maps {self.folder} already holds {earlier} maps of an earlier run; "
                                       "choose an empty folder, or pass --force to write over them")
         self.folder.mkdir(parents=True, exist_ok=True)
+        probe = self.folder / f".bsn-run-{os.getpid()}.probe"   # a read-only disk refuses now, not at the first frame
+        probe.write_bytes(b"")
+        probe.unlink()
         self.written = 0
 
     def write(self, name: str, prob: np.ndarray, depth_m: np.ndarray) -> None:

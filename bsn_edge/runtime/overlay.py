@@ -49,6 +49,8 @@ class OverlayWriter:
     def __init__(self, path: str | Path, fps: float) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        with open(self.path, "wb"):      # a read-only disk refuses now, not at the first frame
+            pass
         self.fps = fps
         self.writer: cv2.VideoWriter | None = None
         self.size: tuple[int, int] | None = None

@@ -298,3 +298,29 @@ def test_sigkill_at_twenty_random_moments_loses_nothing_the_bus_carried(setup, t
         assert all(json.loads(x)["frame"] == i for i, x in enumerate(lines)), k
         msgs = list(can.LogReader(str(canlog))) if canlog.exists() and canlog.stat().st_size else []
         assert len(msgs) >= 2 * (len(lines) - 1), (k, len(msgs), len(lines))
+
+
+@pytest.fixture
+def read_only_dir(tmp_path):
+    """A real read-only file system (a tmpfs mounted ro); needs the right to mount (root)."""
+    d = tmp_path / "ro"
+    d.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(d)], capture_output=True)
+    if r.returncode:
+        pytest.skip("mounting a read-only tmpfs needs root (mount(8) refused)")
+    yield d
+    subprocess.run(["umount", str(d)], check=False)
+
+
+@pytest.mark.parametrize("flag", ["--log", "--overlay", "--save-maps"])
+def test_an_output_on_a_read_only_disk_refuses_the_run_with_unavailable(setup, read_only_dir, flag, capsys):
+    model, clip = setup
+    target = read_only_dir / {"--log": "a.jsonl", "--overlay": "o.mp4", "--save-maps": "maps"}[flag]
+    if flag == "--save-maps":
+        target = read_only_dir                  # an existing folder on the read-only disk
+    code, got = run_on_bus(f"bsn-ro-{flag[2:]}", ["--model", str(model), "--source", str(clip / "video.mp4"),
+                                                   "--calib", str(clip / "calibration.json"), flag, str(target)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Read-only file system" in err and "Traceback" not in err
+    assert [d.signals["System_State"] for d in got if d.name == "BSN_Status"] == [SystemState.UNAVAILABLE]
+    assert not any(read_only_dir.iterdir())
