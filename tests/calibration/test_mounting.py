@@ -81,6 +81,13 @@ def test_cli_writes_the_camera_file_run_and_label_read(tmp_path, drive, capsys):
     assert calib_cli.main(argv) == 2
     assert "exists" in capsys.readouterr().err
     assert calib_cli.main([*argv, "--force"]) == 0
+    # the height from the lanes instead, through the same command: the clip's true height
+    lanes = [str(drive / "video.mp4"), "--mount", "--calib", str(intr), "--lane-width", str(LANE_M), "--out",
+             str(tmp_path / "lanes.json"), "--max-error", "0.3"]
+    assert calib_cli.main(lanes) == 0
+    got = Calibration.read(tmp_path / "lanes.json").mounting
+    assert got.height_m == pytest.approx(truth.mounting.height_m, rel=0.08)
+    assert Calibration.read(tmp_path / "lanes.json").mounting_report["height"]["method"].startswith("lane width")
 
 
 def test_online_estimate_converges_on_a_steady_drive(drive):

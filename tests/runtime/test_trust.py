@@ -105,3 +105,21 @@ def test_the_shipped_default_is_signed_with_the_projects_key():
         pytest.skip("the shipped model is not in this checkout")
     engine = Engine(DEFAULT_MODEL, trust=load_public_keys(PROJECT_KEY))
     assert engine.signer == next(iter(load_public_keys(PROJECT_KEY)))
+
+
+def test_reseal_turns_a_model_from_before_seals_into_one_the_runtime_runs(setup, tmp_path):
+    """A model exported before models were sealed (no graph digest, no self-test answer) is refused;
+    bsn-export --reseal records both, and the resealed file runs with the same card."""
+    from export.seal import read_card, set_metadata
+    model, _ = setup
+    card = read_card(model)
+    m = onnx.load(str(model))
+    set_metadata(m, card.replace(graph_sha256="", self_test=None))
+    old = tmp_path / "old.onnx"
+    onnx.save(m, str(old))
+    with pytest.raises(ModelError, match="no integrity digest"):
+        Engine(old)
+    assert export_cli.main(["--reseal", str(old), "--out", str(tmp_path / "new.onnx")]) == 0
+    engine = Engine(tmp_path / "new.onnx")
+    assert engine.card.graph_sha256 == card.graph_sha256 and engine.card.threshold == card.threshold
+    assert engine.self_test["max_abs_prob"] < 1e-5, "its own answer, recorded at reseal"
