@@ -141,10 +141,12 @@ class SampleCache:
             a.flush()
         del arrays
         (tmp / cls.INDEX).write_text(json.dumps({"key": key, "size": [h, w], "items": items}))
-        if folder.exists():          # another process finished the same cache first
-            shutil.rmtree(tmp, ignore_errors=True)
-        else:
+        try:
             tmp.rename(folder)
+        except OSError:
+            if not (folder / cls.INDEX).is_file():
+                raise
+            shutil.rmtree(tmp, ignore_errors=True)     # another process (a DDP rank) finished it first
         return cls.open(folder)
 
     # -- a teacher's features --------------------------------------------------------------------
