@@ -414,7 +414,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     cl = cfg.train.channels_last
     if teacher is not None and cache is not None:
         cache.attach_teacher(teacher, cfg.teacher.scale, cfg.train.distill_grid, progress=show,
-                             resize=lambda x, sc: _layout(scaled(x, sc), cl))
+                             resize=lambda x, sc: _layout(scaled(x, sc), cl), dtype=dtype)
 
     model = create_model(cfg.model.name)
     if cfg.train.init:

@@ -70,3 +70,16 @@ def test_the_teacher_grid_is_the_teachers_features_of_the_flipped_or_plain_frame
         # stored as float16: the similarity matrices the loss compares agree far closer than they vary
         assert torch.allclose(pairwise_similarity(got["teacher_grid"][r:r + 1], (4, 8)),
                               pairwise_similarity(want, (4, 8)), atol=2e-3)
+
+
+def test_teacher_features_in_bf16_keep_the_similarities_the_loss_compares(clips):
+    torch.manual_seed(0)
+    teacher = create_teacher(18, 32).eval()
+    ds = BlindSpotDataset(clips, (64, 128), label_name="T1s")
+    full, half = SampleCache.for_dataset(ds, None), SampleCache.for_dataset(ds, None)
+    full.attach_teacher(teacher, 0.5, (4, 8), resize=scaled)
+    half.attach_teacher(teacher, 0.5, (4, 8), resize=scaled, dtype=torch.bfloat16)
+    picks = [(k, 0) for k in range(8)]
+    a = pairwise_similarity(full.batch(picks, False, 0)["teacher_grid"], (4, 8))
+    b = pairwise_similarity(half.batch(picks, False, 0)["teacher_grid"], (4, 8))
+    assert (a - b).abs().max() < 0.05
