@@ -183,6 +183,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.max_frames is not None and args.max_frames < 1:
         return fail(PROG, "--max-frames must be >= 1")
+    if not args.stall > 0:
+        return fail(PROG, f"--stall must be a positive number of seconds, got {args.stall:g}")
     # from here on a signal stops the run cleanly; once the outputs are open, every way out ends with
     # UNAVAILABLE on the bus, signals during start-up included
     with StopOnSignal() as stopper:
@@ -203,8 +205,6 @@ def main(argv: list[str] | None = None) -> int:
                 trust = load_public_keys(args.trust)
             engine = Engine(args.model, args.threads, not args.no_spin, trust=trust)
             camera = CameraState(engine.card, calibration, args.height, args.save_calib)
-            if not args.stall > 0:
-                raise ValueError(f"--stall must be a positive number of seconds, got {args.stall:g}")
             source = open_source(args.source, pace=args.pace, stall_s=args.stall)
         except (FileNotFoundError, ValueError, OSError) as e:
             return refuse(senders, str(e))
@@ -243,15 +243,14 @@ def main(argv: list[str] | None = None) -> int:
     print(human_summary(summary, args, camera))
     if summary_error:
         print(f"{PROG}: error: {summary_error}", file=sys.stderr)
-    for s in senders:
-        if s.stats.errors:
-            print(f"{PROG}: warning: {s.name} failed {s.stats.errors} times ({s.stats.last_error})", file=sys.stderr)
     for name, sink in summary["sinks"].items():
         if sink["failure"]:
             f = sink["failure"]
             print(f"{PROG}: warning: the {name} output failed at frame {f['frame']} ({f['error']}); the alerts went "
                   "on, DEGRADED", file=sys.stderr)
     for s in senders:
+        if s.stats.errors:
+            print(f"{PROG}: warning: {s.name} failed {s.stats.errors} times ({s.stats.last_error})", file=sys.stderr)
         if s.stats.log_errors:
             print(f"{PROG}: warning: the CAN log failed ({s.stats.log_error}); the bus went on, DEGRADED",
                   file=sys.stderr)

@@ -24,7 +24,7 @@ import hashlib
 import json
 import os
 import shutil
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -204,6 +204,12 @@ class SampleCache:
         mean = torch.from_numpy(IMAGENET_MEAN)[None, :, None, None]
         std = torch.from_numpy(IMAGENET_STD)[None, :, None, None]
         return (x - mean) / std
+
+    def evenly(self, frames: int, batch: int = 8) -> Iterator[dict[str, torch.Tensor]]:
+        """Unaugmented batches of up to ``frames`` samples evenly spaced over the cache (validation)."""
+        idx = np.unique(np.linspace(0, len(self) - 1, min(frames, len(self))).round().astype(int))
+        for lo in range(0, len(idx), batch):
+            yield self.batch([(int(k), 0) for k in idx[lo:lo + batch]], augment=False, seed=0)
 
     def batch(self, picks: Sequence[tuple[int, int]], augment: bool, seed: int) -> dict[str, torch.Tensor]:
         """The batch of ``picks`` (``(sample, draw)`` pairs, as the trainer's stream gives them), in

@@ -50,7 +50,6 @@ class CameraState:
         self.report: dict[str, Any] = {"source": "camera file" if self.mounting else "online"}
         self._calibrator: OnlineCalibrator | None = None
         self._frames: dict[tuple[int, int], ModelFrame] = {}
-        self._seen = 0
 
     @property
     def calibrating(self) -> bool:
@@ -97,11 +96,12 @@ class CameraState:
         if self._calibrator is None:
             self._calibrator = OnlineCalibrator(cam.intrinsics.scaled(w, h), cam.dist, self.height_m,
                                                 self.calibrate_every or 1, background=self.background)
-        self._seen += 1
         self._calibrator.feed(frame)
         m, report = self._calibrator.result()
         if report:
             self.report = {"source": "online", **report}
+        if self._calibrator.error:          # the estimator failed: say so instead of calibrating for ever
+            self.report["error"] = self._calibrator.error
         if m is not None:
             self.mounting = m
             if self.save_to is not None:
@@ -117,7 +117,8 @@ class CameraState:
         r = self.report or {}
         need = self._calibrator.fit.cfg if self._calibrator is not None else None
         if need is None or not r.get("pairs"):
-            return f"calibrating: {self._seen} frames seen, no usable frame pair yet (needs forward driving)"
+            seen = self._calibrator.seen if self._calibrator is not None else 0
+            return f"calibrating: {seen} frames seen, no usable frame pair yet (needs forward driving)"
         text = f"calibrating: {r['used']} of {r['pairs']} frame pairs used (needs {need.min_pairs})"
         se = r.get("standard_error_deg")
         if se:

@@ -222,9 +222,7 @@ def teacher_miou(teacher: torch.nn.Module, cache: SampleCache, scale: float, fra
     dev = next(teacher.parameters()).device
     inter = dict.fromkeys(TEACHER_CLASSES, 0)
     union = dict.fromkeys(TEACHER_CLASSES, 0)
-    idx = np.unique(np.linspace(0, len(cache) - 1, min(frames, len(cache))).round().astype(int))
-    for lo in range(0, len(idx), 8):
-        b = cache.batch([(int(k), 0) for k in idx[lo:lo + 8]], augment=False, seed=0)
+    for b in cache.evenly(frames):
         with _autocast(dev, dtype):
             logits, _ = teacher(scaled(b["image"].to(dev), scale))
         pred = F.interpolate(logits.float(), size=b["semantic"].shape[1:], mode="bilinear",
@@ -361,9 +359,7 @@ def validate(model: torch.nn.Module, cache: SampleCache, frames: int, dtype: tor
     dev = next(model.parameters()).device
     sweep = ThresholdSweep()
     err, n = 0.0, 0
-    idx = np.unique(np.linspace(0, len(cache) - 1, min(frames, len(cache))).round().astype(int))
-    for lo in range(0, len(idx), 8):
-        b = cache.batch([(int(k), 0) for k in idx[lo:lo + 8]], augment=False, seed=0)
+    for b in cache.evenly(frames):
         with _autocast(dev, dtype):
             logits, depth, _ = model(_layout(b["image"].to(dev), channels_last))
         sweep.add(torch.sigmoid(logits.float()).cpu().numpy(), b["blindspot"].numpy() > 0.5,
