@@ -92,7 +92,7 @@ class VideoFileSource(Source):
                 failures += 1
                 if (self.total is not None and i + failures > self.total) or failures > self.give_up \
                         or (self.total is None and failures > 1):
-                    self._end(i, failures)
+                    self._end(i)
                     return
                 continue
             k = self._index_of_frame_read(i)
@@ -108,7 +108,10 @@ class VideoFileSource(Source):
             yield Captured(t, frame, k, dt)
             i = k + 1
 
-    def _end(self, i: int, failures: int) -> None:
+    def close(self) -> None:
+        self.cap.release()
+
+    def _end(self, i: int) -> None:
         """The reads have stopped at index ``i``: the file's end, or frames before its end that do not
         decode (a failure; a file of unknown length ends at its first failed read)."""
         if self.total is None or i >= self.total:

@@ -324,3 +324,18 @@ def test_an_output_on_a_read_only_disk_refuses_the_run_with_unavailable(setup, r
     assert code == 2 and "Read-only file system" in err and "Traceback" not in err
     assert [d.signals["System_State"] for d in got if d.name == "BSN_Status"] == [SystemState.UNAVAILABLE]
     assert not any(read_only_dir.iterdir())
+
+
+def test_a_video_file_source_lets_its_file_go_when_closed(setup):
+    from bsn_edge.runtime.sources import VideoFileSource
+    _, clip = setup
+
+    def open_fds():
+        return len(os.listdir("/proc/self/fd"))
+
+    before = open_fds()
+    for _ in range(10):
+        src = VideoFileSource(clip / "video.mp4")
+        next(iter(src))
+        src.close()
+    assert open_fds() <= before
