@@ -11,8 +11,10 @@ from bsn_edge.calibration import Calibration
 from bsn_edge.cli import label as label_cli
 from bsn_edge.labels import LabelConfig, Sources, label_sequence, labels_dir, resample
 from bsn_edge.labels.generator import StaleLabelsError
-from bsn_edge.sequence import read_kitti_poses, read_mask, write_kitti_poses, write_tum_poses
+from bsn_edge.semantics import CAR, VEHICLES
+from bsn_edge.sequence import read_depth, read_kitti_poses, read_mask, write_depth, write_kitti_poses, write_tum_poses
 from bsn_edge.sequence.folder import SequenceFolder
+from bsn_edge.sequence.images import MAX_DEPTH_M
 from bsn_edge.synth import SynthConfig, write_clip
 from bsn_edge.synth.rig import Rig
 
@@ -146,6 +148,14 @@ def test_calibration_file_replaces_the_intrinsics(seq, tmp_path):
     shutil.rmtree(labels_dir(seq, CFG))
     rep = label_sequence(seq, CFG, Sources(calib=str(tmp_path / "c.json")))
     assert [f["blindspot_px"] for f in rep["per_frame"]] == [f["blindspot_px"] for f in ref["per_frame"]]
+    same = {p.name: read_mask(p) for p in (labels_dir(seq, CFG) / "blindspot").iterdir()}
+    # a camera that differs (a longer lens, a lower centre) is used, not ignored: other masks
+    Calibration(m.fx * 1.4, m.fy * 1.4, m.cx, m.cy + 6, m.width, m.height).write(tmp_path / "d.json")
+    label_sequence(seq, CFG, Sources(calib=str(tmp_path / "d.json")), force=True)
+    other = {p.name: read_mask(p) for p in (labels_dir(seq, CFG) / "blindspot").iterdir()}
+    assert other.keys() == same.keys()
+    changed = sum(int((other[k] != same[k]).sum()) for k in same)
+    assert changed > 0.2 * sum(int(v.sum()) for v in same.values())
 
 
 def test_the_calibrated_camera_is_recorded_where_training_reads_it(seq, tmp_path):
@@ -194,10 +204,43 @@ def test_labels_recorded_before_a_setting_existed_resume_at_its_default(seq):
         label_sequence(seq, LabelConfig(rate=5.0, horizon_s=1.0, look_tol=8.0))
 
 
-def test_the_look_check_labels_a_clip_and_reports_what_it_removed(seq):
-    rep = label_sequence(seq, LabelConfig(rate=5.0, horizon_s=1.0, look_tol=8.0))
+def _spill_car_outlines(seq, grow_px: int = 2) -> None:
+    """Depth and classes as a segmentation model gives them: every vehicle's outline spills
+    ``grow_px`` pixels onto what surrounds it, which takes the car's class and its nearest depth."""
+    k = np.ones((2 * grow_px + 1,) * 2, np.uint8)
+    for p in sorted((seq / "semantic").iterdir()):
+        s = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        d = read_depth(seq / "depth" / p.name)
+        car = np.isin(s, VEHICLES).astype(np.uint8)
+        grown = cv2.dilate(car, k).astype(bool) & ~car.astype(bool)
+        nearest = cv2.erode(np.where(car > 0, d, MAX_DEPTH_M).astype(np.float32), k)
+        s[grown], d[grown] = CAR, nearest[grown]
+        cv2.imwrite(str(p), s)
+        write_depth(seq / "depth" / p.name, d)
+
+
+def _precision(seq, cfg) -> float:
+    tp = fp = 0
+    for p in sorted((labels_dir(seq, cfg) / "blindspot").iterdir()):
+        got, true = read_mask(p), read_mask(seq / "bsgt" / p.name)
+        tp, fp = tp + int((got & true).sum()), fp + int((got & ~true).sum())
+    return tp / (tp + fp)
+
+
+def test_the_look_check_removes_car_outlines_and_raises_precision(tmp_path):
+    """Car outlines that spill onto the road (as from a segmentation model) make false blind spots
+    beside every car; the look check finds the road there and takes them out: precision against
+    the clip's true blind spots rises, and the report counts what it removed."""
+    seq = tmp_path / "seq"
+    write_clip(SynthConfig(frames=30, height=96, width=192, fps=10.0, seed=3), seq, video=False)
+    _spill_car_outlines(seq)
+    plain, looked = CFG, LabelConfig(rate=5.0, horizon_s=1.0, look_tol=8.0)
+    shutil.copytree(seq, tmp_path / "again")
+    label_sequence(seq, plain)
+    rep = label_sequence(tmp_path / "again", looked)
     assert rep["status"] == "ok" and rep["config"]["look_tol"] == 8.0
-    assert all("removed_by_look_px" in f for f in rep["per_frame"])
+    assert sum(f["removed_by_look_px"] for f in rep["per_frame"]) > 100
+    assert _precision(tmp_path / "again", looked) > _precision(seq, plain) + 0.03
     with pytest.raises(ValueError, match="look_tol"):
         LabelConfig(look_tol=-1.0)
 

@@ -8,7 +8,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 
@@ -155,19 +154,83 @@ def test_cli_errors_are_explained(data, tmp_path, capsys):
     assert "not a training run" in capsys.readouterr().err
 
 
-def test_distributed_training_with_two_processes(data, tmp_path):
-    """torchrun, 2 CPU processes, gloo: both ranks train, rank 0 writes the run."""
+def test_the_ranks_share_out_one_process_s_global_batch():
+    """Two ranks of batch 4 see, step by step across epochs, the samples one process sees at batch 8,
+    each sample once, every augmentation seed of a step distinct."""
+    from bsn_edge.train.trainer import BatchStream
+    one = iter(BatchStream(40, 8, seed=3))
+    ranks = [iter(BatchStream(40, 4, seed=3, world=2, rank=r)) for r in (0, 1)]
+    for _ in range(12):                                   # 5 steps an epoch: past two epochs
+        whole, halves = next(one), [next(r) for r in ranks]
+        got = [i for h in halves for i, _ in h]
+        assert sorted(got) == sorted(i for i, _ in whole) and len(set(got)) == 8
+        assert len({seed for h in halves for _, seed in h}) == 8
+
+
+def _two_ranks_in_one_process(cfg, data_dir, init: Path) -> dict:
+    """What DistributedDataParallel on two ranks computes, step by step in one process: each rank's
+    half of the global batch through the model (BatchNorm on the rank's own samples), the gradients
+    averaged, one optimizer step; the buffers are rank 0's (DDP broadcasts them from rank 0)."""
+    from bsn_edge.models import create_model
+    from bsn_edge.train import trainer
+    data_ = trainer.datasets(cfg, data_dir)
+    cache = trainer.sample_cache(cfg, data_.train_ds)
+    model = create_model(cfg.model.name)
+    model.load_state_dict(Run(init).load_model()[0].state_dict())
+    model.to(memory_format=torch.channels_last if cfg.train.channels_last else torch.contiguous_format)
+    opt = trainer._adam(model.parameters(), cfg.train.lr, cfg)
+    sched = trainer._poly(opt, cfg.train.steps, cfg.train.poly_power)
+    dtype = trainer.autocast_dtype(cfg, torch.device("cpu"))
+    streams = [trainer.training_batches(data_.train_ds, cache, cfg.train.batch_size, 2, r, cfg.train.seed, 0)
+               for r in (0, 1)]
+    model.train()
+    for _ in range(cfg.train.steps):
+        b0, b1 = next(streams[0]), next(streams[1])
+        opt.zero_grad(set_to_none=True)
+        buffers = {k: v.clone() for k, v in model.named_buffers()}
+        (trainer.losses(model, b1, None, cfg, dtype)[0] / 2).backward()
+        with torch.no_grad():
+            for k, v in model.named_buffers():
+                v.copy_(buffers[k])
+        (trainer.losses(model, b0, None, cfg, dtype)[0] / 2).backward()
+        opt.step()
+        sched.step()
+    return model.state_dict()
+
+
+NO_DROPOUT = "import sys, torch\ntorch.nn.Dropout.forward = lambda self, x: x\n" \
+             "from bsn_edge.cli.train import main\nsys.exit(main(sys.argv[1:]))\n"
+
+
+def test_distributed_training_with_two_processes(data, tmp_path, monkeypatch):
+    """torchrun, 2 CPU processes, gloo: the run equals one process doing what the two ranks do
+    (each rank's half of the global batch, gradients averaged); rank 0 writes it. Dropout is off
+    on both sides: each rank draws its own masks, which one process cannot replay."""
+    init = tmp_path / "init"
+    common = ["--quiet", "--set", "data.label=\"T2s\"", "--set", "train.distill_weight=0",
+              "--set", "train.threads=1", "--set", "train.precision=\"fp32\""]
+    assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(init), *common,
+                           "--set", "train.steps=1"]) == 0
     run = tmp_path / "ddp"
+    overrides = ["train.steps=3", f"train.init=\"{init}\""]
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
+    (tmp_path / "train_without_dropout.py").write_text(NO_DROPOUT)
     cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc-per-node", "2", "--master-port", "29531",
-           "-m", "bsn_edge.cli.train", "--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet",
-           "--set", "data.label=\"T2s\"", "--set", "train.steps=3", "--set", "train.distill_weight=0",
-           "--set", "train.threads=1"]
+           str(tmp_path / "train_without_dropout.py"), "--config", SMOKE, "--data", str(data), "--out", str(run),
+           *common,
+           *[a for o in overrides for a in ("--set", o)]]
     res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
     assert res.returncode == 0, res.stderr[-2000:]
     assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
-    model, _ = Run(run).load_model()
-    assert np.isfinite(model(torch.randn(1, 3, 64, 128))[0].detach().numpy()).all()
+    torch.set_num_threads(1)
+    monkeypatch.setattr(torch.nn.Dropout, "forward", lambda self, x: x)
+    cfg = load_config(SMOKE, ["data.label=\"T2s\"", "train.distill_weight=0", "train.threads=1",
+                              "train.precision=\"fp32\"", *overrides])
+    want, got, before = _two_ranks_in_one_process(cfg, data, init), weights(run), weights(init)
+    floats = [k for k in want if want[k].is_floating_point()]
+    moved = sum(float((want[k] - before[k].float()).square().sum()) for k in floats) ** 0.5
+    apart = sum(float((want[k] - got[k].float()).square().sum()) for k in floats) ** 0.5
+    assert moved > 0.1 and apart < 1e-4 * moved, f"weights moved {moved:.3g}, DDP is {apart:.3g} from the two ranks"
 
 
 FAST = ["--config", SMOKE, "--quiet", "--set", "data.label=\"T2s\"", "--set", "train.distill_weight=0",
