@@ -75,10 +75,23 @@ def test_straight_ahead_of_the_car_is_the_model_cameras_centre_column_whatever_t
 
 
 def test_outputs_come_back_on_the_raw_pixels_and_outside_the_view_is_marked():
+    """Each raw pixel gets the model pixel its ray meets: undistorted by OpenCV, turned from the
+    user's mounting to the model's, projected by the model camera (no code under test)."""
     mf = ModelFrame(RAW, DIST, USER, MODEL, REF)
-    ramp = np.tile(np.arange(MODEL.width, dtype=np.float32), (MODEL.height, 1))
-    back = mf.to_raw(ramp)
-    assert back.shape == (RAW.height, RAW.width)
+    u, v = np.meshgrid(np.arange(RAW.width, dtype=np.float64), np.arange(RAW.height, dtype=np.float64))
+    n = cv2.undistortPoints(np.stack([u.ravel(), v.ravel()], -1)[:, None], RAW.K, np.asarray(DIST, float))
+    rays = np.c_[n.reshape(-1, 2), np.ones(u.size)] @ (REF.rotation() @ USER.rotation().T).T
+    col = (MODEL.fx * rays[:, 0] / rays[:, 2] + MODEL.cx).reshape(u.shape)
+    row = (MODEL.fy * rays[:, 1] / rays[:, 2] + MODEL.cy).reshape(u.shape)
+    cols = np.tile(np.arange(MODEL.width, dtype=np.float32), (MODEL.height, 1))
+    rows = np.tile(np.arange(MODEL.height, dtype=np.float32)[:, None], (1, MODEL.width))
+    back_col, back_row = mf.to_raw(cols), mf.to_raw(rows)
+    assert back_col.shape == (RAW.height, RAW.width)
+    inside = (col > 1) & (col < MODEL.width - 2) & (row > 1) & (row < MODEL.height - 2)
+    assert inside.mean() > 0.9
+    assert np.abs(back_col - col)[inside].max() < 1e-3 and np.abs(back_row - row)[inside].max() < 1e-3
+    beyond = (col < -1) | (col > MODEL.width) | (row < -1) | (row > MODEL.height)
+    assert beyond.sum() > 1000 and not back_col[beyond].any() and not back_row[beyond].any()
     # the raw camera sees 65 degrees across, the model camera 80: the model frame's sides are unseen
     assert not mf.seen[:, 0].any() and mf.seen[MODEL.height // 2, 40:-40].all()
     with pytest.raises(ValueError, match="built for"):
