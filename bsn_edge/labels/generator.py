@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import shutil
 import time
@@ -64,7 +65,21 @@ def labels_dir(seq: Path, cfg: LabelConfig) -> Path:
 def _params(cfg: LabelConfig, sources: Sources, camera: Intrinsics) -> dict[str, Any]:
     """What makes a label set: every parameter and source (resuming is only right if they match),
     and the camera the labels were computed with (the one training records in the model card)."""
-    return {"config": cfg.to_dict(), "sources": dataclasses.asdict(sources), "camera": camera.to_dict()}
+    return {"config": cfg.to_dict(), "sources": dataclasses.asdict(sources), "source_files": _source_files(sources),
+            "camera": camera.to_dict()}
+
+
+def _source_files(sources: Sources) -> dict[str, str]:
+    """The sha256 of each file a source names (a model, a trajectory, a camera file): another file at
+    the same path makes other labels."""
+    named = {"depth": sources.depth, "seg": sources.seg, "poses": sources.poses, "calib": sources.calib}
+    out = {}
+    for field, spec in named.items():
+        path = spec.split(":", 1)[1] if spec.startswith(("onnx:", "bsn:")) else spec
+        if path and path not in ("files", "vo", "ground") and Path(path).is_file():
+            with open(path, "rb") as f:
+                out[field] = hashlib.file_digest(f, "sha256").hexdigest()
+    return out
 
 
 def made_with(labels: LabelSet) -> dict[str, Any]:
@@ -117,6 +132,7 @@ def _check_params(labels: LabelSet, params: dict[str, Any], force: bool) -> None
         if isinstance(old, dict) and isinstance(old.get("config"), dict):
             # a setting added since the record was written was made at its default
             old["config"] = {**_DEFAULTS, **old["config"]}
+            old.setdefault("source_files", {})     # recorded before file digests were: files sources only
         if old != params and not force:
             diff = _differences(old or {}, params)
             raise StaleLabelsError(f"{labels.root} holds labels made with other parameters ({diff}); pass --force "
@@ -135,7 +151,14 @@ def _differences(old: dict[str, Any], new: dict[str, Any]) -> str:
     flat = lambda d: {f"{k}.{j}": w for k, v in d.items() if isinstance(v, dict) for j, w in v.items()}  # noqa: E731
     a, b = flat(old), flat(new)
     keys = sorted(k for k in a.keys() | b.keys() if a.get(k) != b.get(k))
-    return ", ".join(f"{k.split('.', 1)[1]} {a.get(k)!r} -> {b.get(k)!r}" for k in keys[:6]) or "unreadable record"
+    def name(k: str) -> str:
+        section, field = k.split(".", 1)
+        return f"{field} file's sha256" if section == "source_files" else field
+
+    def short(v: Any) -> str:
+        return f"{v[:12]}..." if isinstance(v, str) and len(v) == 64 else repr(v)
+
+    return ", ".join(f"{name(k)} {short(a.get(k))} -> {short(b.get(k))}" for k in keys[:6]) or "unreadable record"
 
 
 def _read_done(labels: LabelSet, i: int) -> tuple[np.ndarray, np.ndarray] | None:

@@ -86,6 +86,7 @@ class AlignedDepth(DepthSource):
                 except ValueError:
                     self.frames_without_landmarks += 1
             self._align[i] = a
+        self.clip_fit = clip_fit
         if window is None:
             self.corr = clip_fit.corr
         else:
@@ -103,6 +104,7 @@ class AlignedDepth(DepthSource):
     def describe(self) -> dict[str, Any]:
         return {"kind": self.name, "prediction": self.kind, "window": self.window,
                 "correlation": round(self.corr, 4), "landmarks": self.n_landmarks,
+                "clip_scale": round(self.clip_fit.scale, 4), "clip_shift": round(self.clip_fit.shift, 4),
                 "frames_without_landmarks": self.frames_without_landmarks}
 
 
