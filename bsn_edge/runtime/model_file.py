@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -125,10 +126,11 @@ class ModelFile:
         return cls(p, metadata, digest)
 
 
-def session(model: str | Path | bytes, threads: int = 2, spinning: bool = True,
-            profile_prefix: str | None = None):
-    """An onnxruntime CPU session with ``threads`` intra-op threads on a path or model bytes
-    (profiling into files starting with ``profile_prefix`` when given)."""
+# what onnxruntime says when its exact x86 kernels (session.x64quantprecision) meet signed activations
+EXACT_KERNELS_REFUSED = "Attempt to replace the existing tensor"
+
+
+def _options(threads: int, spinning: bool, profile_prefix: str | None, exact_x64: bool):
     import onnxruntime as ort
 
     so = ort.SessionOptions()
@@ -146,8 +148,30 @@ def session(model: str | Path | bytes, threads: int = 2, spinning: bool = True,
     # summed into int16, which saturates for weights outside [-64, 63]: the shipped model's depth
     # came out up to 55 % off on an AVX2 machine. This makes onnxruntime use uint8 x uint8 there
     # (exact, slower); on VNNI and ARM CPUs it changes nothing.
-    so.add_session_config_entry("session.x64quantprecision", "1")
+    if exact_x64:
+        so.add_session_config_entry("session.x64quantprecision", "1")
     if profile_prefix:
         so.enable_profiling, so.profile_file_prefix = True, profile_prefix
+    return so
+
+
+def session(model: str | Path | bytes, threads: int = 2, spinning: bool = True,
+            profile_prefix: str | None = None):
+    """An onnxruntime CPU session with ``threads`` intra-op threads on a path or model bytes
+    (profiling into files starting with ``profile_prefix`` when given)."""
+    import onnxruntime as ort
+
+    so = _options(threads, spinning, profile_prefix, exact_x64=True)
     src = model if isinstance(model, bytes) else str(model)
+    try:
+        return ort.InferenceSession(src, so, providers=["CPUExecutionProvider"])
+    except Exception as e:
+        if EXACT_KERNELS_REFUSED not in str(e):
+            raise
+    # onnxruntime cannot give a model with signed int8 activations its exact kernels: it runs as
+    # quantized, exact where its weights fit in 7 bits or the CPU has VNNI; the self-test checks it
+    warnings.warn(f"{'the model' if isinstance(model, bytes) else model}: onnxruntime's exact uint8 x uint8 kernels do "
+                  "not take signed int8 activations; on x86 CPUs without VNNI such a model is exact only with 7-bit "
+                  "weights (bsn-export --reduce-range)", RuntimeWarning, stacklevel=2)
+    so = _options(threads, spinning, profile_prefix, exact_x64=False)
     return ort.InferenceSession(src, so, providers=["CPUExecutionProvider"])

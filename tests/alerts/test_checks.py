@@ -163,3 +163,51 @@ def test_a_hazard_payload_under_the_status_id_fails_its_crc():
     (hid, hz), (sid, _) = CanEncoder().encode(AlertFrame(0.0, none, none, none, SystemState.OK, 10.0, {}))
     assert decode(hid, hz).crc_ok
     assert not decode(sid, hz).crc_ok, "the data ID is in the CRC: a frame cannot pass for another message"
+
+
+def _with_a_gap() -> list[tuple[int, bytes]]:
+    fs = frames(10)
+    return fs[:6] + fs[10:]                    # cycles 3 and 4 missing: 2 hazard and 2 status frames
+
+
+def test_listen_on_a_can_bus_counts_lost_frames(monkeypatch, capsys):
+    """``--can virtual:CH``: the frames bsn-run sends on a bus, read off it, the missing cycles counted."""
+    import can
+
+    listener = can.Bus(interface="virtual", channel="bsn-listen-test")     # queues from here on
+    opened = []
+
+    def bus(interface, channel):
+        opened.append((interface, channel))
+        return listener
+
+    with can.Bus(interface="virtual", channel="bsn-listen-test") as sender:
+        for fid, data in _with_a_gap():
+            sender.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+    monkeypatch.setattr(can, "Bus", bus)
+    assert listen_cli.main(["--can", "virtual:bsn-listen-test", "--max", "16"]) == 1
+    out = capsys.readouterr()
+    assert opened == [("virtual", "bsn-listen-test")]
+    assert "16 frames, 0 with a bad CRC, 4 lost, 0 repeated" in out.err
+    assert out.out.count("(2 lost)") == 2 and out.out.count("hazard #") == 8
+
+
+def test_listen_on_a_serial_port_counts_lost_frames(monkeypatch, capsys):
+    """``--serial URL``: COBS frames off a pyserial loopback port, the missing cycles counted."""
+    import serial
+
+    from bsn_edge.alerts.serial_codec import encode_frame
+    port = serial.serial_for_url("loop://", timeout=0.2)
+    port.write(b"".join(encode_frame(f, d) for f, d in _with_a_gap()))
+    opened = []
+
+    def open_url(url, timeout=None):
+        opened.append(url)
+        return port
+
+    monkeypatch.setattr(serial, "serial_for_url", open_url)
+    assert listen_cli.main(["--serial", "loop://", "--max", "16"]) == 1
+    out = capsys.readouterr()
+    assert opened == ["loop://"]
+    assert "16 frames, 0 with a bad CRC, 4 lost, 0 repeated" in out.err
+    assert out.out.count("(2 lost)") == 2 and out.out.count("status #") == 8
