@@ -5,6 +5,7 @@ back-off where that helps, and never raised into the caller's loop."""
 from __future__ import annotations
 
 import contextlib
+import errno
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -73,6 +74,13 @@ class Sender(ABC):
         self.close()
 
 
+def transmit_buffer_full(e: Exception) -> bool:
+    """Whether a python-can send error is the transmit queue being full (the bus is saturated or
+    unplugged: frames are dropped, not the sender broken). python-can gives no type for it: the
+    kernel's ENOBUFS as ``error_code``, or socketcan's send timeout, "Transmit buffer full"."""
+    return getattr(e, "error_code", None) == errno.ENOBUFS or "transmit buffer full" in str(e).lower()
+
+
 class CanSender(Sender):
     """python-can on any interface (``socketcan``, ``virtual``, vendor ones), loaded lazily.
     Optionally logs every sent frame (``.log`` candump, ``.asc``, ``.blf``) through python-can's
@@ -99,7 +107,7 @@ class CanSender(Sender):
             try:
                 self.bus.send(msg, timeout=self.timeout_s)
             except self._can.CanOperationError as e:
-                if "buffer" in str(e).lower() or "full" in str(e).lower():
+                if transmit_buffer_full(e):
                     self.stats.full += 1
                 raise
             self._log(msg)

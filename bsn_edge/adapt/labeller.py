@@ -19,7 +19,6 @@ from torch import Tensor, nn
 from bsn_edge import semantics as sm
 from bsn_edge.export.pipeline import export_run
 from bsn_edge.labels.sources.base import SegSource
-from bsn_edge.models import create_teacher
 from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.train.run import Run
 
@@ -40,17 +39,14 @@ class _Scores(nn.Module):
 def load_teacher(run: Run) -> tuple[nn.Module, tuple[int, int], float]:
     """The run's segmentation teacher (eval mode), the input size it was trained at and its scale
     of the model's input. ``FileNotFoundError`` when the run has none."""
-    state = run.load_teacher_state()
-    if state is None:
+    teacher = run.load_teacher()
+    if teacher is None:
         raise FileNotFoundError(f"{run.path}: no teacher ({run.TEACHER}/teacher.pt); bsn-adapt labels with the "
                                 "run's own teacher (train with bsn-train, which keeps it)")
-    t = run.config().get("teacher", {})
-    teacher = create_teacher(int(t.get("encoder", 18)), int(t.get("width", 128)))
-    teacher.load_state_dict(state)
     h, w = run.card().input_size
-    scale = float(t.get("scale", 1.0))
+    scale = run.teacher_config().scale
     size = (max(32, round(h * scale / 32) * 32), max(32, round(w * scale / 32) * 32))
-    return teacher.eval(), size, scale
+    return teacher, size, scale
 
 
 def export_teacher(run: Run, out: Path) -> Path:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from bsn_edge.cli.common import fail, glue_values, parse_size
 from bsn_edge.data import find_clips
-from bsn_edge.evaluate.evaluator import evaluate, grid_image, load_teacher
+from bsn_edge.evaluate.evaluator import evaluate, grid_image
 from bsn_edge.sequence import write_image
 from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.train.run import Run
@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
                               "(an optimistic figure)")
         return fail(PROG, f"no labelled clips of styles {args.styles} in {args.data}")
     size = tuple(args.size or card.input_size)
-    teacher = None if args.no_baselines else load_teacher(run)
+    teacher = None if args.no_baselines else run.load_teacher()
     res = evaluate(model, card, clips, size, label, teacher,
                    teacher_scale=float(cfg.get("teacher", {}).get("scale", 0.5)))
     if args.no_baselines:

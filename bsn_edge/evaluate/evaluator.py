@@ -12,25 +12,12 @@ from bsn_edge.card import ModelCard
 from bsn_edge.data import BlindSpotDataset, Clip
 from bsn_edge.evaluate.baselines import detection_2d, detection_3d, traversable_hidden
 from bsn_edge.metrics import Counts
-from bsn_edge.models import create_teacher
 from bsn_edge.sequence import read_kitti_poses
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth.sheet import tint
-from bsn_edge.train.run import Run
 from bsn_edge.train.trainer import scaled
 
 METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
-
-
-def load_teacher(run: Run) -> torch.nn.Module | None:
-    """The run's segmentation teacher (None if it has none), built as its config says."""
-    state = run.load_teacher_state()
-    if state is None:
-        return None
-    t = run.config().get("teacher", {})
-    teacher = create_teacher(t.get("encoder", 18), t.get("width", 128))
-    teacher.load_state_dict(state)
-    return teacher.eval()
 
 
 @torch.no_grad()

@@ -268,6 +268,12 @@ class LiveSource(Source):
             else:
                 time.sleep(0.002)
 
+    @property
+    def last_frame_at(self) -> float:
+        """``time.monotonic()`` when the newest frame was read (or the source opened)."""
+        with self._lock:
+            return self._last_frame
+
     def stop(self) -> None:
         self._stop.set()
 

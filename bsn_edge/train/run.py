@@ -18,6 +18,7 @@ damaged and refused.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import io
 import json
@@ -28,8 +29,9 @@ from typing import Any
 import torch
 
 from bsn_edge.card import ModelCard
-from bsn_edge.models import BlindSpotNet, ModelSpec, build, weights_bytes
+from bsn_edge.models import BlindSpotNet, ModelSpec, build, create_teacher, weights_bytes
 from bsn_edge.sequence.images import atomic_write_bytes
+from bsn_edge.train.config import TeacherConfig
 
 
 class RunError(ValueError):
@@ -191,6 +193,22 @@ class Run:
                 raise RunError(f"{self.teacher_path}: the teacher does not match {self.CHECKPOINT} (sha256 differs): "
                                "the file is damaged or was replaced")
         return _from_bytes(data, self.teacher_path)
+
+    def teacher_config(self) -> TeacherConfig:
+        """How the run's teacher is built and fed: its config's ``teacher`` section, with the
+        defaults for what a run written before a setting existed does not record."""
+        known = {f.name for f in dataclasses.fields(TeacherConfig)}
+        return TeacherConfig(**{k: v for k, v in self.config().get("teacher", {}).items() if k in known})
+
+    def load_teacher(self) -> torch.nn.Module | None:
+        """The run's segmentation teacher in eval mode, built as its config says (None without one)."""
+        state = self.load_teacher_state()
+        if state is None:
+            return None
+        t = self.teacher_config()
+        teacher = create_teacher(t.encoder, t.width)
+        teacher.load_state_dict(state)
+        return teacher.eval()
 
     def ship(self, dest: str | Path, dtype: torch.dtype = torch.float16, force: bool = False) -> Run:
         """A copy of this run to hand out: the weights and the teacher in ``dtype`` (half the size in

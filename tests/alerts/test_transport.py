@@ -100,18 +100,33 @@ def test_a_vanished_serial_port_is_counted_and_reopened():
 def test_serial_across_processes_through_a_pty_pair(tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
     proc = subprocess.Popen(["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"])
+    # each wait ends as soon as its condition holds; the deadlines only bound a failure
     try:
-        for _ in range(50):
-            if a.exists() and b.exists():
-                break
-            time.sleep(0.05)
-        rx = serial.Serial(str(b), timeout=0.5)
+        deadline = time.monotonic() + 30
+        while not (a.exists() and b.exists()) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        rx = serial.Serial(str(b), timeout=0.1)
         with SerialSender(str(a)) as tx:
             assert tx.send(frame())
-        data = rx.read(200)
-        got = list(FrameDecoder().feed(data))
-        assert len(got) == 2 and all(decode(f, d).crc_ok for f, d in got)
+        dec, got = FrameDecoder(), []
+        while len(got) < 2 and time.monotonic() < deadline:
+            got += dec.feed(rx.read(64))
+        assert len(got) == 2 and all(decode(f, d).crc_ok for f, d in got) and dec.errors == 0
         rx.close()
     finally:
         proc.terminate()
         proc.wait(timeout=5)
+
+
+def test_only_a_full_transmit_queue_counts_as_full():
+    """python-can says "full" only in words (socketcan) or as the kernel's ENOBUFS; any other send
+    error is an error, not a full queue."""
+    import errno
+
+    from bsn_edge.alerts.senders import transmit_buffer_full
+    assert transmit_buffer_full(can.CanOperationError("Transmit buffer full"))
+    assert transmit_buffer_full(can.CanOperationError("Failed to transmit: No buffer space available",
+                                                      error_code=errno.ENOBUFS))
+    assert not transmit_buffer_full(can.CanOperationError("Failed to transmit: Network is down",
+                                                          error_code=errno.ENETDOWN))
+    assert not transmit_buffer_full(can.CanOperationError("bus off"))

@@ -290,11 +290,13 @@ def test_health_survives_two_threads_hammering_it():
 class ExplodingHealth(Health):
     """A health whose snapshot raises now and then: a bug the heartbeat must outlive."""
 
-    calls = 0
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls = 0
 
     def snapshot(self, t):
-        ExplodingHealth.calls += 1
-        if ExplodingHealth.calls % 3 == 1:
+        self.calls += 1
+        if self.calls % 3 == 1:
             raise RuntimeError("deque mutated during iteration")
         return super().snapshot(t)
 

@@ -10,20 +10,25 @@ import time
 import cv2
 import numpy as np
 
-from bsn_edge.runtime.sources import LiveSource, Reconnect
+from bsn_edge.runtime.sources import LiveSource, Reconnect, open_capture
 
 FRAMES = 15
 
 
 class Stalling(http.server.BaseHTTPRequestHandler):
-    """Serves FRAMES JPEG frames, then keeps the connection open and sends nothing."""
+    """The first connection gets FRAMES JPEG frames, then the connection stays open and silent; every
+    later one is refused (404), so the source sees exactly FRAMES frames, however slow its reader."""
 
     release = threading.Event()
+    served = threading.Lock()
 
     def log_message(self, *args):
         pass
 
     def do_GET(self):
+        if not Stalling.served.acquire(blocking=False):
+            self.send_error(404)
+            return
         self.send_response(200)
         self.send_header("Content-Type", "multipart/x-mixed-replace; boundary=frame")
         self.end_headers()
@@ -32,7 +37,6 @@ class Stalling(http.server.BaseHTTPRequestHandler):
             self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\nContent-Length: %d\r\n\r\n" % len(jpg)
                              + jpg.tobytes() + b"\r\n")
             self.wfile.flush()
-            time.sleep(0.02)
         Stalling.release.wait(30)
 
 
@@ -41,25 +45,25 @@ def test_a_stalled_stream_is_seen_within_the_stall_time_then_given_up_when_it_re
     srv.daemon_threads = True
     threading.Thread(target=srv.serve_forever, daemon=True).start()
     url = f"http://127.0.0.1:{srv.server_address[1]}/stream.mjpg"
-    src = LiveSource(url, Reconnect(stall_s=1.0, first_s=0.1, max_s=0.2, give_up_s=20, max_tries=2))
+    opened: list[float] = []
+
+    def opener(target):
+        opened.append(time.monotonic())
+        return open_capture(target, 1.0)
+
+    src = LiveSource(url, Reconnect(stall_s=1.0, first_s=0.1, max_s=0.2, give_up_s=20, max_tries=2), opener=opener)
+    seen: list[float] = []
     try:
-        got, last_frame, first_reconnect = 0, None, None
-        deadline = time.monotonic() + 25
-        for _ in src:
-            got += 1
-            last_frame = time.monotonic()
-            if got + src.dropped == FRAMES:          # the newest frame wins: a slow reader may skip some
-                srv.shutdown()                  # from now on the server refuses new connections
-                srv.server_close()
-                break
-        while time.monotonic() < deadline and src.reconnects == 0:
-            time.sleep(0.01)
-        first_reconnect = time.monotonic()
-        for _ in src:                           # ends when the reconnects fail
-            pass
+        for item in src:                        # ends when the reconnects fail
+            seen.append(item.t)
     finally:
         Stalling.release.set()
         src.close()
-    assert got + src.dropped == FRAMES and got > 0
-    assert src.reconnects >= 1 and first_reconnect - last_frame < 1.0 + 2.0, "the stall is seen within about 1 s"
+        srv.shutdown()
+        srv.server_close()
+    assert len(seen) + src.dropped == FRAMES and seen   # the newest frame wins: a slow reader may skip some
+    assert src.reconnects == 2 and len(opened) == 3
+    # FFmpeg's own read timeout is 30 s: the stall is seen after --stall (1 s), then the back-off
+    stalled_for = opened[1] - src.last_frame_at
+    assert 0.9 < stalled_for < 1.0 + 2.0, f"the stall was seen after {stalled_for:.2f} s"
     assert src.failure and "reconnects failed" in src.failure
