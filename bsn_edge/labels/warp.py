@@ -48,26 +48,47 @@ def window_mean(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Cloud:
-    """Traversable points of one frame in world coordinates, grouped by grid level.
+class Points:
+    """Points of a cloud in world coordinates (float32, relative to the warper's origin), their
+    depth in their own frame and, when the cloud was made with its picture, their grey level."""
 
-    ``levels[k]`` holds the points on the 2^k pixel grid but not the 2^(k+1) one (the last
-    level holds everything on its grid), each sorted by depth in their own frame:
-    ``(x, y, z, depth)`` float32 arrays, and the point's grey level in its own frame when the
-    cloud was made with its picture.
-    """
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    depth: np.ndarray
+    grey: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.depth)
+
+    def select(self, index) -> Points:
+        """The points at ``index`` (a mask, a slice or an index array), all fields alike."""
+        return Points(self.x[index], self.y[index], self.z[index], self.depth[index],
+                      None if self.grey is None else self.grey[index])
+
+    @staticmethod
+    def concat(parts: list[Points]) -> Points:
+        grey = None if any(p.grey is None for p in parts) else np.concatenate([p.grey for p in parts])
+        return Points(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("x", "y", "z", "depth")), grey)
+
+
+@dataclass(frozen=True)
+class Cloud:
+    """Traversable points of one frame, grouped by grid level: ``levels[k]`` holds the points on
+    the 2^k pixel grid but not the 2^(k+1) one (the last level holds everything on its grid), each
+    sorted by depth in their own frame."""
 
     centre: np.ndarray
-    levels: tuple[tuple[np.ndarray, ...], ...]
+    levels: tuple[Points, ...]
 
     @property
     def has_grey(self) -> bool:
         """Whether the points carry their grey levels (the cloud was made with its picture)."""
-        return all(len(lv) == 5 for lv in self.levels)
+        return all(lv.grey is not None for lv in self.levels)
 
     @property
     def size(self) -> int:
-        return sum(len(lv[3]) for lv in self.levels)
+        return sum(len(lv) for lv in self.levels)
 
 
 def _grid_level(height: int, width: int) -> np.ndarray:
@@ -97,37 +118,34 @@ class Warper:
         grey levels when the frame's ``grey`` picture is given, for ``look_agrees``)."""
         m = traversable & (depth > 0)
         d = depth[m].astype(np.float32)
-        extra = () if grey is None else (smooth_grey(grey)[m],)
         x_c, y_c = self._rx[m] * d, self._ry[m] * d
         R = T_wc[:3, :3].astype(np.float32)
         t = (T_wc[:3, 3] - self.origin).astype(np.float32)
         world = [R[i, 0] * x_c + R[i, 1] * y_c + R[i, 2] * d + t[i] for i in range(3)]
+        points = Points(*world, d, None if grey is None else smooth_grey(grey)[m])
         lvl = self._level[m]
         levels = []
         for k in range(LEVELS):
-            sel = lvl == k if k < LEVELS - 1 else lvl >= k
-            order = np.argsort(d[sel], kind="stable")
-            levels.append(tuple(a[sel][order] for a in (*world, d, *extra)))
+            sel = np.flatnonzero(lvl == k if k < LEVELS - 1 else lvl >= k)
+            levels.append(points.select(sel[np.argsort(d[sel], kind="stable")]))
         return Cloud(centre=t.astype(np.float64), levels=tuple(levels))
 
-    def _pick(self, cloud: Cloud, baseline: float, margin: float):
+    def _pick(self, cloud: Cloud, baseline: float, margin: float) -> Points:
         """The points of ``cloud`` needed to cover its footprint seen from a camera ``baseline``
         metres away: a point at depth d may shrink to d / (d + margin * baseline)."""
         parts = []
         b = margin * baseline
         for k in range(LEVELS):
             lv = cloud.levels[k]
-            d = lv[3]
             # points on grid level k are needed when their shrink is worse than 1 / 2^(k+1),
             # i.e. d >= b / (2^(k+1) - 1); the coarsest level is always needed
             needed_from = b / ((1 << (k + 1)) - 1) if (k < LEVELS - 1 and b > 0) else 0.0
-            start = np.searchsorted(d, needed_from)
-            if start < len(d):
-                parts.append([a[start:] for i, a in enumerate(lv) if i != 3])
-        n = 4 if cloud.has_grey else 3
+            start = np.searchsorted(lv.depth, needed_from)
+            if start < len(lv):
+                parts.append(lv.select(slice(start, None)))
         if not parts:
-            return tuple(np.zeros(0, np.float32) for _ in range(n))
-        return tuple(np.concatenate([p[i] for p in parts]) for i in range(n))
+            return cloud.levels[-1].select(slice(0, 0))
+        return Points.concat(parts)
 
     def splat(self, clouds: list[Cloud], T_wc: np.ndarray, margin: float = 0.5
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -149,14 +167,14 @@ class Warper:
         keys, depths, greys = [], [], []
         for j, cl in enumerate(clouds):
             base = float(np.linalg.norm(cl.centre - C))
-            x, y, z, *g = self._pick(cl, base, margin)
-            if want_grey and not g:
+            pts = self._pick(cl, base, margin)
+            if want_grey and pts.grey is None:
                 raise ValueError("a cloud made without its picture cannot be compared by look")
-            x, y, z = x - C[0], y - C[1], z - C[2]
+            x, y, z = pts.x - C[0], pts.y - C[1], pts.z - C[2]
             zc = R_cw[2, 0] * x + R_cw[2, 1] * y + R_cw[2, 2] * z
             ok = zc > 0.05
             x, y, z, zc = x[ok], y[ok], z[ok], zc[ok]
-            g = [a[ok] for a in g]
+            grey = pts.grey[ok] if want_grey else None
             inv = 1.0 / zc
             u = (self.intr.fx * (R_cw[0, 0] * x + R_cw[0, 1] * y + R_cw[0, 2] * z) * inv + self.intr.cx)
             v = (self.intr.fy * (R_cw[1, 0] * x + R_cw[1, 1] * y + R_cw[1, 2] * z) * inv + self.intr.cy)
@@ -166,7 +184,7 @@ class Warper:
             keys.append(j * n_px + vi[ok] * w + ui[ok])
             depths.append(zc[ok])
             if want_grey:
-                greys.append(g[0][ok])
+                greys.append(grey[ok])
         zbuf = np.full(len(clouds) * n_px, np.inf, np.float32)
         gbuf = None
         if keys:
