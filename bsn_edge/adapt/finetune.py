@@ -10,11 +10,10 @@ from tqdm import tqdm
 from bsn_edge.adapt.config import AdaptConfig
 from bsn_edge.metrics import ThresholdSweep
 from bsn_edge.models import BlindSpotNet
+from bsn_edge.train.config import TrainConfig
 from bsn_edge.train.losses import distillation_loss, masked_bce
+from bsn_edge.train.optim import Optimizer
 from bsn_edge.train.trainer import batch_stream, scaled
-
-WEIGHT_DECAY = 5e-4     # as in training
-POLY_POWER = 0.9
 
 
 @torch.no_grad()
@@ -43,9 +42,7 @@ def finetune_b(model: BlindSpotNet, ds, cfg: AdaptConfig, teacher: torch.nn.Modu
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
     model.depth_net.requires_grad_(False)
-    params = list(model.blindspot.parameters())
-    opt = torch.optim.Adam(params, lr=cfg.lr, weight_decay=WEIGHT_DECAY)
-    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: (1 - s / cfg.steps) ** POLY_POWER)
+    optim = Optimizer(model.blindspot.parameters(), cfg.lr, cfg.steps, TrainConfig())   # training's step
     stream = batch_stream(ds, cfg.batch_size, 1, 0, cfg.seed, 0)
     model.train()
     model.depth_net.eval()
@@ -58,10 +55,7 @@ def finetune_b(model: BlindSpotNet, ds, cfg: AdaptConfig, teacher: torch.nn.Modu
             with torch.no_grad():
                 _, t_feats = teacher(scaled(b["image"], teacher_scale))
             loss = loss + cfg.distill_weight * distillation_loss(feats, t_feats, distill_grid)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
+        optim.step(loss)
         losses.append(float(loss.item()))
     model.eval()
     model.depth_net.requires_grad_(True)

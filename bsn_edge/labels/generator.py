@@ -21,7 +21,7 @@ from bsn_edge.card import EARLY_MOUNTING
 from bsn_edge.labels.config import LabelConfig
 from bsn_edge.labels.monocular import metric_depth_and_poses, seed_poses
 from bsn_edge.labels.sources import ClipData, FilesDepth, frame_count
-from bsn_edge.labels.sources.base import ClipRejectedError, SegSource
+from bsn_edge.labels.sources.base import ClipRejectedError, DepthSource, SegSource
 from bsn_edge.labels.sources.registry import make_depth, make_poses, make_seg
 from bsn_edge.labels.warp import Cloud, Warper, label_frame
 from bsn_edge.model_frame import ModelFrame
@@ -171,6 +171,87 @@ def _read_done(labels: LabelSet, i: int) -> tuple[np.ndarray, np.ndarray] | None
         return None
 
 
+def resolve_camera(seq: Path, meta: SequenceMeta, sources: Sources
+                    ) -> tuple[SequenceMeta, Calibration | None, ModelFrame | None]:
+    """The camera the labels are made in: a camera file (``--calib``, else the clip's own) replaces
+    the clip's intrinsics, rescaled to the clip's frame size; with lens distortion, depth and
+    segmentation are undistorted first (the returned warp), so the labels are made in the
+    undistorted (pinhole) camera the loader warps them from."""
+    cam_path = Path(sources.calib) if sources.calib else SequenceFolder(seq).calibration_path
+    if not (sources.calib or cam_path.is_file()):
+        return meta, None, None
+    cal = Calibration.read(cam_path)
+    k = cal.intrinsics.scaled(meta.width, meta.height)
+    meta = dataclasses.replace(meta, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy)
+    lens = ModelFrame.undistort_only(k, cal.dist, cal.mounting or EARLY_MOUNTING) if cal.has_distortion else None
+    return meta, cal, lens
+
+
+def open_sources(clip: ClipData, cfg: LabelConfig, sources: Sources, idx: np.ndarray, cal: Calibration | None
+                 ) -> tuple[DepthSource, SegSource, np.ndarray, dict[str, Any]]:
+    """Depth, segmentation, poses (and what the pose source reports) for the label-rate frames
+    ``idx``; raises :class:`ClipRejectedError` when a source cannot be trusted."""
+    frames = [int(i) for i in idx]
+    seg = make_seg(sources.seg, clip)
+    if sources.seg != "files" and sources.depth != "files":
+        # the depth source holds every label frame's depth already; their classes cost a quarter of it
+        seg = _Remembered(seg)
+    if sources.poses == "vo" and sources.depth != "files":
+        # no metric depth to anchor VO: seed poses, align, ground-scale, re-solve (monocular.py)
+        seed, pose_info = seed_poses(clip)
+        aligned = make_depth(sources.depth, clip, seed, cfg, frames, window=SEED_WINDOW, seg=seg)
+        height = (cfg.camera_height or (cal.mounting.height_m if cal is not None and cal.mounting else None)
+                  or clip.meta.extra.get("camera_height") or DEFAULT_CAMERA_HEIGHT)
+        depth, poses, more = metric_depth_and_poses(clip, aligned, seg, idx, float(height))
+        return depth, seg, poses, {"kind": "vo", "metric": True, **pose_info, **more}
+    metric = FilesDepth(clip) if sources.depth == "files" else None
+    poses, pose_info = make_poses(sources.poses, clip, metric)
+    return make_depth(sources.depth, clip, poses, cfg, frames, seg=seg), seg, poses, pose_info
+
+
+class FrameCache:
+    """Each label-rate frame's depth, classes (and grey picture, for the look check) and cloud,
+    read (or inferred, for model sources) once: first as a later frame of an earlier label, then
+    again as a label frame itself; :meth:`take` hands a label frame over and lets go of what
+    comes before it."""
+
+    def __init__(self, seq: Path, idx: np.ndarray, depth: DepthSource, seg: SegSource, poses: np.ndarray,
+                 warper: Warper, lens: ModelFrame | None, by_look: bool) -> None:
+        self.seq, self.idx, self.depth, self.seg, self.poses = seq, idx, depth, seg, poses
+        self.warper, self.lens, self.by_look = warper, lens, by_look
+        self._sources: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}
+        self._clouds: dict[int, Cloud] = {}
+
+    def frame(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Depth, classes and grey picture (None without the look check) of label-rate frame ``k``."""
+        if k not in self._sources:
+            i = int(self.idx[k])
+            d, s = self.depth(i), self.seg(i)
+            g = read_gray(self.seq, i) if self.by_look else None
+            if self.lens is not None:
+                d, s = self.lens.depth_to_model(d), self.lens.labels_to_model(s)
+                g = None if g is None else self.lens.to_model(g)
+            self._sources[k] = (d, s, g)
+        return self._sources[k]
+
+    def cloud(self, k: int) -> Cloud:
+        if k not in self._clouds:
+            d, sem, g = self.frame(k)
+            self._clouds[k] = self.warper.cloud(d, sm.is_traversable(sem), self.poses[int(self.idx[k])], g)
+        return self._clouds[k]
+
+    def take(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Frame ``k``'s sources, to label it; frames up to it are not needed again."""
+        for old in [c for c in self._clouds if c <= k]:
+            del self._clouds[old]
+        d, s, g = self.frame(k)
+        for old in [c for c in self._sources if c <= k]:
+            del self._sources[old]
+        if isinstance(self.seg, _Remembered):
+            self.seg.forget(int(self.idx[k]))
+        return d, s, g
+
+
 def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sources | None = None,
                    progress: Callable[[int], None] | None = None,
                    on_total: Callable[[int], None] | None = None, force: bool = False) -> dict[str, Any]:
@@ -183,20 +264,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     sources = sources or Sources()
     seq = Path(seq)
     t_start = time.perf_counter()
-    meta = SequenceMeta.read(seq)
-    cam_path = Path(sources.calib) if sources.calib else SequenceFolder(seq).calibration_path
-    lens = None
-    cal = None
-    if sources.calib or cam_path.is_file():
-        # a camera file replaces the clip's intrinsics, rescaled to the clip's frame size; with lens
-        # distortion, depth and segmentation are undistorted first, so the labels are made in the
-        # undistorted (pinhole) camera the loader warps them from
-        cal = Calibration.read(cam_path)
-        k = cal.intrinsics.scaled(meta.width, meta.height)
-        meta = dataclasses.replace(meta, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy)
-        if cal.has_distortion:
-            m = cal.mounting or EARLY_MOUNTING
-            lens = ModelFrame.undistort_only(k, cal.dist, m)
+    meta, cal, lens = resolve_camera(seq, SequenceMeta.read(seq), sources)
     clip = ClipData(seq, meta, frame_count(seq), {"calibration": cal} if cal is not None else {})
     labels = SequenceFolder(seq).labels(cfg.name)
     out = labels.root
@@ -211,22 +279,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         "frames": clip.frames, "fps": meta.fps, "size": [meta.height, meta.width],
     }
     try:
-        seg = make_seg(sources.seg, clip)
-        if sources.seg != "files" and sources.depth != "files":
-            # the depth source holds every label frame's depth already; their classes cost a quarter of it
-            seg = _Remembered(seg)
-        if sources.poses == "vo" and sources.depth != "files":
-            # no metric depth to anchor VO: seed poses, align, ground-scale, re-solve (monocular.py)
-            seed, pose_info = seed_poses(clip)
-            aligned = make_depth(sources.depth, clip, seed, cfg, [int(i) for i in idx], window=SEED_WINDOW, seg=seg)
-            height = (cfg.camera_height or (cal.mounting.height_m if cal is not None and cal.mounting else None)
-                      or clip.meta.extra.get("camera_height") or DEFAULT_CAMERA_HEIGHT)
-            depth, poses, more = metric_depth_and_poses(clip, aligned, seg, idx, float(height))
-            pose_info = {"kind": "vo", "metric": True, **pose_info, **more}
-        else:
-            metric = FilesDepth(clip) if sources.depth == "files" else None
-            poses, pose_info = make_poses(sources.poses, clip, metric)
-            depth = make_depth(sources.depth, clip, poses, cfg, [int(i) for i in idx], seg=seg)
+        depth, seg, poses, pose_info = open_sources(clip, cfg, sources, idx, cal)
     except ClipRejectedError as e:
         report.update(status="rejected", reason=str(e))
         _write_report(out, report)
@@ -237,36 +290,12 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     todo = list(range(max(len(idx) - T, 0)))
     if on_total:
         on_total(len(todo))
-    min_area = cfg.min_area_px(meta.height, meta.width)
     warper = Warper(meta.intrinsics, origin=poses[0, :3, 3])
-    clouds: dict[int, Cloud] = {}
-    # each label-rate frame is read (or inferred, for model sources) once: first as a later frame
-    # of an earlier label, then again as a label frame itself
-    sources_at: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}
-    by_look = cfg.look_tol > 0
-
-    def frame(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        if k not in sources_at:
-            i = int(idx[k])
-            d, s = depth(i), seg(i)
-            g = read_gray(seq, i) if by_look else None
-            if lens is not None:
-                d, s = lens.depth_to_model(d), lens.labels_to_model(s)
-                g = None if g is None else lens.to_model(g)
-            sources_at[k] = (d, s, g)
-        return sources_at[k]
-
-    def cloud(k: int) -> Cloud:
-        if k not in clouds:
-            d, sem, g = frame(k)
-            clouds[k] = warper.cloud(d, sm.is_traversable(sem), poses[int(idx[k])], g)
-        return clouds[k]
-
+    cache = FrameCache(seq, idx, depth, seg, poses, warper, lens, cfg.look_tol > 0)
     per_frame = []
     skipped = 0
     for k in todo:
         i = int(idx[k])
-        bs_path, vis_path = labels.blindspot(i), labels.visibility(i)
         done = _read_done(labels, i)
         if done is not None:
             omega, vis = done
@@ -274,18 +303,11 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
                               "blindspot_in_v_px": int((omega & vis).sum()), "resumed": True})
             skipped += 1
         else:
-            for old in [c for c in clouds if c <= k]:
-                del clouds[old]
-            d_t, sem_t, grey_t = frame(k)
-            for old in [c for c in sources_at if c <= k]:
-                del sources_at[old]
-            if isinstance(seg, _Remembered):
-                seg.forget(i)
-            lab = label_frame(warper, [cloud(k + j) for j in range(1, T + 1)], d_t,
-                              sm.is_traversable(sem_t), sem_t == sm.SKY, poses[i],
-                              cfg.depth_tol, cfg.vis_range, min_area, cfg.shrink_margin, grey_t, cfg.look_tol)
-            write_mask(bs_path, lab.omega, durable=True)
-            write_mask(vis_path, lab.visibility, durable=True)
+            d_t, sem_t, grey_t = cache.take(k)
+            lab = label_frame(warper, [cache.cloud(k + j) for j in range(1, T + 1)], d_t, sm.is_traversable(sem_t),
+                              sem_t == sm.SKY, poses[i], cfg, grey_t)
+            write_mask(labels.blindspot(i), lab.omega, durable=True)
+            write_mask(labels.visibility(i), lab.visibility, durable=True)
             per_frame.append({
                 "frame": i, "blindspot_px": int(lab.omega.sum()), "visible_px": int(lab.visibility.sum()),
                 "blindspot_in_v_px": int((lab.omega & lab.visibility).sum()),
@@ -298,7 +320,7 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
     report.update(
         status="ok", label_frames=len(todo), resumed_frames=skipped,
         unlabelled_tail_frames=int(len(idx) - len(todo)), resampled_indices=idx.tolist(),
-        min_area_px=min_area, seconds=round(elapsed, 3), per_frame=per_frame,
+        min_area_px=cfg.min_area_px(meta.height, meta.width), seconds=round(elapsed, 3), per_frame=per_frame,
     )
     _write_report(out, report)
     return report

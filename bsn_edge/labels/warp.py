@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.labels.config import LabelConfig
 
 LEVELS = 4  # pixel grids of 1, 2, 4, 8
 LOOK_WINDOW = 7        # pixels: looks are compared as the mean over this square, a patch not a pixel
@@ -154,12 +155,13 @@ class Warper:
         Returns ``(s, d_a, hits)``: the OR of the warped masks, the mean of the per-cloud
         z-buffered depths (0 where nothing landed) and how many clouds landed on each pixel.
         """
-        s, d_a, hits, _ = self._splat(clouds, T_wc, margin, False)
+        s, d_a, hits, _ = self.splat_with_grey(clouds, T_wc, margin, False)
         return s, d_a, hits
 
-    def _splat(self, clouds: list[Cloud], T_wc: np.ndarray, margin: float, want_grey: bool):
+    def splat_with_grey(self, clouds: list[Cloud], T_wc: np.ndarray, margin: float, want_grey: bool
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """``splat``, and with ``want_grey`` the grey level of each cloud's nearest point per
-        pixel, ``[len(clouds), H, W]`` (NaN where the cloud did not land)."""
+        pixel, ``[len(clouds), H, W]`` (NaN where the cloud did not land; None without)."""
         h, w = self.intr.height, self.intr.width
         n_px = h * w
         R_cw = T_wc[:3, :3].T.astype(np.float32)
@@ -256,21 +258,20 @@ def look_agrees(grey: np.ndarray, warped_grey: np.ndarray, look_tol: float) -> n
 
 
 def label_frame(warper: Warper, clouds: list[Cloud], depth: np.ndarray, traversable: np.ndarray,
-                sky: np.ndarray, T_wc: np.ndarray, depth_tol: float, vis_range: float,
-                min_area: int, margin: float = 0.5, grey: np.ndarray | None = None,
-                look_tol: float = 0.0) -> FrameLabel:
-    """T-frame blind spots and the visibility mask of one frame from the clouds of later frames;
-    with ``look_tol`` > 0 (clouds made with their pictures, this frame's ``grey``), warped road
-    that looks like this frame's picture is visible too (``look_agrees``)."""
-    by_look = look_tol > 0
+                sky: np.ndarray, T_wc: np.ndarray, cfg: LabelConfig, grey: np.ndarray | None = None) -> FrameLabel:
+    """T-frame blind spots and the visibility mask of one frame from the clouds of later frames,
+    with ``cfg``'s tolerances (``depth_tol``, ``vis_range``, ``min_area`` at this frame's size,
+    ``shrink_margin``); with ``look_tol`` > 0 (clouds made with their pictures, this frame's
+    ``grey``), warped road that looks like this frame's picture is visible too (``look_agrees``)."""
+    by_look = cfg.look_tol > 0
     if by_look and grey is None:
         raise ValueError("comparing by look needs the label frame's grey picture")
-    s, d_a, _, warped_grey = warper._splat(clouds, T_wc, margin, by_look)
+    s, d_a, _, warped_grey = warper.splat_with_grey(clouds, T_wc, cfg.shrink_margin, by_look)
     omega = s & ~traversable & ~sky
-    agree = omega & depth_agrees(depth, d_a, depth_tol) if depth_tol > 0 else np.zeros_like(omega)
+    agree = omega & depth_agrees(depth, d_a, cfg.depth_tol) if cfg.depth_tol > 0 else np.zeros_like(omega)
     omega &= ~agree
-    looks = omega & look_agrees(grey, warped_grey, look_tol) if by_look else np.zeros_like(omega)
+    looks = omega & look_agrees(grey, warped_grey, cfg.look_tol) if by_look else np.zeros_like(omega)
     omega &= ~looks
-    kept = remove_small_components(omega, min_area)
-    vis = sky | ((depth > 0) & (depth < vis_range))
+    kept = remove_small_components(omega, cfg.min_area_px(*depth.shape))
+    vis = sky | ((depth > 0) & (depth < cfg.vis_range))
     return FrameLabel(kept, vis, s, d_a, int(agree.sum()), int(omega.sum() - kept.sum()), int(looks.sum()))

@@ -35,6 +35,7 @@ from bsn_edge.sequence import SequenceMeta
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.train.config import Config
 from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce
+from bsn_edge.train.optim import Optimizer
 from bsn_edge.train.run import Run, RunError
 
 
@@ -153,15 +154,6 @@ def scaled(x: torch.Tensor, scale: float, mode: str = "bilinear") -> torch.Tenso
     return F.interpolate(x, scale_factor=scale, mode=mode, **kw)
 
 
-def _poly(opt: torch.optim.Optimizer, steps: int, power: float) -> torch.optim.lr_scheduler.LambdaLR:
-    return torch.optim.lr_scheduler.LambdaLR(opt, lambda s: max(1.0 - s / steps, 0.0) ** power)
-
-
-def _adam(params, lr: float, cfg: Config) -> torch.optim.Optimizer:
-    t = cfg.train
-    return torch.optim.Adam(params, lr=lr, betas=t.betas, eps=t.eps, weight_decay=t.weight_decay)
-
-
 @dataclass(frozen=True)
 class Datasets:
     """What a training run reads: its clips split by clip (``clips``: train / val / test), the training
@@ -263,8 +255,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
     teacher.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
     dtype = autocast_dtype(cfg, dev)
     model = torch.nn.parallel.DistributedDataParallel(teacher) if world > 1 else teacher
-    opt = _adam(model.parameters(), t.lr, cfg)
-    sched = _poly(opt, t.steps, cfg.train.poly_power)
+    optim = Optimizer(model.parameters(), t.lr, t.steps, cfg.train)
     batches = training_batches(ds, cache, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers, device=dev)
     bar = tqdm(range(t.steps), desc="teacher", disable=True if (not progress or rank) else None, unit="step")
     if rank == 0:
@@ -278,10 +269,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
             logits, _ = model(_layout(scaled(b["image"], t.scale), cl))
         target = scaled(b["semantic"][:, None].float(), t.scale, "nearest")[:, 0].long()
         loss = F.cross_entropy(logits.float(), target, ignore_index=sm.IGNORE)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
+        optim.step(loss)
         losses.append(loss.item())
         bar.set_postfix(ce=f"{losses[-1]:.3f}")
         done = step + 1
@@ -421,15 +409,12 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         model.load_state_dict(init.state_dict())
     model.to(dev)
     start, seconds_before = 0, 0.0
-    opt = _adam(model.parameters(), cfg.train.lr, cfg)
-    sched = _poly(opt, cfg.train.steps, cfg.train.poly_power)
+    optim = Optimizer(model.parameters(), cfg.train.lr, cfg.train.steps, cfg.train)
     if state is not None:
         model.load_state_dict(state["weights"])
-        opt.load_state_dict(state["optimizer"])
+        optim.load_state_dict(state)
         start = int(state["step"])
         seconds_before = float(state.get("seconds", 0.0))
-        if "scheduler" in state:
-            sched.load_state_dict(state["scheduler"])
     model.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
     batches = training_batches(data.train_ds, cache, cfg.train.batch_size, world, rank, cfg.train.seed,
@@ -449,10 +434,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     for step in bar:
         b = next(batches)
         loss, l_bce, l_kd, l_depth = losses(net, b, teacher, cfg, dtype)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
+        optim.step(loss)
         history.append([loss.item(), l_bce.item(), l_kd.item(), l_depth.item()])
         since.append(history[-1])
         bar.set_postfix(loss=f"{loss.item():.3f}", bce=f"{l_bce.item():.3f}", kd=f"{l_kd.item():.4f}",
@@ -473,7 +455,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             since = []
         if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps or out_of_time):
             _save(run, model, cfg, data, done, threshold=None,
-                  resume_state={"optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "step": done,
+                  resume_state={**optim.state_dict(), "step": done,
                                 "torch_rng": torch.get_rng_state(), "seconds": seconds})
         if out_of_time:
             break

@@ -31,7 +31,7 @@ def labels_for(intr, frames, poses, depth_tol=1.0, min_area=0):
     clouds = [w.cloud(f.depth, sm.is_traversable(f.semantic), p) for f, p in zip(frames, poses, strict=True)]
     f0 = frames[0]
     return label_frame(w, clouds[1:], f0.depth, sm.is_traversable(f0.semantic), f0.semantic == sm.SKY,
-                       poses[0], depth_tol, 16.0, min_area)
+                       poses[0], LabelConfig(depth_tol=depth_tol, vis_range=16.0, min_area=min_area))
 
 
 def test_parked_car_gives_blind_spots_behind_it_and_nowhere_else(straight_road):
@@ -135,8 +135,9 @@ def test_look_check_clears_road_a_bloated_outline_hides_and_keeps_true_blind_spo
               for f, p in zip(frames[1:], poses[1:], strict=True)]
 
     def label(look_tol):
-        return label_frame(w, clouds, depth, sm.is_traversable(sem), sem == sm.SKY, poses[0], 1.0, 16.0, 0,
-                           grey=grey(frames[0]), look_tol=look_tol)
+        return label_frame(w, clouds, depth, sm.is_traversable(sem), sem == sm.SKY, poses[0],
+                           LabelConfig(depth_tol=1.0, vis_range=16.0, min_area=0, look_tol=look_tol),
+                           grey=grey(frames[0]))
     off, on = label(0.0), label(8.0)
     gt = frames[0].bsgt
 

@@ -173,28 +173,28 @@ def _two_ranks_in_one_process(cfg, data_dir, init: Path) -> dict:
     averaged, one optimizer step; the buffers are rank 0's (DDP broadcasts them from rank 0)."""
     from bsn_edge.models import create_model
     from bsn_edge.train import trainer
+    from bsn_edge.train.optim import Optimizer
     data_ = trainer.datasets(cfg, data_dir)
     cache = trainer.sample_cache(cfg, data_.train_ds)
     model = create_model(cfg.model.name)
     model.load_state_dict(Run(init).load_model()[0].state_dict())
     model.to(memory_format=torch.channels_last if cfg.train.channels_last else torch.contiguous_format)
-    opt = trainer._adam(model.parameters(), cfg.train.lr, cfg)
-    sched = trainer._poly(opt, cfg.train.steps, cfg.train.poly_power)
+    optim = Optimizer(model.parameters(), cfg.train.lr, cfg.train.steps, cfg.train)
     dtype = trainer.autocast_dtype(cfg, torch.device("cpu"))
     streams = [trainer.training_batches(data_.train_ds, cache, cfg.train.batch_size, 2, r, cfg.train.seed, 0)
                for r in (0, 1)]
     model.train()
     for _ in range(cfg.train.steps):
         b0, b1 = next(streams[0]), next(streams[1])
-        opt.zero_grad(set_to_none=True)
+        optim.opt.zero_grad(set_to_none=True)
         buffers = {k: v.clone() for k, v in model.named_buffers()}
         (trainer.losses(model, b1, None, cfg, dtype)[0] / 2).backward()
         with torch.no_grad():
             for k, v in model.named_buffers():
                 v.copy_(buffers[k])
         (trainer.losses(model, b0, None, cfg, dtype)[0] / 2).backward()
-        opt.step()
-        sched.step()
+        optim.opt.step()
+        optim.sched.step()
     return model.state_dict()
 
 
