@@ -56,7 +56,7 @@ def make_clip(cfg: SynthConfig) -> Clip:
         rig = Rig.draw(cfg.seed)
     else:
         rng = np.random.default_rng([cfg.seed, 0x706F7365])
-        rig = Rig(cfg.hfov_deg, cfg.camera_height, float(rng.uniform(*PITCH_DEG)))
+        rig = Rig(cfg.hfov_deg, cfg.camera_height, float(rng.uniform(*PITCH_DEG)), roll_deg=cfg.roll_deg)
     times = np.arange(cfg.frames) / cfg.fps
     xy, yaw = sc.route.at(sc.start_s + times * sc.speed)
     # the car's level camera, turned by the mounting: x_cam = R x_level, so R_wc = R_w,level R^T

@@ -26,6 +26,7 @@ class SynthConfig:
     camera: str = "vary"           # "vary": each clip draws its own camera from its seed (synth.rig)
     hfov_deg: float = 80.0         # the camera of "fixed" clips
     camera_height: float = REFERENCE_HEIGHT_M
+    roll_deg: float = 0.0          # the roll of "fixed" clips' camera about its optical axis
     bs_range: float = 50.0        # R: blind spots count within this ground distance, metres
     far: float = 250.0            # nothing is rendered beyond this depth
     parked: float = 1.0
@@ -47,6 +48,8 @@ class SynthConfig:
             raise ValueError(f"fps must be in [0.5, 120], got {self.fps}")
         if not 20.0 <= self.hfov_deg <= 150.0:
             raise ValueError(f"hfov_deg must be in [20, 150], got {self.hfov_deg}")
+        if not -15.0 <= self.roll_deg <= 15.0:
+            raise ValueError(f"roll_deg must be in [-15, 15], got {self.roll_deg}")
         if not 0.5 <= self.camera_height <= 4.0:
             raise ValueError(f"camera_height must be in [0.5, 4] m, got {self.camera_height}")
         if not 0 < self.bs_range < self.far:
