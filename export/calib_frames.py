@@ -44,15 +44,41 @@ def _video_frames(path: Path, count: int) -> Iterator[np.ndarray]:
         cap.release()
 
 
+def _sequences(folder: Path) -> list[Path]:
+    """The sequence folders directly inside ``folder`` (none when ``folder`` is one itself)."""
+    if (folder / SequenceFolder.RGB).is_dir():
+        return []
+    return sorted(d for d in folder.iterdir() if d.is_dir() and (d / SequenceFolder.RGB).is_dir())
+
+
+def _from_folder(folder: Path, size: tuple[int, int], count: int, card: ModelCard | None) -> list[np.ndarray]:
+    """Up to ``count`` frames of one folder, evenly spaced, in the model's input: warped into the card's
+    model camera when the folder is a sequence folder with a camera file, else resized."""
+    h, w = size
+    files = _images(folder)
+    picks = np.unique(np.linspace(0, len(files) - 1, min(count, len(files))).round().astype(int)) if files else []
+    frames = [img for k in picks if (img := cv2.imread(str(files[k]), cv2.IMREAD_COLOR)) is not None]
+    if not frames:
+        return []
+    cam_file = SequenceFolder(folder).calibration_path
+    if card is not None and cam_file.is_file():
+        cam, at = Calibration.read(cam_file), card.at_size(h, w)
+        fh, fw = frames[0].shape[:2]
+        mf = cam.model_frame(fw, fh, at.camera, at.mounting)
+        return [mf.to_model(f) for f in frames if f.shape[:2] == (fh, fw)]
+    return [cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in frames]
+
+
 def load_frames(source: str | os.PathLike, size: tuple[int, int], count: int = 64,
                 cache_dir: str | os.PathLike | None = None, card: ModelCard | None = None) -> np.ndarray:
     """``[N, H, W, 3]`` uint8 BGR frames for calibration (``N <= count``), sampled evenly.
 
-    ``source`` is a folder of images (a sequence folder's ``rgb/`` is preferred) or a video file.
-    With ``card`` and a sequence folder that has a camera file, frames are warped into the card's
-    model camera as the runtime warps them; otherwise they are resized. Raises ``ValueError`` when
-    no frame can be read. With ``cache_dir`` the set is cached, keyed by the source's path,
-    modification time, size and count.
+    ``source`` is a folder of images (a sequence folder's ``rgb/`` is preferred), a folder of
+    sequence folders (the count shared evenly between them, each sampled evenly) or a video file.
+    With ``card``, frames of a sequence folder that has a camera file are warped into the card's
+    model camera as the runtime warps them, each clip by its own camera; otherwise they are resized.
+    Raises ``ValueError`` when no frame can be read. With ``cache_dir`` the set is cached, keyed by
+    the source's path, modification time, size and count.
     """
     src = Path(source)
     if not src.exists():
@@ -64,29 +90,23 @@ def load_frames(source: str | os.PathLike, size: tuple[int, int], count: int = 6
         key = Path(cache_dir) / f"calib-{hashlib.sha256(stamp.encode()).hexdigest()[:16]}.npz"
         if key.is_file():
             return np.load(key)["frames"]
-    frames = []
+    frames: list[np.ndarray] = []
     if src.is_dir():
-        files = _images(src)
-        picks = np.unique(np.linspace(0, len(files) - 1, min(count, len(files))).round().astype(int)) if files else []
-        for k in picks:
-            img = cv2.imread(str(files[k]), cv2.IMREAD_COLOR)
-            if img is not None:
-                frames.append(img)
+        seqs = _sequences(src)
+        if seqs:
+            shares = [len(a) for a in np.array_split(np.arange(count), len(seqs))]
+            for seq, n in zip(seqs, shares, strict=True):
+                frames += _from_folder(seq, size, n, card) if n else []
+        else:
+            frames = _from_folder(src, size, count, card)
     elif src.suffix.lower() in VIDEO_EXTS:
-        frames = list(_video_frames(src, count))
+        frames = [cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in _video_frames(src, count)]
     else:
         raise ValueError(f"{src}: a calibration source is a folder of images or a video "
                          f"({', '.join(VIDEO_EXTS)})")
     if not frames:
         raise ValueError(f"{src}: no readable frames for calibration")
-    cam_file = SequenceFolder(src).calibration_path if src.is_dir() else None
-    if card is not None and cam_file is not None and cam_file.is_file():
-        cam, at = Calibration.read(cam_file), card.at_size(h, w)
-        fh, fw = frames[0].shape[:2]
-        mf = cam.model_frame(fw, fh, at.camera, at.mounting)
-        out = np.stack([mf.to_model(f) for f in frames[:count] if f.shape[:2] == (fh, fw)])
-    else:
-        out = np.stack([cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in frames[:count]])
+    out = np.stack(frames[:count])
     if key is not None:
         key.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(key, frames=out)

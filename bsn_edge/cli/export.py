@@ -28,7 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--size", type=parse_size, default=None, metavar="HxW",
                    help="input size (default: the size the run was trained at)")
     p.add_argument("--int8", action="store_true", help="quantize to int8 (needs --calib)")
-    p.add_argument("--calib", help="calibration frames: a folder of images (or sequence folders) or a video")
+    p.add_argument("--calib", help="calibration frames: a folder of images, a sequence folder, a folder of sequence "
+                        "folders (shared evenly, each warped by its own camera) or a video")
     p.add_argument("--calib-frames", type=int, default=64, help="calibration frames to use (default 64)")
     p.add_argument("--method", choices=sorted(METHODS), default="minmax", help="calibration method (default minmax)")
     p.add_argument("--activations", choices=sorted(TYPES), default="uint8", help="activation type (default uint8)")

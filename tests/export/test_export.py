@@ -199,6 +199,25 @@ def test_calibration_sets_from_folders_and_videos(run, tmp_path):
         load_frames(clip / "meta.json", (32, 64))
 
 
+def test_a_folder_of_clips_is_sampled_across_them_each_warped_by_its_own_camera(tmp_path):
+    from bsn_edge.calibration import Calibration
+
+    root = tmp_path / "clips"
+    for seed in (1, 2):      # two clips, two cameras (each clip draws its own)
+        write_clip(SynthConfig(frames=6, height=96, width=192, seed=seed), root / f"c{seed}", video=False)
+    card = card_for(SIZE)
+    got = load_frames(root, SIZE, count=5, card=card)
+    assert got.shape == (5, *SIZE, 3)
+    want = []
+    for name, picks in (("c1", (0, 2, 5)), ("c2", (0, 5))):
+        cam = Calibration.read(root / name / "calibration.json")
+        mf = cam.model_frame(192, 96, card.camera, card.mounting)
+        want += [mf.to_model(cv2.imread(str(root / name / "rgb" / f"{i:06d}.png"))) for i in picks]
+    np.testing.assert_array_equal(got, np.stack(want))
+    resized = cv2.resize(cv2.imread(str(root / "c2" / "rgb" / "000000.png")), SIZE[::-1], interpolation=cv2.INTER_AREA)
+    assert np.abs(got[3].astype(int) - resized).mean() > 5, "the clip's frames were resized, not warped"
+
+
 def test_quantize_directly_reports_its_scheme(run, spread, tmp_path):
     _, clip, _ = run
     _, model, unseen = spread
