@@ -5,7 +5,8 @@
 
 Each model runs as ``bsn-run`` runs it: every clip warped into the model's own camera (its card),
 uint8 frames into the int8 graph, its own threshold. IoU, recall and precision inside V against the
-T-frame labels (warped the same way), pooled over every labelled frame of the set's clips.
+T-frame labels (warped the same way), pooled over every labelled frame of the set's clips; and the
+depth's AbsRel on vehicle and on road pixels, 5-10, 10-20 and 20-40 m, against the clips' exact depth.
 """
 
 from __future__ import annotations
@@ -14,24 +15,47 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from benchmarks.common import write_result
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.metrics import Counts
 from bsn_edge.runtime.engine import Engine
+from bsn_edge.semantics import ROAD, VEHICLES
+
+DEPTH_BINS_M = ((5.0, 10.0), (10.0, 20.0), (20.0, 40.0))
+DEPTH_CLASSES = {"vehicle": VEHICLES, "road": (ROAD,)}
 
 
 def evaluate(engine: Engine, clips, label: str = "T5s") -> dict[str, Any]:
+    """Blind-spot IoU, recall and precision inside V, and the depth's AbsRel on vehicle and road
+    pixels in distance bins (``depth_abs_rel``: class -> "5-10" ... -> value)."""
     card = engine.card
     counts = Counts()
     frames = 0
+    err = {c: np.zeros(len(DEPTH_BINS_M)) for c in DEPTH_CLASSES}
+    n = {c: np.zeros(len(DEPTH_BINS_M)) for c in DEPTH_CLASSES}
     for clip in clips:
         ds = BlindSpotDataset([clip], card.input_size, label_name=label, camera=card.camera, mounting=card.mounting)
         for k in range(len(ds)):
             item = ds.load(k)
-            prob, _ = engine.infer(item["rgb"][None])
+            prob, depth = engine.infer(item["rgb"][None])
             counts.add(prob >= card.threshold, item["blindspot"] > 0, item["visibility"] > 0)
+            pred, true, sem = np.asarray(depth).reshape(item["depth"].shape), item["depth"], item["semantic"]
+            for c, ids in DEPTH_CLASSES.items():
+                on = np.isin(sem, ids)
+                for b, (lo, hi) in enumerate(DEPTH_BINS_M):
+                    m = on & (true >= lo) & (true < hi)
+                    err[c][b] += float(np.sum(np.abs(pred[m] - true[m]) / true[m]))
+                    n[c][b] += int(m.sum())
             frames += 1
-    return {**counts.metrics(), "frames": frames}
+    depth_abs_rel = {c: {f"{lo:g}-{hi:g}": (float(err[c][b] / n[c][b]) if n[c][b] else None)
+                         for b, (lo, hi) in enumerate(DEPTH_BINS_M)} for c in DEPTH_CLASSES}
+    return {**counts.metrics(), "frames": frames, "depth_abs_rel": depth_abs_rel}
+
+
+def _fmt(v: float | None) -> str:
+    return "-" if v is None else f"{v:.3f}"
 
 
 def parse_set(text: str) -> tuple[str, Path, list[str]]:
@@ -60,12 +84,15 @@ def main(argv: list[str] | None = None) -> int:
         for name, clips in sets:
             m = evaluate(engine, clips)
             res[name] = m
+            d = m["depth_abs_rel"]
             rows.append(f"| {Path(mp).name} | {name} | {m['frames']} | {m['iou']:.3f} | {m['recall']:.3f} | "
-                        f"{m['precision']:.3f} |")
+                        f"{m['precision']:.3f} | " + " / ".join(_fmt(v) for v in d["vehicle"].values()) + " | "
+                        + " / ".join(_fmt(v) for v in d["road"].values()) + " |")
         result["models"][Path(mp).name] = res
     md = "\n".join(["# Held-out synthetic IoU, every clip in the model's own camera", "",
                     "Inside V, at each model's own threshold, int8 through onnxruntime as bsn-run runs it.", "",
-                    "| model | clips | frames | IoU | recall | precision |", "|---|---|---|---|---|---|", *rows, "",
+                    "| model | clips | frames | IoU | recall | precision | vehicle depth AbsRel 5-10 / 10-20 / 20-40 m "
+                    "| road depth AbsRel |", "|---|---|---|---|---|---|---|---|", *rows, "",
                     *[f"- {n}: {', '.join(c.path.name for c in cs)}" for n, cs in sets]])
     write_result(args.out, "cameras", result, md)
     print(md)
