@@ -39,6 +39,32 @@ EARLY_MOUNTING = Mounting(height_m=REFERENCE_HEIGHT_M, pitch_deg=1.5)
 
 
 @dataclass(frozen=True)
+class TrainingRecord:
+    """How a model was trained, as its run recorded it: optimizer steps and samples seen in all
+    (every piece and resume of the run), wall-clock hours of training, the clips it trained and
+    validated on, the run it started from (``init``, empty: from scratch) and where its teacher
+    came from."""
+
+    steps: int
+    samples: int
+    hours: float
+    train_clips: int
+    val_clips: int
+    init: str = ""
+    teacher: str = ""
+
+    def __post_init__(self) -> None:
+        if min(self.steps, self.samples, self.train_clips, self.val_clips) < 0 or not self.hours >= 0:
+            raise ValueError(f"a training record counts nothing below zero, got {self}")
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> TrainingRecord:
+        return cls(steps=int(d["steps"]), samples=int(d["samples"]), hours=float(d["hours"]),
+                   train_clips=int(d["train_clips"]), val_clips=int(d["val_clips"]), init=str(d.get("init", "")),
+                   teacher=str(d.get("teacher", "")))
+
+
+@dataclass(frozen=True)
 class SelfTest:
     """A known answer: the model's outputs on ``selftest.test_frame`` pooled to ``grid`` cells,
     and how far a healthy run may stray from them (absolute on probabilities, relative on depth)."""
@@ -77,6 +103,7 @@ class ModelCard:
     config_digest:  digest of the resolved training config
     weights_sha256: sha256 of the trained weights it came from
     train_camera:   the training clips' camera at its own size (``None`` if unknown)
+    training:       how it was trained (:class:`TrainingRecord`; ``None`` if unknown)
     graph_sha256, self_test: the seal of an exported model (empty / ``None`` in a checkpoint)
     """
 
@@ -93,6 +120,7 @@ class ModelCard:
     graph_sha256: str = ""
     self_test: SelfTest | None = field(default=None, repr=False)
     mounting: Mounting = EARLY_MOUNTING
+    training: TrainingRecord | None = None
 
     def __post_init__(self) -> None:
         if not self.variant or not isinstance(self.variant, str):
@@ -135,7 +163,7 @@ class ModelCard:
     # -- checkpoint.json -----------------------------------------------------------------------
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        d = {
             "card_version": CARD_VERSION, "model": MODEL_NAME, "variant": self.variant, "spec": dict(self.spec),
             "input_size": list(self.input_size), "threshold": self.threshold, "camera": self.camera.to_dict(),
             "depth_range": list(self.depth_range), "quantization": self.quantization,
@@ -145,6 +173,9 @@ class ModelCard:
             "self_test": None if self.self_test is None else dataclasses.asdict(self.self_test),
             "mounting": self.mounting.to_dict(),
         }
+        if self.training is not None:       # absent, not null: cards from before it read and digest as they did
+            d["training"] = dataclasses.asdict(self.training)
+        return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "model card") -> ModelCard:
@@ -164,7 +195,7 @@ class ModelCard:
 
         def build(key: str, fn):
             v = get(key, required=key not in ("train_camera", "self_test", "config_digest", "graph_sha256",
-                                              "mounting"))
+                                              "mounting", "training"))
             try:
                 return fn(v)
             except (TypeError, ValueError, KeyError) as e:
@@ -185,6 +216,7 @@ class ModelCard:
             "graph_sha256": build("graph_sha256", lambda v: "" if v is None else str(v)),
             "self_test": build("self_test", _self_test),
             "mounting": build("mounting", lambda v: EARLY_MOUNTING if v is None else Mounting.from_dict(v, "mounting")),
+            "training": build("training", lambda v: None if v is None else TrainingRecord.from_dict(v)),
         }
         try:
             return cls(**card_fields)

@@ -28,7 +28,7 @@ from typing import Any
 
 import torch
 
-from bsn_edge.card import ModelCard
+from bsn_edge.card import ModelCard, TrainingRecord
 from bsn_edge.models import BlindSpotNet, ModelSpec, build, create_teacher, weights_bytes
 from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.train.config import TeacherConfig
@@ -109,7 +109,35 @@ class Run:
             d["card"] = ModelCard.from_dict(d["card"], str(p))
         else:
             d = {"card": ModelCard.from_legacy(d, str(p)), **{k: v for k, v in d.items() if k != "card"}}
+        if d["card"].training is None and (record := self._training_record(d)) is not None:
+            d["card"] = d["card"].replace(training=record)
         return d
+
+    def _training_record(self, info: dict[str, Any]) -> TrainingRecord | None:
+        """How the run was trained: samples and seconds summed over every piece, as the trainer
+        recorded them with the checkpoint (runs from before that: the history's last training record,
+        scaled to the run's last step); the clips from the checkpoint; the start and the teacher from
+        the config. None for a run with neither."""
+        steps = int(info.get("step") or 0)
+        trained = info.get("trained")
+        if trained is None:
+            recs = [r for r in self.history() if r.get("phase") == "train" and r.get("step")]
+            if not recs or not steps:
+                return None
+            scale = steps / recs[-1]["step"]
+            trained = {"samples": recs[-1]["samples"] * scale, "seconds": recs[-1].get("seconds", 0.0) * scale}
+        cfg = self.config()
+
+        def short(path: str) -> str:     # a folder's last two parts: no user's directory layout in a card
+            return "/".join(Path(path).parts[-2:]) if path else ""
+
+        teacher = short(cfg.get("teacher", {}).get("checkpoint", ""))
+        if not teacher and self.teacher_path.is_file():
+            teacher = f"trained in the run, {cfg.get('teacher', {}).get('steps', '?')} steps"
+        return TrainingRecord(steps=steps, samples=round(trained["samples"]),
+                              hours=round(trained["seconds"] / 3600, 2),
+                              train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),
+                              init=short(str(cfg.get("train", {}).get("init", ""))), teacher=teacher)
 
     def card(self) -> ModelCard:
         return self.info()["card"]

@@ -456,7 +456,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps or out_of_time):
             _save(run, model, cfg, data, done, threshold=None,
                   resume_state={**optim.state_dict(), "step": done,
-                                "torch_rng": torch.get_rng_state(), "seconds": seconds})
+                                "torch_rng": torch.get_rng_state(), "seconds": seconds},
+                  trained={"samples": done * cfg.train.batch_size * world, "seconds": round(seconds, 1)})
         if out_of_time:
             break
     elapsed = time.perf_counter() - t0
@@ -483,8 +484,9 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
 
 def _save(run: Run, model, cfg: Config, data: Datasets, step: int, threshold: float | None,
           val: dict | None = None, history: list | None = None,
-          resume_state: dict[str, Any] | None = None) -> ModelCard:
-    """A checkpoint of ``model`` with its card; ``threshold`` None keeps the previous one (if any)."""
+          resume_state: dict[str, Any] | None = None, trained: dict[str, Any] | None = None) -> ModelCard:
+    """A checkpoint of ``model`` with its card; ``threshold`` None keeps the previous one (if any).
+    ``trained``: samples seen and seconds spent up to ``step`` (None keeps the previous record)."""
     first = data.train[0].path
     # the labels' camera (bsn-label --calib's calibration when one was given), else the clip's
     camera = label_camera(SequenceFolder(first).labels(cfg.data.label)) or SequenceMeta.read(first).intrinsics
@@ -506,6 +508,8 @@ def _save(run: Run, model, cfg: Config, data: Datasets, step: int, threshold: fl
         "test_clips": [c.path.name for c in data.clips["test"]],
         "val": val if val is not None else prev.get("val", {}),
     }
+    if (trained := trained or prev.get("trained")) is not None:
+        info["trained"] = trained
     if history:
         info["loss_first_last"] = [history[0], history[-1]]
     return run.save(model, card_fields, info, resume_state)

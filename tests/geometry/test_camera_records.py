@@ -42,3 +42,20 @@ def test_camera_file_round_trip_and_files_from_before_mountings(tmp_path):
     (tmp_path / "bad.json").write_text(json.dumps(bad))
     with pytest.raises(ValueError, match=r"bad\.json.*height_m"):
         Calibration.read(tmp_path / "bad.json")
+
+
+
+def test_the_shipped_card_reads_back_to_its_stored_entries_and_a_card_without_a_record_has_none():
+    """Reading and writing a sealed card gives back exactly the file's ``bsn.*`` entries (the card
+    digest and the signature cover them); a card without a training record carries no entry for it,
+    so cards sealed before the record existed digest as they did."""
+    import onnx
+
+    from tests.runtime.test_failsafe import SHIPPED
+
+    assert "training" not in card_for((64, 128)).to_dict()
+    if not SHIPPED.is_file():
+        pytest.skip("the shipped model is not in this checkout")
+    stored = {p.key: p.value for p in onnx.load(str(SHIPPED), load_external_data=False).metadata_props}
+    card = ModelCard.from_metadata(stored)
+    assert card.to_metadata() == {k: v for k, v in stored.items() if k.startswith("bsn.")}

@@ -11,11 +11,13 @@ from pathlib import Path
 import pytest
 import torch
 
+from bsn_edge.card import TrainingRecord
 from bsn_edge.cli import eval as eval_cli
 from bsn_edge.cli import label as label_cli
 from bsn_edge.cli import synth as synth_cli
 from bsn_edge.cli import train as train_cli
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
+from bsn_edge.export import read_card
 from bsn_edge.train import Run, load_config
 from bsn_edge.train.losses import masked_bce
 
@@ -390,10 +392,20 @@ def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tm
         (pa, da, _), (pb, db, _) = a(x), b(x)
     assert torch.allclose(torch.sigmoid(pa), torch.sigmoid(pb), atol=1e-2)
     assert torch.allclose(da, db, rtol=1e-2) and card.threshold == src.card().threshold
+    # the card says how it was trained (the smoke config: 2 steps of batch 2, a teacher of its own),
+    # in the shipped run and in the exported model alike
+    info = json.loads(src.checkpoint_path.read_text())
+    assert card.training == TrainingRecord(steps=2, samples=4, hours=card.training.hours,
+                                           train_clips=len(info["train_clips"]), val_clips=len(info["val_clips"]),
+                                           init="", teacher="trained in the run, 4 steps")
+    assert 0 <= card.training.hours < 1
+    assert json.loads(dst.checkpoint_path.read_text())["card"]["training"]["steps"] == 2
+    assert read_card(out).training == card.training
     # every tool takes it: fine-tuning from it (its teacher too), evaluation, export
     assert train_cli.main(["--config", SMOKE, "--quiet", "--data", str(data), "--out", str(tmp_path / "ft"),
                            "--set", "data.label=\"T2s\"", "--set", "train.steps=1",
                            "--set", f"train.init=\"{shipped}\"", "--set", f"teacher.checkpoint=\"{shipped}\""]) == 0
+    assert Run(tmp_path / "ft").card().training.init == f"{tmp_path.name}/default"
     assert eval_cli.main(["--run", str(shipped), "--data", str(data), "--clips", "all", "--out",
                           str(tmp_path / "e.json"), "--no-baselines"]) == 0
     assert export_cli.main(["--checkpoint", str(shipped), "--out", str(tmp_path / "again.onnx")]) == 0
