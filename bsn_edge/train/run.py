@@ -209,11 +209,23 @@ class Run:
                 out.append(rec)
         return out
 
+    @classmethod
+    def of_teacher(cls, checkpoint: str | Path) -> Run:
+        """The run a ``teacher.checkpoint`` setting names: a run folder or its ``teacher/`` folder."""
+        src = Path(checkpoint)
+        return cls(src.parent) if src.name == cls.TEACHER else cls(src)
+
     def load_teacher_state(self) -> dict[str, torch.Tensor] | None:
-        """The teacher's weights (None if the run has none); checked against the sha256 the run's
-        ``checkpoint.json`` records for it, where it records one (shipped runs do)."""
+        """The teacher's weights: the run's own, else those of the run its config's
+        ``teacher.checkpoint`` names (a run that trained with a teacher from elsewhere); None if it
+        has none. Checked against the sha256 the holding run's ``checkpoint.json`` records for it,
+        where it records one (shipped runs do)."""
         if not self.teacher_path.is_file():
-            return None
+            named = self.config().get("teacher", {}).get("checkpoint", "")
+            src = Run.of_teacher(named) if named else None
+            if src is None or src.path.resolve() == self.path.resolve() or not src.teacher_path.is_file():
+                return None
+            return src.load_teacher_state()
         data = self.teacher_path.read_bytes()
         if self.checkpoint_path.is_file():
             want = self.info().get("teacher_sha256")

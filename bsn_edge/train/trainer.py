@@ -240,8 +240,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
     dev = train_device(cfg)
     teacher = create_teacher(t.encoder, t.width)
     if t.checkpoint:
-        src = Path(t.checkpoint)
-        state = Run(src.parent).load_teacher_state() if src.name == Run.TEACHER else Run(src).load_teacher_state()
+        state = Run.of_teacher(t.checkpoint).load_teacher_state()
         if state is None:
             raise FileNotFoundError(f"teacher.checkpoint {t.checkpoint}: no teacher/teacher.pt there")
         teacher.load_state_dict(state)

@@ -405,7 +405,12 @@ def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tm
     assert train_cli.main(["--config", SMOKE, "--quiet", "--data", str(data), "--out", str(tmp_path / "ft"),
                            "--set", "data.label=\"T2s\"", "--set", "train.steps=1",
                            "--set", f"train.init=\"{shipped}\"", "--set", f"teacher.checkpoint=\"{shipped}\""]) == 0
-    assert Run(tmp_path / "ft").card().training.init == f"{tmp_path.name}/default"
+    ft = Run(tmp_path / "ft")
+    assert ft.card().training.init == f"{tmp_path.name}/default"
+    # a run whose teacher came from elsewhere still has it (bsn-adapt and shipping need it)
+    assert not ft.teacher_path.exists() and ft.load_teacher() is not None
+    ft.ship(tmp_path / "ft_shipped")
+    assert Run(tmp_path / "ft_shipped").teacher_path.is_file()
     assert eval_cli.main(["--run", str(shipped), "--data", str(data), "--clips", "all", "--out",
                           str(tmp_path / "e.json"), "--no-baselines"]) == 0
     assert export_cli.main(["--checkpoint", str(shipped), "--out", str(tmp_path / "again.onnx")]) == 0
