@@ -232,6 +232,15 @@ def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, repo
     after = agreement(model, held_ds)
     threshold, best = after.best()
     b_th, b_best = before.best()
+    as_trained = at_threshold(before, card.threshold)
+    if best["iou"] < as_trained["iou"]:
+        # never hand out a model that the user's own held-out labels score below the one it came from
+        report["kept_source"] = (f"fine-tuning lowered the agreement with the held-out labels from "
+                                 f"{as_trained['iou']:.3f} to {best['iou']:.3f}: the adapted run is the source "
+                                 "model as it was (more or longer clips may help)")
+        report["fine_tuned_agreement"] = {"threshold": threshold, **best}
+        model, _ = src.load_model()
+        threshold, best = card.threshold, as_trained
     report["split"] = {"train_frames": len(train_ds), "held_out_frames": len(held_ds),
                        "train": [f"{c.path.name}[{c.frames[0]}..{c.frames[-1]}]" for c in train],
                        "held_out": [f"{c.path.name}[{c.frames[0]}..{c.frames[-1]}]" for c in held]}

@@ -81,6 +81,8 @@ def main(argv: list[str] | None = None) -> int:
     a = rep["agreement"]
     print(f"agreement with held-out labels (IoU inside V): before {a['before']['iou']:.3f} at "
           f"{a['before']['threshold']:.2f}, after {a['after']['iou']:.3f} at {a['after']['threshold']:.2f}")
+    if "kept_source" in rep:
+        print(f"kept the source model: {rep['kept_source']}")
     if "export" in rep:
         print(f"wrote {rep['export']['path']}")
     print(f"wrote the adapted run to {args.out} (report: {args.out}/adapt/report.json)")

@@ -107,8 +107,9 @@ def test_adapt_runs_on_a_clip_without_ground_truth(run, user_clip, stand_in_labe
     old, _ = Run(run).load_model()
     same = [torch.equal(p, q) for p, q in zip(old.depth_net.parameters(), model.depth_net.parameters(), strict=True)]
     assert all(same), "D must stay as trained"
-    assert not all(torch.equal(p, q) for p, q in zip(old.blindspot.parameters(), model.blindspot.parameters(),
-                                                      strict=True))
+    changed = not all(torch.equal(p, q) for p, q in zip(old.blindspot.parameters(), model.blindspot.parameters(),
+                                                         strict=True))
+    assert changed == ("kept_source" not in rep), "B is the fine-tuned one unless the source was kept"
     assert "agreement with held-out labels" in capsys.readouterr().out
 
     # the same command again is refused; --resume keeps the labels and fine-tunes again
@@ -120,6 +121,28 @@ def test_adapt_runs_on_a_clip_without_ground_truth(run, user_clip, stand_in_labe
                            "--seed", "1", "--resume", "--quiet"]) == 0
     assert {p.name: p.stat().st_mtime_ns for p in labels.iterdir()} == stamp
     assert json.loads((out / "adapt" / "report.json").read_text())["fine_tune"]["seed"] == 1
+
+
+def test_a_fine_tuning_that_lowers_agreement_hands_back_the_source_model(run, user_clip, stand_in_labellers,
+                                                                          monkeypatch, tmp_path, capsys):
+    seq, _ = user_clip
+
+    def ruin(model, ds, cfg, *args, **kwargs):      # a fine-tuning that leaves B answering "no blind spot"
+        with torch.no_grad():
+            model.blindspot.head.conv.weight.zero_()
+            model.blindspot.head.conv.bias.fill_(-20.0)
+        return [1.0]
+
+    monkeypatch.setattr(pipeline, "finetune_b", ruin)
+    out = tmp_path / "adapted"
+    assert adapt_cli.main(["--run", str(run), "--video", str(seq), "--out", str(out), "--T", "1", "--quiet"]) == 0
+    rep = json.loads((out / "adapt" / "report.json").read_text())
+    assert rep["fine_tuned_agreement"]["iou"] == 0.0 and "kept_source" in rep
+    assert rep["agreement"]["after"]["iou"] == rep["agreement"]["before"]["iou"] > 0
+    (kept, card), (source, src_card) = Run(out).load_model(), Run(run).load_model()
+    assert all(torch.equal(p, q) for p, q in zip(kept.state_dict().values(), source.state_dict().values(), strict=True))
+    assert card.threshold == src_card.threshold
+    assert "kept the source model" in capsys.readouterr().out
 
 
 def test_a_clip_the_depth_head_does_not_fit_is_labelled_from_the_road_plane(run, user_clip, stand_in_labellers,
