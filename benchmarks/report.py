@@ -35,11 +35,18 @@ def _save(fig, out: Path) -> Path:
 
 
 def plot_stages(res: dict, out: Path) -> Path:
-    fig, ax = plt.subplots(figsize=(6, 2.6))
-    names = list(res["stage_ms"])
-    ax.barh(names, [res["stage_ms"][k] for k in names], color="#4477aa")
+    rows = res.get("rows") or [{**res, "clip": "", "model_file": "", "camera_file": True}]
+    stages = list(rows[0]["stage_ms"])
+    labels = [f"{r['clip']} {r['model_file']} {'file' if r['camera_file'] else 'calibrating'}".strip() for r in rows]
+    fig, ax = plt.subplots(figsize=(8, 0.5 + 0.45 * len(rows)))
+    left = [0.0] * len(rows)
+    for s in stages:
+        widths = [r["stage_ms"].get(s, 0.0) for r in rows]
+        ax.barh(labels, widths, left=left, label=s)
+        left = [a + b for a, b in zip(left, widths, strict=True)]
     ax.set_xlabel("ms per frame")
-    ax.set_title(f"bsn-run stages ({res['e2e_fps']:.0f} frames/s end to end)")
+    ax.set_title("bsn-run stages per frame")
+    ax.legend(fontsize=7, ncol=3, loc="lower center", bbox_to_anchor=(0.5, 1.08))
     ax.invert_yaxis()
     return _save(fig, out)
 

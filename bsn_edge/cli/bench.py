@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from bsn_edge.cli.common import CHECKOUT, fail
+from bsn_edge.cli.demo import DEFAULT_MODEL
 
 PROG = "bsn-bench"
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
@@ -81,20 +82,23 @@ def main(argv: list[str] | None = None) -> int:
             _py("-m", "benchmarks.bench_labels", "--out", out)
         if "train_step" in names:
             _py("-m", "benchmarks.bench_train_step", "--data", str(_prepare_data(work)), "--out", out)
-        if {"arch", "quant", "runtime"} & set(names):
-            data, run, model = _prepare(work)
+        if {"arch", "quant"} & set(names):
+            data, run, _ = _prepare(work)
             if "quant" in names:
                 _py("-m", "benchmarks.bench_quant", "--run", str(run), "--data", str(data), "--calib",
                     str(data / "town_0"), "--out", out)
-            if "runtime" in names:
-                clip = data / "town_0" / "video.mp4"
-                if not clip.is_file():
-                    _py("-m", "bsn_edge.cli.synth", str(work / "clip"), "--frames", "300", "--seed", "42", "--force")
-                    clip = work / "clip" / "video.mp4"
-                _py("-m", "benchmarks.bench_runtime", "--model", str(model), "--source", str(clip), "--out", out)
             if "arch" in names:
                 _py("-m", "benchmarks.bench_arch", "--out", out, "--runs", f"small-light={run}", "--data", str(data),
                     "--train-steps", "300", "--work", str(work / "arch"))
+        if "runtime" in names:      # the real clips when at hand, else a synthetic one with its camera
+            source: list[str] = []
+            if not (CHECKOUT.parent / "shared" / "data" / "real" / "udacity_test_video.mp4").is_file():
+                clip = work / "clip" / "video.mp4"
+                if not clip.is_file():
+                    _py("-m", "bsn_edge.cli.synth", str(work / "clip"), "--frames", "300", "--seed", "42",
+                        "--force")
+                source = ["--source", str(clip)]
+            _py("-m", "benchmarks.bench_runtime", "--model", str(DEFAULT_MODEL), *source, "--out", out)
         if "realcam" in names:
             _py("-m", "benchmarks.bench_realcam", "--out", out)
         if "realview" in names:
