@@ -34,6 +34,11 @@ from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.train.config import TeacherConfig
 
 
+def _last_parts(path: str) -> str:
+    """A folder's last two parts ("models/campaign"): no one's directory layout in what is handed out."""
+    return "/".join(Path(path).parts[-2:]) if path else ""
+
+
 class RunError(ValueError):
     """A run folder that cannot be used as asked (damaged, unfinished, or in the way)."""
 
@@ -127,10 +132,7 @@ class Run:
             scale = steps / recs[-1]["step"]
             trained = {"samples": recs[-1]["samples"] * scale, "seconds": recs[-1].get("seconds", 0.0) * scale}
         cfg = self.config()
-
-        def short(path: str) -> str:     # a folder's last two parts: no user's directory layout in a card
-            return "/".join(Path(path).parts[-2:]) if path else ""
-
+        short = _last_parts
         teacher = short(cfg.get("teacher", {}).get("checkpoint", ""))
         if not teacher and self.teacher_path.is_file():
             teacher = f"trained in the run, {cfg.get('teacher', {}).get('steps', '?')} steps"
@@ -281,9 +283,16 @@ class Run:
             atomic_write_bytes(out.teacher_path, tdata)
             record["teacher_sha256"] = hashlib.sha256(tdata).hexdigest()
         atomic_write_bytes(out.model_path, weights)
-        for f in (self.config_path, self.history_path):
-            if f.is_file():
-                atomic_write_bytes(out.path / f.name, f.read_bytes())
+        if self.history_path.is_file():
+            atomic_write_bytes(out.history_path, self.history_path.read_bytes())
+        if self.config_path.is_file():
+            # no path of this machine in a run handed out: the teacher travels with it, the start is named
+            cfg = self.config()
+            if teacher is not None and "teacher" in cfg:
+                cfg["teacher"]["checkpoint"] = ""
+            if cfg.get("train", {}).get("init"):
+                cfg["train"]["init"] = _last_parts(cfg["train"]["init"])
+            out.write_config(cfg)
         out.state_path.unlink(missing_ok=True)
         atomic_write_bytes(out.checkpoint_path, (json.dumps(record, indent=2) + "\n").encode())
         return out
