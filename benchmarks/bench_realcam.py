@@ -188,10 +188,17 @@ def ddad_samples(cameras: str = "front") -> list[Sample]:
     return out
 
 
+def udacity_camera() -> tuple[Calibration, Calibration]:
+    """The Udacity camera as a user makes its file: the chessboard photos (intrinsics and lens), then
+    the mounting step on the clip. Returns (intrinsics only, the whole camera file)."""
+    intr = calibrate(REAL / "camera_cal")
+    return intr, calibrate_mounting(REAL / "udacity_test_video.mp4", intr, lane_width_m=US_LANE_M,
+                                    cfg=MountFitConfig(max_spread_deg=0.3))
+
+
 def udacity_samples(every: int = 6) -> tuple[list[Sample], dict[str, Any]]:
     video = REAL / "udacity_test_video.mp4"
-    intr = calibrate(REAL / "camera_cal")
-    cam = calibrate_mounting(video, intr, lane_width_m=US_LANE_M, cfg=MountFitConfig(max_spread_deg=0.3))
+    intr, cam = udacity_camera()
     m = cam.mounting
     info = {"intrinsics_rms_px": intr.rms_px, "mounting": m.to_dict(), "mounting_report": cam.mounting_report}
     frames = read_video(video)

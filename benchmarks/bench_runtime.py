@@ -26,19 +26,16 @@ from typing import Any
 
 import cv2
 
+from benchmarks.bench_realcam import REAL, udacity_camera
 from benchmarks.common import machine, summary, time_calls, write_result
 from bsn_edge.alerts.senders import CanSender
-from bsn_edge.calibration import Calibration, calibrate
-from bsn_edge.calibration.mount_fit import MountFitConfig
-from bsn_edge.calibration.mounting_step import calibrate_mounting
-from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.calibration import Calibration
+from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.runtime import Engine, open_source, run
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import read_video
 
-REAL = CHECKOUT.parent / "shared" / "data" / "real"
-US_LANE_M = 3.7
 FPS_BAR, FPS_BAR_VNNI = 30.0, 60.0
 SHARE_BAR = 0.9
 TAIL_BAR = 2.0
@@ -70,13 +67,6 @@ def lengthen(video: Path, frames: int, tmp: Path) -> Path:
     return out
 
 
-def udacity_camera() -> Calibration:
-    """The Udacity camera as a user makes its file: chessboard photos, then the mounting step."""
-    intr = calibrate(REAL / "camera_cal")
-    return calibrate_mounting(REAL / "udacity_test_video.mp4", intr, lane_width_m=US_LANE_M,
-                              cfg=MountFitConfig(max_spread_deg=0.3))
-
-
 def profile(engine: Engine, video: Path, frames: int, calibration: Calibration | None) -> dict[str, Any]:
     with CanSender("virtual", "bsn-bench") as tx:
         s = run(engine, open_source(str(video)), [tx], max_frames=frames, camera=CameraState(engine.card, calibration))
@@ -93,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--frames", type=int, default=300)
     args = p.parse_args(argv)
-    models = args.model or [str(CHECKOUT / "models" / "bsn_small_light_int8.onnx")]
+    models = args.model or [str(DEFAULT_MODEL)]
     vnni = "VNNI" in machine()["isa"]
     fps_bar = FPS_BAR_VNNI if vnni else FPS_BAR
     rows: list[dict[str, Any]] = []
@@ -108,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         if not args.source:
             if not (REAL / "udacity_test_video.mp4").is_file():
                 raise SystemExit(f"no real clips in {REAL}: pass --source")
-            clips = [("udacity 1280x720", REAL / "udacity_test_video.mp4", udacity_camera()),
+            clips = [("udacity 1280x720", REAL / "udacity_test_video.mp4", udacity_camera()[1]),
                      ("highway 960x540", REAL / "dashcam_highway.mp4", None)]
         for name, video, cal in clips:
             long = lengthen(video, args.frames, tmp)
