@@ -132,14 +132,13 @@ class Run:
             scale = steps / recs[-1]["step"]
             trained = {"samples": recs[-1]["samples"] * scale, "seconds": recs[-1].get("seconds", 0.0) * scale}
         cfg = self.config()
-        short = _last_parts
-        teacher = short(cfg.get("teacher", {}).get("checkpoint", ""))
+        teacher = _last_parts(cfg.get("teacher", {}).get("checkpoint", ""))
         if not teacher and self.teacher_path.is_file():
             teacher = f"trained in the run, {cfg.get('teacher', {}).get('steps', '?')} steps"
         return TrainingRecord(steps=steps, samples=round(trained["samples"]),
                               hours=round(trained["seconds"] / 3600, 2),
                               train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),
-                              init=short(str(cfg.get("train", {}).get("init", ""))), teacher=teacher)
+                              init=_last_parts(str(cfg.get("train", {}).get("init", ""))), teacher=teacher)
 
     def card(self) -> ModelCard:
         return self.info()["card"]
