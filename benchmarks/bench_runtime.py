@@ -13,6 +13,12 @@ step) and the 960x540 highway clip (no camera file: online calibration only). A 
 ``--frames`` is played forwards then backwards until long enough and re-encoded (MPEG-4 part 2:
 its decode time is not the original's H.264).
 
+Each clip is run in every way the loop can be set (``--loops``), side by side: reading in turn with
+the model or overlapped with it (``RuntimeConfig.overlap``: decode and warp of the next frame on a
+thread of their own), onnxruntime's idle threads spinning or not (``bsn-run --no-spin``), and, while
+calibrating, the estimator's thread at normal or lower priority (``nice``). With overlap the stage
+times are work per frame on two threads: they add up to more than the frame's wall time.
+
 Bars (issue: real time on every 2-core CPU): end to end >= 30 frames/s (>= 60 on a CPU with VNNI),
 >= 90 % of the model's own frames/s, p99 <= 2x p50.
 """
@@ -21,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +38,7 @@ from benchmarks.common import machine, summary, time_calls, write_result
 from bsn_edge.alerts.senders import CanSender
 from bsn_edge.calibration import Calibration
 from bsn_edge.cli.demo import DEFAULT_MODEL
-from bsn_edge.runtime import Engine, open_source, run
+from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import read_video
@@ -67,12 +74,34 @@ def lengthen(video: Path, frames: int, tmp: Path) -> Path:
     return out
 
 
-def profile(engine: Engine, video: Path, frames: int, calibration: Calibration | None) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Loop:
+    """One way of setting the loop: reading overlapped with the model, onnxruntime's threads spinning,
+    the calibration thread's ``nice`` (only while calibrating)."""
+
+    overlap: bool
+    spin: bool
+    nice: int = 10
+
+    @property
+    def name(self) -> str:
+        return f"{'overlap' if self.overlap else 'in turn'}, {'spin' if self.spin else 'no spin'}"
+
+
+LOOPS = {"all": [Loop(o, sp) for o in (False, True) for sp in (True, False)],
+         "default": [Loop(RuntimeConfig.overlap, True)]}
+NICE_BEFORE = 0          # the calibration thread at the loop's own priority: how it ran before
+
+
+def profile(engine: Engine, video: Path, frames: int, calibration: Calibration | None, loop: Loop) -> dict[str, Any]:
+    camera = CameraState(engine.card, calibration, calibrate_nice=loop.nice)
     with CanSender("virtual", "bsn-bench") as tx:
-        s = run(engine, open_source(str(video)), [tx], max_frames=frames, camera=CameraState(engine.card, calibration))
+        s = run(engine, open_source(str(video)), [tx], RuntimeConfig(overlap=loop.overlap), max_frames=frames,
+                camera=camera)
     return {"frames": s["frames"], "e2e_fps": s["fps"], "p50_ms": s["p50_ms"], "p95_ms": s["p95_ms"],
             "p99_ms": s["p99_ms"], "stage_ms": s["stage_ms"], "dropped": s["dropped"], "camera": s["camera"],
-            "model": s["model"]}
+            "model": s["model"], "loop": loop.name, "overlap": loop.overlap, "spin": loop.spin,
+            "calibration_nice": loop.nice if calibration is None else None}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -82,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="a video, with its camera file if it has one (default: the real clips)")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--frames", type=int, default=300)
+    p.add_argument("--loops", choices=sorted(LOOPS), default="all",
+                   help="every way of setting the loop side by side, or only bsn-run's default (default: all)")
     args = p.parse_args(argv)
     models = args.model or [str(DEFAULT_MODEL)]
     vnni = "VNNI" in machine()["isa"]
@@ -103,18 +134,24 @@ def main(argv: list[str] | None = None) -> int:
         for name, video, cal in clips:
             long = lengthen(video, args.frames, tmp)
             for model in models:
-                engine = Engine(model, threads=2)
-                mo = model_only(engine, str(long), min(args.frames, 200), CameraState(engine.card, cal))
-                for calibration in ([cal, None] if cal is not None else [None]):
-                    r = profile(engine, long, args.frames, calibration)
-                    share, tail = r["e2e_fps"] / mo, r["p99_ms"] / r["p50_ms"]
-                    r.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
-                             model_only_fps=mo, e2e_over_model=share, p99_over_p50=tail,
-                             passes={"fps": r["e2e_fps"] >= fps_bar, "share": share >= SHARE_BAR,
-                                     "tail": tail <= TAIL_BAR})
-                    rows.append(r)
-                    print({k: r[k] for k in ("clip", "model_file", "camera_file", "e2e_fps", "model_only_fps",
-                                             "p50_ms", "p99_ms")}, flush=True)
+                for spin in sorted({lp.spin for lp in LOOPS[args.loops]}, reverse=True):
+                    engine = Engine(model, threads=2, spinning=spin)
+                    mo = model_only(engine, str(long), min(args.frames, 200), CameraState(engine.card, cal))
+                    for loop in (lp for lp in LOOPS[args.loops] if lp.spin == spin):
+                        for calibration in ([cal, None] if cal is not None else [None]):
+                            nices = [NICE_BEFORE, loop.nice] if calibration is None and args.loops == "all" else [
+                                loop.nice]
+                            for nice in nices:
+                                r = profile(engine, long, args.frames, calibration, replace(loop, nice=nice))
+                                share, tail = r["e2e_fps"] / mo, r["p99_ms"] / r["p50_ms"]
+                                r.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
+                                         model_only_fps=mo, e2e_over_model=share, p99_over_p50=tail,
+                                         passes={"fps": r["e2e_fps"] >= fps_bar, "share": share >= SHARE_BAR,
+                                                 "tail": tail <= TAIL_BAR})
+                                rows.append(r)
+                                print({k: r[k] for k in ("clip", "model_file", "camera_file", "loop",
+                                                         "calibration_nice", "e2e_fps", "model_only_fps",
+                                                         "p50_ms", "p99_ms")}, flush=True)
     stages = sorted({k for r in rows for k in r["stage_ms"]}, key=lambda k: list(rows[0]["stage_ms"]).index(k)
                     if k in rows[0]["stage_ms"] else 99)
     md = ["# Edge runtime latency profile", "",
@@ -122,12 +159,13 @@ def main(argv: list[str] | None = None) -> int:
           "virtual bus; model only: the same session on the same frames back to back. Bars: end to end "
           f">= {fps_bar:.0f} frames/s ({'VNNI' if vnni else 'no VNNI'} on this CPU), >= {100 * SHARE_BAR:.0f} % "
           f"of model only, p99 <= {TAIL_BAR:.0f}x p50.", "",
-          "| clip | model | camera | end to end frames/s | model only frames/s | ratio | p50 ms | p99 ms | "
+          "| clip | model | camera | loop | end to end frames/s | model only frames/s | ratio | p50 ms | p99 ms | "
           + " | ".join(f"{s} ms" for s in stages) + " | dropped | bars |",
-          "|---|---|---|---|---|---|---|---|" + "---|" * len(stages) + "---|---|"]
+          "|---|---|---|---|---|---|---|---|---|" + "---|" * len(stages) + "---|---|"]
     for r in rows:
         bars = ", ".join(k for k, ok in r["passes"].items() if not ok)
-        md.append(f"| {r['clip']} | {r['model_file']} | {'file' if r['camera_file'] else 'calibrating'} | "
+        cam = "file" if r["camera_file"] else f"calibrating (nice {r['calibration_nice']})"
+        md.append(f"| {r['clip']} | {r['model_file']} | {cam} | {r['loop']} | "
                   f"{r['e2e_fps']:.1f} | {r['model_only_fps']:.1f} | {100 * r['e2e_over_model']:.0f} % | "
                   f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | "
                   + " | ".join(f"{r['stage_ms'].get(s, 0.0):.2f}" for s in stages)

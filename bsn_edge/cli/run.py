@@ -48,6 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="stop after this many frames")
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
     p.add_argument("--no-spin", action="store_true", help="do not let idle onnxruntime threads spin")
+    p.add_argument("--no-overlap", action="store_true",
+                   help="read and warp each frame only after the model has answered the one before (by default "
+                        "the next frame is decoded and warped on a thread of its own while the model runs)")
     p.add_argument("--pace", action="store_true", help="play files at their own frame rate")
     p.add_argument("--trust", metavar="KEYS",
                    help="Ed25519 public key file (or a file or folder of several): refuse any model not signed by "
@@ -221,9 +224,10 @@ def main(argv: list[str] | None = None) -> int:
                     if camera.calibrating and bar.n % 25 == 0:
                         bar.set_postfix_str(camera.progress(), refresh=False)
 
-                summary = run(engine, source, senders, RuntimeConfig(cycle_s=args.cycle), overlay=args.overlay,
-                              log=args.log, max_frames=args.max_frames, progress=tick, camera=camera,
-                              save_maps=maps, stop=stopper.event)
+                cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.no_overlap)
+                summary = run(engine, source, senders, cfg, overlay=args.overlay, log=args.log,
+                              max_frames=args.max_frames, progress=tick, camera=camera, save_maps=maps,
+                              stop=stopper.event)
         except OSError as e:            # an output that could not be opened: the bus has had UNAVAILABLE
             return fail(PROG, f"{e} (UNAVAILABLE sent)" if senders else str(e))
         except Exception as e:          # a fault of the runtime itself: the bus has had UNAVAILABLE

@@ -3,15 +3,22 @@
 The estimator (:class:`~bsn_edge.calibration.mount_fit.MountFit`: corners, optical flow and an
 essential matrix per frame pair) costs more than a frame's warp. It runs on a thread of its own,
 fed one frame in ``every``: the frame loop only copies that frame into a slot of one. When the
-estimator is still busy with the previous one, the loop waits for it (so which frames are used
-does not depend on timing, and the estimator never takes more than one frame's work in ``every``
-frames of the loop's time); with ``every`` frames between, it is done long before. What the loop
+estimator is still busy with the previous one, the loop waits for it (``wait``: so which frames are
+used does not depend on timing, and the estimator never takes more than one frame's work in
+``every`` frames of the loop's time), or, from a live source (``wait=False``), skips the frame
+(counted in ``skipped``); with ``every`` frames between, it is done long before. What the loop
 reads back (:meth:`result`) is the estimate from every frame fed before the last one, taken as that
 one is handed over: the frame at which the loop adopts a mounting does not depend on timing either.
+
+The worker runs at a lower scheduling priority (``nice``; on Linux per thread): on two cores the
+model's threads and the frame path come first, and the estimator takes what they leave. A model
+whose threads spin-wait for each other slows far more when a third thread takes one of its cores
+than the third thread's share would say.
 """
 
 from __future__ import annotations
 
+import os
 import threading
 from typing import Any
 
@@ -22,6 +29,19 @@ from bsn_edge.camera import Intrinsics
 from bsn_edge.mounting import Mounting
 
 
+def lower_priority(nice: int) -> bool:
+    """Lower the calling thread's scheduling priority by ``nice`` (Linux, where a thread is a task of
+    its own); False where that is not possible (other systems, a sandbox that forbids it)."""
+    if not nice or not hasattr(os, "setpriority") or not hasattr(threading, "get_native_id"):
+        return False
+    try:
+        tid = threading.get_native_id()
+        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + nice))
+    except OSError:
+        return False
+    return True
+
+
 class OnlineCalibrator:
     """Feeds frames to a :class:`MountFit` on a worker thread; :meth:`result` is the latest estimate.
 
@@ -29,9 +49,14 @@ class OnlineCalibrator:
     estimate alone)."""
 
     def __init__(self, intrinsics: Intrinsics, dist: tuple[float, ...], height_m: float, every: int = 3,
-                 cfg: MountFitConfig | None = None, background: bool = True) -> None:
+                 cfg: MountFitConfig | None = None, background: bool = True, nice: int = 10,
+                 wait: bool = True) -> None:
         if every < 1:
             raise ValueError(f"every must be >= 1, got {every}")
+        if not 0 <= nice <= 19:
+            raise ValueError(f"nice must be within 0..19, got {nice}")
+        self.nice, self.wait = nice, wait
+        self.skipped = 0
         self.fit = MountFit(intrinsics, dist, cfg or MountFitConfig())
         self.height_m, self.every, self.background = height_m, int(every), background
         self.seen = 0
@@ -59,6 +84,9 @@ class OnlineCalibrator:
             self._step(frame)
             return
         with self._has_work:
+            if self._slot is not None and not self.wait:
+                self.skipped += 1
+                return
             while self._slot is not None and not self._closed:
                 self._has_work.wait()
             if self._closed:
@@ -81,6 +109,7 @@ class OnlineCalibrator:
             self._thread.join(timeout=5.0)
 
     def _work(self) -> None:
+        lower_priority(self.nice)
         while True:
             with self._has_work:
                 while self._slot is None and not self._closed:

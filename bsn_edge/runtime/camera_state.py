@@ -11,6 +11,7 @@ frame (the picture is only resized): the overlay and summary say so.
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -29,13 +30,15 @@ class CameraState:
     Online, about ``CALIBRATE_HZ`` frames a second are fed to the estimator (one in
     ``calibrate_every``; by default chosen from the source's frame rate, :meth:`use_frame_rate`),
     which runs on a thread of its own (:class:`OnlineCalibrator`; ``background=False`` runs it on
-    the caller's). ``close()`` stops that thread."""
+    the caller's) at a lower priority (``calibrate_nice``). ``close()`` stops that thread. Frames
+    may be warped on one thread (the loop's feeder) while another asks for :meth:`progress` or
+    :meth:`summary`: one lock guards the state."""
 
     CALIBRATE_HZ = 8.0
 
     def __init__(self, card: ModelCard, calibration: Calibration | None = None, height_m: float | None = None,
                  save_to: str | Path | None = None, calibrate_every: int | None = None,
-                 background: bool = True) -> None:
+                 background: bool = True, calibrate_nice: int = 10) -> None:
         self.card = card
         self.calibration = calibration
         self.save_to = Path(save_to) if save_to else None
@@ -46,20 +49,26 @@ class CameraState:
         if self.mounting is not None and height_m:
             self.mounting = Mounting(height_m, self.mounting.pitch_deg, self.mounting.yaw_deg, self.mounting.roll_deg)
         self.calibrate_every = None if calibrate_every is None else max(1, int(calibrate_every))
-        self.background = background
+        self.background, self.calibrate_nice = background, calibrate_nice
+        self.calibrate_wait = True
         self.report: dict[str, Any] = {"source": "camera file" if self.mounting else "online"}
         self._calibrator: OnlineCalibrator | None = None
         self._frames: dict[tuple[int, int], ModelFrame] = {}
+        self._lock = threading.RLock()
 
     @property
     def calibrating(self) -> bool:
-        return self.mounting is None
+        with self._lock:
+            return self.mounting is None
 
-    def use_frame_rate(self, fps: float) -> None:
+    def use_frame_rate(self, fps: float, live: bool = False) -> None:
         """The source's frame rate: online calibration then feeds about ``CALIBRATE_HZ`` frames a second
-        (unless ``calibrate_every`` was given)."""
+        (unless ``calibrate_every`` was given). From a ``live`` source the frame path never waits for
+        the estimator: a frame it is too busy for is skipped (from a file it waits, so which frames are
+        used does not depend on timing)."""
         if self.calibrate_every is None and self._calibrator is None and fps > 0:
             self.calibrate_every = max(1, round(fps / self.CALIBRATE_HZ))
+        self.calibrate_wait = not live
 
     def close(self) -> None:
         """Stop online calibration's thread (idempotent)."""
@@ -77,13 +86,14 @@ class CameraState:
         h, w = frame.shape[:2]
         if self.calibrating:
             self._calibrate(frame)
-        key = (h, w)
-        mf = self._frames.get(key)
-        if mf is None or mf.mounting != (self.mounting or self._guess):
-            mf = self.camera_file(w, h).model_frame(w, h, self.card.camera, self.card.mounting,
-                                                    mounting=self.mounting or self._guess)
-            self._frames[key] = mf
-        return mf
+        with self._lock:
+            key = (h, w)
+            mf = self._frames.get(key)
+            if mf is None or mf.mounting != (self.mounting or self._guess):
+                mf = self.camera_file(w, h).model_frame(w, h, self.card.camera, self.card.mounting,
+                                                        mounting=self.mounting or self._guess)
+                self._frames[key] = mf
+            return mf
 
     @property
     def _guess(self) -> Mounting:
@@ -91,27 +101,36 @@ class CameraState:
         return Mounting(self.height_m, m.pitch_deg, m.yaw_deg, m.roll_deg)
 
     def _calibrate(self, frame: np.ndarray) -> None:
+        # only the thread that warps frames feeds the estimator; the lock is held for the state it
+        # changes, not while the frame is handed over (which may wait for the estimator)
         h, w = frame.shape[:2]
         cam = self.camera_file(w, h)
         if self._calibrator is None:
             self._calibrator = OnlineCalibrator(cam.intrinsics.scaled(w, h), cam.dist, self.height_m,
-                                                self.calibrate_every or 1, background=self.background)
+                                                self.calibrate_every or 1, background=self.background,
+                                                nice=self.calibrate_nice, wait=self.calibrate_wait)
         self._calibrator.feed(frame)
         m, report = self._calibrator.result()
-        if report:
-            self.report = {"source": "online", **report}
-        if self._calibrator.error:          # the estimator failed: say so instead of calibrating for ever
-            self.report["error"] = self._calibrator.error
+        with self._lock:
+            if report:
+                self.report = {"source": "online", **report}
+            if self._calibrator.error:          # the estimator failed: say so instead of calibrating for ever
+                self.report["error"] = self._calibrator.error
+            if m is not None:
+                self.mounting = m
+                if self.save_to is not None:
+                    cam.with_mounting(m, **report).write(self.save_to)
+                    self.report["saved"] = str(self.save_to)
         if m is not None:
-            self.mounting = m
-            if self.save_to is not None:
-                cam.with_mounting(m, **report).write(self.save_to)
-                self.report["saved"] = str(self.save_to)
             self._calibrator.close()
 
     def progress(self) -> str:
         """Where online calibration stands, in a line: pairs used and the standard errors of pitch and
         yaw against what convergence needs ("" when not calibrating)."""
+        with self._lock:
+            return self._progress()
+
+    def _progress(self) -> str:
         if not self.calibrating:
             return ""
         r = self.report or {}
@@ -127,7 +146,8 @@ class CameraState:
         return text
 
     def summary(self) -> dict[str, Any]:
-        m = self.mounting
+        with self._lock:
+            m, report = self.mounting, dict(self.report)
         return {"intrinsics": "assumed: the model camera's, rescaled (no camera file)" if self.assumed_intrinsics
                 else "camera file", "mounting": None if m is None else m.to_dict(),
-                "calibrating": self.calibrating, "calibration": self.report}
+                "calibrating": m is None, "calibration": report}

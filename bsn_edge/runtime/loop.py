@@ -32,6 +32,7 @@ from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.engine import Engine
+from bsn_edge.runtime.feeder import Feeder, Prepared
 from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.runtime.overlay import OverlayWriter, draw
 from bsn_edge.runtime.sinks import GuardedSink, SinkFailure
@@ -51,11 +52,19 @@ def blind_spots(prob: np.ndarray, threshold: float, mf: ModelFrame) -> np.ndarra
 
 @dataclass(frozen=True)
 class RuntimeConfig:
+    """How the loop runs: the alerts' state machine, the sectors, health, the send cycle, warm-up
+    inferences before the first frame, and whether reading overlaps the model (:mod:`.feeder`)."""
+
     alerts: AlertConfig = field(default_factory=AlertConfig)
     sectors: SectorConfig = field(default_factory=SectorConfig)
     health: HealthConfig = field(default_factory=HealthConfig)
     cycle_s: float = 0.1
     warmup: int = 3
+    overlap: bool = True         # decode and warp the next frame on a thread of its own while the model runs
+
+    def __post_init__(self) -> None:
+        if not self.cycle_s > 0 or self.warmup < 0:
+            raise ValueError(f"cycle_s must be positive and warmup >= 0, got {self.cycle_s} and {self.warmup}")
 
 
 @dataclass
@@ -87,10 +96,13 @@ class StageTimer:
 class FramePipeline:
     """The runtime's work on one source, stage by stage; :meth:`run` drives it, :func:`run` wires it.
 
-    Per frame: :meth:`read` (the source's frame and its faults), :meth:`warp` (into the model camera,
-    the engine's own input buffer), :meth:`infer`, :meth:`sectors` (mask and depth -> smoothed levels
-    -> the alert published to the send cycle), :meth:`emit` (cycles due by the frame's time, for
-    files) and :meth:`write` (the outputs beside the bus, each a :class:`GuardedSink`).
+    Per frame: :meth:`warp` (into the model camera, an input buffer; on the feeder's thread when
+    reading overlaps the model, :class:`~bsn_edge.runtime.feeder.Feeder`), then on the caller's
+    thread :meth:`read` (the source's frame and its faults), :meth:`infer`, :meth:`sectors` (mask and
+    depth -> smoothed levels -> the alert published to the send cycle), :meth:`emit` (cycles due by
+    the frame's time, for files) and :meth:`write` (the outputs beside the bus, each a
+    :class:`GuardedSink`). Only :meth:`warp` runs on the feeder's thread: health, the alert state and
+    the outputs belong to the caller's.
     """
 
     def __init__(self, engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig,
@@ -104,8 +116,10 @@ class FramePipeline:
         self.emitter = CycleEmitter(senders, self.health, cfg.cycle_s, self.wall)
         self.timer = StageTimer()
         self.latency = LatencyStats()
+        self.waiting = LatencyStats()        # warped frames waiting for the model (overlap)
         self.sinks: dict[str, GuardedSink] = {}
         self.heartbeat: Heartbeat | None = None
+        self.feeder: Feeder | None = None
         self.frames = self.valid = 0
         self.last_shape: tuple[int, ...] | None = None
         self.last_t = 0.0
@@ -117,7 +131,7 @@ class FramePipeline:
         h = self.health
         self.frames += 1
         self.last_t = cap.t
-        h.set_fault(Fault.DROPPED_FRAMES, self.source.dropped)   # live sources drop while we work
+        h.set_fault(Fault.DROPPED_FRAMES, self.dropped)   # live sources drop while we work
         h.set_fault(Fault.SOURCE_RECONNECTS, self.source.reconnects)
         self.timer.add("decode", cap.decode_s)
         if cap.frame is None:
@@ -130,16 +144,21 @@ class FramePipeline:
         self.last_shape = cap.frame.shape
         return True
 
-    def warp(self, frame: np.ndarray) -> ModelFrame:
-        """The frame into the model camera, written into the engine's input buffer."""
-        mf = self.camera.frame_for(frame)
-        self.health.calibrating(self.camera.calibrating)
-        mf.to_model(frame, dst=self.engine.buf[0])
-        return mf
+    @property
+    def dropped(self) -> int:
+        """Frames the model had no time for: skipped by a live source, or replaced in the feeder's slot."""
+        return self.source.dropped + (self.feeder.dropped if self.feeder is not None else 0)
 
-    def infer(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The model on its buffer; None (and counted) when it answers NaN or infinity."""
-        prob, depth = self.engine.infer(self.engine.buf)
+    def warp(self, frame: np.ndarray, buf: np.ndarray) -> tuple[ModelFrame, bool]:
+        """The frame into the model camera, written into the input buffer ``buf``; whether the camera
+        was still calibrating for it."""
+        mf = self.camera.frame_for(frame)
+        mf.to_model(frame, dst=buf[0])
+        return mf, self.camera.calibrating
+
+    def infer(self, buf: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The model on ``buf``; None (and counted) when it answers NaN or infinity."""
+        prob, depth = self.engine.infer(buf)
         if not (np.isfinite(prob).all() and np.isfinite(depth).all()):
             self.health.fault(Fault.NAN_OUTPUTS)
             return None
@@ -181,7 +200,7 @@ class FramePipeline:
     def open(self) -> None:
         """Start the heartbeat (live) and open the outputs; one that cannot be opened raises (the run is
         refused: the user asked for it); later failures only degrade the run."""
-        self.camera.use_frame_rate(self.source.fps)
+        self.camera.use_frame_rate(self.source.fps, live=self.source.live)
         if self.source.live:
             self.heartbeat = Heartbeat(self.emitter).__enter__()
         out = self.outputs
@@ -200,41 +219,47 @@ class FramePipeline:
         if out.maps is not None:
             self.sinks["maps"] = GuardedSink("maps", out.maps.write, None, fault)
 
-    def step(self, cap: Captured) -> None:
-        """One frame through every stage, timed."""
+    def step(self, item: Prepared) -> None:
+        """One prepared frame through the remaining stages, timed."""
+        cap = item.cap
         t0 = time.perf_counter()
         rec: dict[str, Any] = {"frame": cap.index, "t": round(cap.t, 4)}
-        if self.read(cap, rec):
-            mf = self.warp(cap.frame)
-            t1 = time.perf_counter()
-            out = self.infer()
+        self.timer.add("preprocess", item.warp_s)
+        if self.read(cap, rec) and item.mf is not None and item.buf is not None:
+            self.health.calibrating(item.calibrating)
+            out = self.infer(item.buf)
+            self.feeder.release(item.buf)
             t2 = time.perf_counter()
-            self.timer.add("preprocess", t1 - t0)
-            self.timer.add("inference", t2 - t1)
+            self.timer.add("inference", t2 - t0)
             if out is None:
                 rec["fault"] = "nan_output"
             else:
                 prob, depth = out
-                alert, mask = self.sectors(cap, mf, prob, depth)
+                alert, mask = self.sectors(cap, item.mf, prob, depth)
                 self.timer.add("postprocess", time.perf_counter() - t2)
                 rec.update(levels=[s.level.name for s in alert.sectors],
                            scores=[round(s.score, 3) for s in alert.sectors],
                            distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in alert.sectors],
                            state=alert.state.name)
-                self.write(cap, mf, mask, alert, prob, depth)
+                self.write(cap, item.mf, mask, alert, prob, depth)
         t4 = time.perf_counter()
         self.emit(cap)
         t5 = time.perf_counter()
         self.timer.add("send", t5 - t4)
-        self.latency.add(t5 - t0 + cap.decode_s)
+        # the frame's own path, decode to alert; the time it waited for the model is counted apart
+        latency = t5 - t0 + item.warp_s + cap.decode_s
+        self.latency.add(latency)
+        self.waiting.add(max(0.0, t0 - item.ready_at))
         log = self.sinks.get("log")
         if log is not None:
-            rec["latency_ms"] = round(1e3 * (t5 - t0 + cap.decode_s), 2)
+            rec["latency_ms"] = round(1e3 * latency, 2)
             log.write(cap.index, rec)
 
     def close(self) -> None:
         """Whatever ended the run (the source, a signal, an exception): the outputs are finished, then
         the last word on every bus is UNAVAILABLE, since no valid inference is coming any more."""
+        if self.feeder is not None:
+            self.feeder.close()
         for sink in self.sinks.values():
             sink.close(self.frames)
         self.camera.close()
@@ -252,10 +277,13 @@ class FramePipeline:
         """Process the source until it ends, ``max_frames`` or ``stop``; returns the summary."""
         self.engine.warmup(self.cfg.warmup)
         t_start = time.perf_counter()
+        overlap = self.cfg.overlap
+        buffers = [self.engine.buf] + [np.empty_like(self.engine.buf) for _ in range(2 if overlap else 0)]
         try:
             self.open()
-            for cap in self.source:
-                self.step(cap)
+            self.feeder = Feeder(self.source, self.warp, buffers, background=overlap, limit=max_frames)
+            for item in self.feeder:
+                self.step(item)
                 if progress:
                     progress(1)
                 if (max_frames is not None and self.frames >= max_frames) or (stop is not None and stop.is_set()):
@@ -267,9 +295,11 @@ class FramePipeline:
     def summary(self, elapsed: float, stop: threading.Event | None) -> dict[str, Any]:
         card, frames = self.engine.card, self.frames
         maps = self.outputs.maps
-        return {"frames": frames, "valid_frames": self.valid, "dropped": self.source.dropped,
+        return {"frames": frames, "valid_frames": self.valid, "dropped": self.dropped,
+                "overlap": self.cfg.overlap,
                 "seconds": round(elapsed, 3), "fps": frames / elapsed if elapsed else 0.0,
                 **self.latency.percentiles(),
+                "wait_ms": {k.removesuffix("_ms"): v for k, v in self.waiting.percentiles().items()},
                 "stage_ms": self.timer.per_frame_ms(frames), "stage_share": self.timer.shares(),
                 "faults": self.health.faults, "cycles_sent": self.emitter.sent_cycles,
                 "senders": {s.name: vars(s.stats) for s in self.senders},

@@ -1,0 +1,175 @@
+"""Frames read and warped for the model: :class:`Feeder`, on the caller's thread or a thread of its own.
+
+In the background the feeder decodes and warps frame t+1 while the model runs frame t, handing each
+prepared frame over through a slot of one. From a file every frame is used: the feeder waits while
+the slot is full, so a run's outputs do not depend on timing. From a live source the newest frame
+wins: a prepared frame the model had no time for is replaced by the next one and counted in
+``dropped`` (the source itself counts the frames it skipped before they were decoded).
+
+Every prepared frame is warped into an input buffer of its own, which the caller has until it asks
+for the next frame or hands it back (:meth:`Feeder.release`) once the model has read it. Three
+buffers are enough: one in the model, one in the slot, one being written.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from bsn_edge.model_frame import ModelFrame
+from bsn_edge.runtime.sources import Captured, Source
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A frame ready for the model: the capture, its model frame and the buffer it was warped into
+    (both None when the frame did not decode), whether the camera was still calibrating when it was
+    warped, the warp's seconds and when it was ready (``time.perf_counter()``)."""
+
+    cap: Captured
+    mf: ModelFrame | None
+    buf: np.ndarray | None
+    calibrating: bool
+    warp_s: float
+    ready_at: float
+
+
+# (raw frame, input buffer) -> (model frame, calibrating); writes the warped frame into the buffer
+Warp = Callable[[np.ndarray, np.ndarray], tuple[ModelFrame, bool]]
+
+
+class Feeder:
+    """Iterate to get :class:`Prepared` frames of ``source``, at most ``limit``; ``close()`` stops it.
+
+    ``background=False`` reads and warps on the caller's thread, into one buffer (``buffers[0]``).
+    ``background=True`` needs three buffers and uses a thread of its own; an exception there is
+    raised on the caller's thread when the iteration reaches it."""
+
+    def __init__(self, source: Source, warp: Warp, buffers: list[np.ndarray], background: bool,
+                 limit: int | None = None) -> None:
+        if background and len(buffers) < 3:
+            raise ValueError(f"a background feeder needs 3 input buffers, got {len(buffers)}")
+        if not buffers:
+            raise ValueError("a feeder needs an input buffer")
+        self.source, self.warp, self.background, self.limit = source, warp, background, limit
+        self.newest_wins = source.live
+        self._buffers = list(buffers)
+        self._free = list(buffers)
+        self._held: np.ndarray | None = None      # the buffer of the frame the caller has
+        self._cond = threading.Condition()
+        self._slot: Prepared | None = None
+        self._ended = False
+        self._closed = False
+        self._error: BaseException | None = None
+        self._dropped = 0
+        self._thread: threading.Thread | None = None
+
+    @property
+    def dropped(self) -> int:
+        """Prepared frames replaced by a newer one before the model took them (live sources only)."""
+        with self._cond:
+            return self._dropped
+
+    def prepare(self, cap: Captured, buf: np.ndarray) -> Prepared:
+        """``cap`` warped into ``buf`` (nothing to warp when it did not decode)."""
+        if cap.frame is None:
+            return Prepared(cap, None, None, False, 0.0, time.perf_counter())
+        t0 = time.perf_counter()
+        mf, calibrating = self.warp(cap.frame, buf)
+        t1 = time.perf_counter()
+        return Prepared(cap, mf, buf, calibrating, t1 - t0, t1)
+
+    def release(self, buf: np.ndarray | None) -> None:
+        """The model has read ``buf``: the feeder may warp the next frame into it. Asking for the next
+        frame releases the one before anyway; releasing early lets the feeder start sooner."""
+        with self._cond:
+            if buf is None or self._held is None or buf is not self._held:
+                return
+            self._free.append(buf)
+            self._held = None
+            self._cond.notify_all()
+
+    def __iter__(self) -> Iterator[Prepared]:
+        if not self.background:
+            yield from self._inline()
+            return
+        self._thread = threading.Thread(target=self._work, name="bsn-feeder", daemon=True)
+        self._thread.start()
+        while True:
+            self.release(self._held)
+            with self._cond:
+                while self._slot is None and not self._ended:
+                    self._cond.wait()
+                item, self._slot = self._slot, None
+                self._held = None if item is None else item.buf
+                self._cond.notify_all()
+                if item is None:
+                    if self._error is not None:
+                        raise self._error
+                    return
+            yield item
+
+    def close(self) -> None:
+        """Stop reading (idempotent); waits for the feeder's thread to let go of the source and camera."""
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+
+    # -- internals -------------------------------------------------------------------------------
+
+    def _inline(self) -> Iterator[Prepared]:
+        for n, cap in enumerate(self.source, 1):
+            yield self.prepare(cap, self._buffers[0])
+            if self._closed or (self.limit is not None and n >= self.limit):
+                return
+
+    def _take_buffer(self) -> np.ndarray | None:
+        with self._cond:
+            while not self._free and not self._closed:
+                self._cond.wait()
+            return None if self._closed else self._free.pop()
+
+    def _put(self, item: Prepared) -> bool:
+        """Hand ``item`` over; False when the feeder was closed meanwhile."""
+        with self._cond:
+            if self.newest_wins and self._slot is not None:
+                self._dropped += 1
+                if self._slot.buf is not None:
+                    self._free.append(self._slot.buf)
+                self._slot = None
+            while self._slot is not None and not self._closed:
+                self._cond.wait()
+            if self._closed:
+                return False
+            self._slot = item
+            self._cond.notify_all()
+            return True
+
+    def _work(self) -> None:
+        n = 0
+        try:
+            for cap in self.source:
+                buf = self._take_buffer()
+                if buf is None:
+                    return
+                item = self.prepare(cap, buf)
+                if item.buf is None:
+                    self.release(buf)
+                if not self._put(item):
+                    return
+                n += 1
+                if self.limit is not None and n >= self.limit:
+                    return
+        except BaseException as e:        # raised on the consumer's thread, in order after the frames before
+            with self._cond:
+                self._error = e
+        finally:
+            with self._cond:
+                self._ended = True
+                self._cond.notify_all()

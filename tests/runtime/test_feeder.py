@@ -1,0 +1,119 @@
+"""Reading overlapped with the model: every frame from a file, the newest from a live source, no buffer
+written while the model reads it, and the loop's answers the same as reading in turn."""
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
+from bsn_edge.runtime.feeder import Feeder
+from bsn_edge.runtime.sources import Captured, Source
+from tests.runtime.conftest import mounted
+
+
+class ListSource(Source):
+    """Frames filled with their index, ``gap_s`` apart; ``live`` like a camera."""
+
+    def __init__(self, n: int, live: bool = False, gap_s: float = 0.0, shape=(4, 6, 3)) -> None:
+        self.n, self.live, self.gap_s, self.shape = n, live, gap_s, shape
+
+    def __iter__(self):
+        for i in range(self.n):
+            if self.gap_s:
+                time.sleep(self.gap_s)
+            yield Captured(0.1 * i, np.full(self.shape, i % 256, np.uint8), i)
+
+
+def copy_warp(frame, buf):
+    """A warp that writes the frame's value into the whole buffer, slowly enough to race the model."""
+    time.sleep(0.002)
+    buf[...] = frame[0, 0, 0]
+    return None, False
+
+
+def buffers(n=3):
+    return [np.zeros((1, 4, 6, 3), np.uint8) for _ in range(n)]
+
+
+def test_from_a_file_every_frame_in_order_and_no_buffer_written_while_read():
+    feeder = Feeder(ListSource(40), copy_warp, buffers(), background=True)
+    seen = []
+    for item in feeder:
+        time.sleep(0.005)                 # the model is busy; the feeder runs as far ahead as it may
+        # what the model reads is still the frame it was given, not one warped since
+        assert (item.buf == item.cap.index).all(), item.cap.index
+        seen.append(item.cap.index)
+        feeder.release(item.buf)
+    feeder.close()
+    assert seen == list(range(40)) and feeder.dropped == 0
+
+
+def test_from_a_live_source_the_newest_frame_wins_and_the_rest_are_counted():
+    feeder = Feeder(ListSource(60, live=True, gap_s=0.001), copy_warp, buffers(), background=True)
+    seen = []
+    for item in feeder:
+        time.sleep(0.02)
+        assert (item.buf == item.cap.index).all()
+        seen.append(item.cap.index)
+        feeder.release(item.buf)
+    feeder.close()
+    assert seen == sorted(seen) and seen[-1] == 59, "in order, and the last frame is never lost"
+    assert feeder.dropped > 0 and feeder.dropped == 60 - len(seen)
+
+
+def test_at_most_limit_frames_and_errors_reach_the_caller():
+    feeder = Feeder(ListSource(10), copy_warp, buffers(), background=True, limit=4)
+    assert [i.cap.index for i in feeder] == [0, 1, 2, 3], "buffers come back when the next frame is asked for"
+
+    def failing(frame, buf):
+        if frame[0, 0, 0] == 3:
+            raise RuntimeError("the warp failed")
+        return copy_warp(frame, buf)
+
+    feeder, seen = Feeder(ListSource(10), failing, buffers(), background=True), []
+    with pytest.raises(RuntimeError, match="the warp failed"):
+        for item in feeder:
+            seen.append(item.cap.index)
+            feeder.release(item.buf)
+    assert seen == [0, 1, 2], "the frames before the failure are delivered first"
+    with pytest.raises(ValueError, match="3 input buffers"):
+        Feeder(ListSource(1), copy_warp, buffers(2), background=True)
+
+
+def frame_log(path):
+    return [{k: v for k, v in json.loads(x).items() if k != "latency_ms"} for x in path.read_text().splitlines()]
+
+
+@pytest.mark.parametrize("calibrating", [False, True])
+def test_overlap_changes_no_answer(setup, tmp_path, calibrating):
+    """The same frames, the same alerts, the same maps, with reading overlapped or in turn (and while
+    calibrating online, whose estimate is adopted at the same frame either way)."""
+    model, clip = setup
+    out = {}
+    for overlap in (False, True):
+        engine = Engine(model)
+        camera = None if calibrating else mounted(engine, clip)
+        log, maps = tmp_path / f"log{overlap}.jsonl", tmp_path / f"maps{overlap}"
+        summary = run(engine, open_source(str(clip / "video.mp4")), [], RuntimeConfig(overlap=overlap),
+                      log=log, camera=camera, save_maps=maps)
+        assert summary["overlap"] is overlap and summary["frames"] == 15 and summary["dropped"] == 0
+        out[overlap] = frame_log(log), {p.name: p.read_bytes() for p in sorted(maps.iterdir())}
+    assert out[True][0] == out[False][0]
+    assert out[True][1] == out[False][1] and len(out[True][1]) == 30
+
+
+class SlowEngine(Engine):
+    def infer(self, batch):
+        time.sleep(0.03)
+        return super().infer(batch)
+
+
+def test_frames_the_model_had_no_time_for_are_a_fault_on_the_bus(setup):
+    model, _ = setup
+    engine = SlowEngine(model)
+    h, w = engine.size
+    summary = run(engine, ListSource(40, live=True, gap_s=0.003, shape=(h, w, 3)), [], RuntimeConfig(warmup=0))
+    assert summary["dropped"] > 0 and summary["frames"] + summary["dropped"] == 40
+    assert summary["faults"]["dropped_frames"] == summary["dropped"]
