@@ -3,9 +3,12 @@
     python -m benchmarks.bench_floor [--model models/bsn_small_light_int8.onnx] --out benchmarks/results
 
 The floor is how fast the model could run if every multiply-accumulate went at the best int8
-rate onnxruntime reaches on this machine: a stack of dense 3x3 convolutions (with ReLU),
-quantized exactly as ``bsn-export --int8`` quantizes the model (static QDQ, the same
-``QuantConfig``), at the feature sizes of the model's encoder stages. The rate is their MACs
+rate onnxruntime reaches on this machine on the kernels the runtime gives this model: a stack of
+dense 3x3 convolutions (with ReLU), quantized as the model's card says it was (static QDQ, 7-bit
+weights when the model has them), at the feature sizes of the model's encoder stages, in the
+session the runtime would open for the model (the exact uint8 x uint8 kernels for 8-bit weights,
+the fast uint8 x int8 ones for 7-bit weights). Which kernels those are depends on the CPU: VNNI
+dot products, or without VNNI the 7-bit fast path or the exact kernels; the report names it. The rate is their MACs
 over their median latency; the fastest stack is then timed again, one run at a time in alternation
 with the model, and its rate there is the machine's int8 peak. Then:
 
@@ -33,7 +36,7 @@ from onnxruntime.quantization.shape_inference import quant_pre_process
 
 from benchmarks.bench_arch import count_gmacs
 from benchmarks.bench_quant import kernel_times, latency
-from benchmarks.common import write_result
+from benchmarks.common import machine, write_result
 from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
 from bsn_edge.export.seal import read_card
 from bsn_edge.models import create_model
@@ -59,6 +62,15 @@ class ConvStack(torch.nn.Module):
         return self.body(frame)
 
 
+def kernel_class(isa: list[str], seven_bit: bool) -> str:
+    """The int8 kernels a model runs on, on a CPU with instruction sets ``isa`` (``machine()``)."""
+    if "VNNI" in isa or "AVX-VNNI" in isa:
+        return "VNNI dot products (uint8 x int8)"
+    if seven_bit:
+        return "uint8 x int8 without VNNI, exact with 7-bit weights"
+    return "exact uint8 x uint8 (no VNNI, 8-bit weights)"
+
+
 def stack_rate(channels: int, hw: tuple[int, int], cfg: QuantConfig, runs: int, tmp: Path) -> dict:
     """int8 multiply-accumulates per second of one dense stack at feature size ``hw``."""
     torch.manual_seed(0)
@@ -71,18 +83,19 @@ def stack_rate(channels: int, hw: tuple[int, int], cfg: QuantConfig, runs: int, 
     quantize_static(str(pre), str(q), FrameReader(calib), quant_format=QuantFormat.QDQ, per_channel=cfg.per_channel,
                     activation_type=TYPES[cfg.activations], weight_type=TYPES[cfg.weights],
                     calibrate_method=METHODS[cfg.method],
-                    extra_options={"ActivationSymmetric": cfg.activations == "int8"})
+                    reduce_range=cfg.reduce_range, extra_options={"ActivationSymmetric": cfg.activations == "int8"})
     macs = DEPTH * channels * channels * 9 * hw[0] * hw[1]
-    t = latency(q, x.numpy(), runs)
+    t = latency(q, x.numpy(), runs, exact_x64=not cfg.reduce_range)
     return {"channels": channels, "size": list(hw), "gmacs": macs / 1e9, "median_ms": 1e3 * t,
             "tmacs_per_s": macs / t / 1e12, "path": q, "input": x.numpy()}
 
 
-def side_by_side(a: tuple[Path, np.ndarray], b: tuple[Path, np.ndarray], runs: int) -> tuple[float, float]:
+def side_by_side(a: tuple[Path, np.ndarray], b: tuple[Path, np.ndarray], runs: int,
+                 exact_x64: bool = True) -> tuple[float, float]:
     """Median seconds per run of two models timed in alternation (one run of each per round), so
     that the machine's drift during the measurement falls on both alike."""
     # no spinning: an idle session's spinning threads would take the cores from the running one
-    sa, sb = session(a[0], threads=2, spinning=False), session(b[0], threads=2, spinning=False)
+    sa, sb = (session(m[0], threads=2, spinning=False, exact_x64=exact_x64) for m in (a, b))
     ta, tb = [], []
     for _ in range(5):
         sa.run(None, {"frame": a[1]})
@@ -152,7 +165,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     card = read_card(args.model)
     h, w = card.input_size
-    cfg = QuantConfig()
+    cfg = QuantConfig(reduce_range=card.seven_bit_weights)
+    kernels = kernel_class(machine()["isa"], card.seven_bit_weights)
     torch.manual_seed(0)
     gmacs = count_gmacs(create_model(card.variant).eval(), (h, w))
     frame = np.random.default_rng(0).integers(0, 256, (1, h, w, 3), dtype=np.uint8)
@@ -160,7 +174,8 @@ def main(argv: list[str] | None = None) -> int:
         stacks = [stack_rate(c, (h // s, w // s), cfg, args.runs, Path(tmp)) for c, s in STACKS]
         best = max(stacks, key=lambda r: r["tmacs_per_s"])
         # the model and the fastest stack again, alternating: the multiple is a ratio of these two
-        t_model, t_best = side_by_side((Path(args.model), frame), (best["path"], best["input"]), 3 * args.runs)
+        t_model, t_best = side_by_side((Path(args.model), frame), (best["path"], best["input"]), 3 * args.runs,
+                                        exact_x64=not cfg.reduce_range)
         for r in stacks:
             del r["path"], r["input"]
     peak = best["gmacs"] * 1e9 / t_best / 1e12
@@ -170,13 +185,14 @@ def main(argv: list[str] | None = None) -> int:
     total = sum(ops.values())
     model = Path(args.model).resolve()
     shown = model.relative_to(CHECKOUT) if model.is_relative_to(CHECKOUT) else model.name
-    result = {"model": str(shown), "variant": card.variant, "size": [h, w], "scheme": cfg.scheme(),
+    result = {"model": str(shown), "variant": card.variant, "size": [h, w], "scheme": cfg.scheme(), "kernels": kernels,
               "stacks": stacks, "peak_tmacs_per_s": peak, "model_gmacs": gmacs, "model_median_ms": 1e3 * t_model,
               "floor_ms": 1e3 * floor_s, "multiple": multiple, "share_of_peak": 1 / multiple,
               "goal_multiple": GOAL_MULTIPLE, "op_ms": ops, "conv_kinds": convs}
     lines = ["# The shipped model against this machine's int8 floor", "",
-             f"Dense 3x3 stacks ({DEPTH} convolutions + ReLU each), quantized as `bsn-export --int8` does "
-             f"({cfg.scheme()}), onnxruntime with 2 intra-op threads:", "",
+             f"Kernels on this CPU for this model: **{kernels}**.", "",
+             f"Dense 3x3 stacks ({DEPTH} convolutions + ReLU each), quantized as the model was "
+             f"({cfg.scheme()}), onnxruntime with 2 intra-op threads, in the session the runtime opens for it:", "",
              "| channels | feature size | GMACs | median ms | TMAC/s |", "|---|---|---|---|---|"]
     lines += [f"| {r['channels']} | {r['size'][0]}x{r['size'][1]} | {r['gmacs']:.2f} | {r['median_ms']:.2f} | "
               f"{r['tmacs_per_s']:.3f} |" for r in stacks]

@@ -33,9 +33,10 @@ BAR_IOU_DROP = 0.01
 BAR_SPEEDUP, BAR_FPS, GOAL_FPS = 2.5, 60.0, 100.0
 
 
-def latency(path: Path, frame: np.ndarray, runs: int) -> float:
-    """Median seconds per run of the model at ``path`` on ``frame``, after warm-up."""
-    s = session(path, threads=2)
+def latency(path: Path, frame: np.ndarray, runs: int, exact_x64: bool = True) -> float:
+    """Median seconds per run of the model at ``path`` on ``frame``, after warm-up (``exact_x64``: see
+    :func:`bsn_edge.runtime.model_file.session`)."""
+    s = session(path, threads=2, exact_x64=exact_x64)
     return summary(time_calls(lambda _: s.run(None, {"frame": frame}), runs, warmup=10))["median_ms"] / 1e3
 
 

@@ -30,6 +30,7 @@ MODEL_NAME = "BlindSpotNet"
 PREFIX = "bsn."
 CARD_SHA_KEY = f"{PREFIX}card_sha256"
 FP32 = "none (fp32)"
+SEVEN_BIT_WEIGHTS = "(7-bit range)"      # how a quantization scheme says its int8 weights lie in [-64, 63]
 # used only when a run has no validation clips to choose the threshold on (the trainer says so)
 UNCHOSEN_THRESHOLD = 0.5
 _HEX64 = re.compile(r"[0-9a-f]{64}")
@@ -152,6 +153,12 @@ class ModelCard:
     @property
     def sealed(self) -> bool:
         return bool(self.graph_sha256) and self.self_test is not None
+
+    @property
+    def seven_bit_weights(self) -> bool:
+        """int8 weights within [-64, 63]: x86 CPUs without VNNI multiply them by uint8 activations on
+        their fast kernels without saturating, so the model needs no exact uint8 x uint8 kernels."""
+        return SEVEN_BIT_WEIGHTS in self.quantization
 
     def replace(self, **changes: Any) -> ModelCard:
         return dataclasses.replace(self, **changes)

@@ -19,6 +19,7 @@ import onnx
 from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
+from bsn_edge.card import SEVEN_BIT_WEIGHTS
 from bsn_edge.export.fused import NORMALISE
 from bsn_edge.export.seal import read_card, seal
 
@@ -50,7 +51,7 @@ class QuantConfig:
 
     def scheme(self) -> str:
         return (f"static QDQ, activations {self.activations}, weights {self.weights}"
-                f"{' (7-bit range)' if self.reduce_range else ''}{' per-channel' if self.per_channel else ''}, "
+                f"{' ' + SEVEN_BIT_WEIGHTS if self.reduce_range else ''}{' per-channel' if self.per_channel else ''}, "
                 f"{self.method} calibration")
 
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from bsn_edge.card import CARD_SHA_KEY, ModelCard
+from bsn_edge.card import CARD_SHA_KEY, FP32, ModelCard
 from bsn_edge.runtime import selftest
 from bsn_edge.runtime.model_file import ModelFile, session
 from bsn_edge.runtime.trust import UntrustedModelError, verify
@@ -55,7 +55,8 @@ class Engine:
             except UntrustedModelError as e:
                 raise ModelError(str(e)) from None
         try:
-            self.sess = session(mf.path, threads, spinning)
+            # 7-bit weights are exact on every x86 CPU's fast kernels; 8-bit ones need the exact ones
+            self.sess = session(mf.path, threads, spinning, exact_x64=not self.card.seven_bit_weights)
         except Exception as e:
             raise ModelError(f"{self.path}: onnxruntime cannot load it: {e}") from None
         self._check_io()
@@ -80,6 +81,15 @@ class Engine:
             if list(o.shape) != [1, 1, h, w] or o.type != "tensor(float)":
                 raise ModelError(f"{self.path}: output {o.name!r} is {o.type} {list(o.shape)}; a bsn-export model "
                                  f"gives float [1, 1, {h}, {w}] (the card's input size)")
+
+    @property
+    def kernels(self) -> str:
+        """Which onnxruntime kernels the model runs on, as the summary says it."""
+        if self.card.quantization == FP32:
+            return "fp32"
+        if self.card.seven_bit_weights:
+            return "int8: uint8 x int8 (7-bit weights, exact on every x86 CPU)"
+        return "int8: exact uint8 x uint8 on x86 CPUs without VNNI"
 
     @property
     def size(self) -> tuple[int, int]:

@@ -309,7 +309,8 @@ class FramePipeline:
                 "sinks": {name: {"written": k.written, "failure": None if k.ok else vars(k.failure)}
                           for name, k in self.sinks.items()},
                 "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
-                          "quantization": card.quantization, "self_test": self.engine.self_test,
+                          "quantization": card.quantization, "kernels": self.engine.kernels,
+                          "self_test": self.engine.self_test,
                           "signer": self.engine.signer}}
 
 

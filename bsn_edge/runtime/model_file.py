@@ -156,11 +156,18 @@ def _options(threads: int, spinning: bool, profile_prefix: str | None, exact_x64
 
 
 def session(model: str | Path | bytes, threads: int = 2, spinning: bool = True,
-            profile_prefix: str | None = None):
+            profile_prefix: str | None = None, exact_x64: bool = True):
     """An onnxruntime CPU session with ``threads`` intra-op threads on a path or model bytes
-    (profiling into files starting with ``profile_prefix`` when given)."""
+    (profiling into files starting with ``profile_prefix`` when given). ``exact_x64``: onnxruntime's
+    exact uint8 x uint8 kernels on x86 CPUs without VNNI, which 8-bit weights need there; a model
+    with 7-bit weights (:attr:`~bsn_edge.card.ModelCard.seven_bit_weights`) is exact on the faster
+    uint8 x int8 kernels and can do without."""
     import onnxruntime as ort
 
+    if not exact_x64:
+        return ort.InferenceSession(model if isinstance(model, bytes) else str(model),
+                                    _options(threads, spinning, profile_prefix, exact_x64=False),
+                                    providers=["CPUExecutionProvider"])
     so = _options(threads, spinning, profile_prefix, exact_x64=True)
     src = model if isinstance(model, bytes) else str(model)
     try:

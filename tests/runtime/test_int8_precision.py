@@ -63,3 +63,43 @@ def test_uint8_by_int8_convolution_does_not_saturate():
     assert 0 < want.max() < 255 * Y_SCALE, "the test's sums must stay inside the output's range"
     got = session(_qdq_conv(w), threads=1).run(None, {"x": x})[0]
     np.testing.assert_allclose(got, want, atol=Y_SCALE * 1.01)
+
+
+def test_seven_bit_weights_are_exact_on_the_fast_kernels():
+    """Weights in [-64, 63] are why a 7-bit model may skip the exact kernels: pairs of uint8 x int8
+    products then stay inside int16 (2 x 255 x 64 < 32768) on every x86 CPU."""
+    rng = np.random.default_rng(1)
+    x = rng.integers(200, 256, (1, C_IN, SIZE, SIZE), dtype=np.uint8)
+    w = rng.integers(-30, 64, (C_OUT, C_IN, 3, 3)).astype(np.int8)
+    w[:, :, 1, 1] = 63
+    want = _reference(x, w)
+    assert 0 < want.max() < 255 * Y_SCALE
+    got = session(_qdq_conv(w), threads=1, exact_x64=False).run(None, {"x": x})[0]
+    np.testing.assert_allclose(got, want, atol=Y_SCALE * 1.01)
+
+
+def test_the_engine_asks_for_exact_kernels_only_for_8_bit_weights(tmp_path):
+    """The card of a 7-bit model lets the runtime use the fast kernels; any other int8 model gets
+    the exact ones (and the self-test checks the answer either way)."""
+    import torch
+
+    from bsn_edge.export import to_onnx
+    from bsn_edge.models import create_model
+    from bsn_edge.runtime import Engine
+    from tests.cards import card_for
+
+    torch.manual_seed(0)
+    path = tmp_path / "m.onnx"
+    to_onnx(create_model("small-light").eval(), path, card_for((64, 128)))
+    fp32 = Engine(path)
+    assert not fp32.card.seven_bit_weights
+    assert fp32.sess.get_session_options().get_session_config_entry("session.x64quantprecision") == "1"
+    from bsn_edge.export.quantize import QuantConfig
+    from bsn_edge.export.seal import read_card, seal
+
+    seven = tmp_path / "m7.onnx"
+    seal(path, read_card(path).replace(quantization=QuantConfig(reduce_range=True).scheme()), out=seven)
+    engine = Engine(seven)
+    assert engine.card.seven_bit_weights
+    with pytest.raises(Exception, match="x64quantprecision"):
+        engine.sess.get_session_options().get_session_config_entry("session.x64quantprecision")
