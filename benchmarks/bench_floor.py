@@ -37,13 +37,13 @@ from onnxruntime.quantization.shape_inference import quant_pre_process
 from benchmarks.bench_arch import count_gmacs
 from benchmarks.bench_quant import kernel_times, latency
 from benchmarks.common import machine, write_result
+from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
 from bsn_edge.export.seal import read_card
 from bsn_edge.models import create_model
 from bsn_edge.runtime.model_file import session
 
 CHECKOUT = Path(__file__).resolve().parents[1]
-DEFAULT_MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
 # (channels, stride below the input) of dense 3x3 stacks: ResNet stages at 1/4 to 1/32
 STACKS = ((64, 4), (128, 8), (256, 16), (512, 32))
 DEPTH = 6          # convolutions per stack

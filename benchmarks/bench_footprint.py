@@ -27,12 +27,13 @@ from pathlib import Path
 
 from benchmarks.common import write_result
 from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.cli.demo import DEFAULT_MODEL
 
 BASE_MODULES = "numpy, cv2, onnxruntime, can, cantools, serial, tqdm"
 OLD_PATH = "torch, onnx, onnxruntime.quantization"
 GOAL_IMPORT = 1.15       # bsn-run's import within 15 % of the base dependencies alone
 GOAL_RSS_MB = 150.0
-MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
+MODEL = DEFAULT_MODEL
 
 
 def site_mb(python: str) -> float:

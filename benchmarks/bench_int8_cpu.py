@@ -25,13 +25,14 @@ import numpy as np
 
 from benchmarks.common import summary, time_calls, write_result
 from bsn_edge.card import ModelCard
+from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.export import quantize, to_onnx
 from bsn_edge.export.quantize import QuantConfig
 from bsn_edge.models import create_model
 from bsn_edge.runtime import selftest
 from bsn_edge.runtime.model_file import ModelFile, session
 
-SHIPPED = Path(__file__).resolve().parents[1] / "models" / "bsn_small_light_int8.onnx"
+SHIPPED = DEFAULT_MODEL
 ROUNDS, CALLS = 6, 20
 
 

@@ -34,13 +34,14 @@ from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.calibration.mounting_step import calibrate_mounting
 from bsn_edge.camera import Intrinsics
-from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.cli.common import REAL_DATA
+from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.mounting import Mounting
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.media import read_video
 from bsn_edge.synth.sheet import tint
 
-REAL = CHECKOUT.parent / "shared" / "data" / "real"
+REAL = REAL_DATA
 BINS = ((5, 10), (10, 20), (20, 40), (5, 40))
 ROAD_TOL_M = 0.15
 OBJECT_M = (0.3, 2.5)
@@ -284,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--model", action="append", help="exported models to compare (default: the shipped one)")
     args = p.parse_args(argv)
-    models = args.model or [str(CHECKOUT / "models" / "bsn_small_light_int8.onnx")]
+    models = args.model or [str(DEFAULT_MODEL)]
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to measure")
         return 0

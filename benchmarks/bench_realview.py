@@ -27,7 +27,7 @@ from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_sample
 from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import Intrinsics
-from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.media import read_video
@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to show")
         return 0
-    specs = args.model or [str(CHECKOUT / "models" / "bsn_small_light_int8.onnx")]
+    specs = args.model or [str(DEFAULT_MODEL)]
     models = {}
     for spec in specs:
         name, _, path = spec.rpartition("=")

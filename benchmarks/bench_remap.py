@@ -25,12 +25,12 @@ import cv2
 from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.camera import Intrinsics
-from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.cli.common import REAL_DATA
+from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.mounting import Mounting
 from bsn_edge.sequence.media import read_video
 
-REAL = CHECKOUT.parent / "shared" / "data" / "real"
-MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
+REAL, MODEL = REAL_DATA, DEFAULT_MODEL
 GOAL = 0.95
 
 

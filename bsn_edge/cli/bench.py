@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from bsn_edge.cli.common import CHECKOUT, fail
+from bsn_edge.cli.common import CHECKOUT, REAL_DATA, fail
 from bsn_edge.cli.demo import DEFAULT_MODEL
 
 PROG = "bsn-bench"
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
                     "--train-steps", "300", "--work", str(work / "arch"))
         if "runtime" in names:      # the real clips when at hand, else a synthetic one with its camera
             source: list[str] = []
-            if not (CHECKOUT.parent / "shared" / "data" / "real" / "udacity_test_video.mp4").is_file():
+            if not (REAL_DATA / "udacity_test_video.mp4").is_file():
                 clip = work / "clip" / "video.mp4"
                 if not clip.is_file():
                     _py("-m", "bsn_edge.cli.synth", str(work / "clip"), "--frames", "300", "--seed", "42",

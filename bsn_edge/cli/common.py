@@ -9,6 +9,8 @@ from pathlib import Path
 
 # the source checkout this package runs from (editable install): benchmarks/ and models/ live here
 CHECKOUT = Path(__file__).resolve().parents[2]
+# the real development data, beside the checkout (tests and benchmarks that need it skip without it)
+REAL_DATA = CHECKOUT.parent / "shared" / "data" / "real"
 
 
 def parse_size(text: str) -> tuple[int, int]:

@@ -1,7 +1,6 @@
 """bsn-calibrate on rendered chessboards with known intrinsics and distortion, and on real photos."""
 
 import json
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -10,9 +9,10 @@ import pytest
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli import calibrate as calib_cli
+from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.mounting import Mounting
 
-REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "camera_cal"
+REAL = REAL_DATA / "camera_cal"
 K_TRUE = np.array([[520.0, 0, 322.0], [0, 515.0, 236.0], [0, 0, 1]])
 DIST_TRUE = np.array([-0.28, 0.09, 0.0005, -0.0003, 0.0])
 W, H = 640, 480

@@ -10,10 +10,11 @@ import pytest
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli import run as run_cli
+from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.mounting import Mounting
 
 ROOT = Path(__file__).resolve().parents[2]
-MODEL = ROOT / "models" / "bsn_small_light_int8.onnx"
+MODEL = DEFAULT_MODEL
 
 
 def camera_file(tmp_path: Path, **changes) -> Path:

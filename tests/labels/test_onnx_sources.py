@@ -1,13 +1,13 @@
 """``--depth onnx:MODEL`` and ``--seg onnx:MODEL`` with small models the tests build."""
 
 import shutil
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
 from bsn_edge import semantics as sm
+from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.labels import ClipRejectedError, LabelConfig, Sources, label_sequence, labels_dir
 from bsn_edge.labels.generator import StaleLabelsError
 from bsn_edge.labels.sources.base import ClipData
@@ -19,7 +19,7 @@ from bsn_edge.synth import SynthConfig, write_clip
 from tests.labels.onnx_models import channel_model
 
 CFG = LabelConfig(rate=5.0, horizon_s=1.0)
-SHIPPED = Path(__file__).resolve().parents[2] / "models" / "bsn_small_light_int8.onnx"
+SHIPPED = DEFAULT_MODEL
 IDENTITY_NORM = {"bsn.mean": [0, 0, 0], "bsn.std": [1, 1, 1]}
 
 

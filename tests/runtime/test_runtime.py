@@ -3,7 +3,6 @@
 import json
 import threading
 import time
-from pathlib import Path
 
 import can
 import cv2
@@ -17,6 +16,7 @@ from bsn_edge.alerts.can_codec import decode
 from bsn_edge.alerts.senders import CanSender, SerialSender
 from bsn_edge.cli import listen as listen_cli
 from bsn_edge.cli import run as run_cli
+from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.sources import ImageFolderSource
 from tests.fakes import FullBus, GonePort
@@ -199,7 +199,7 @@ def test_saved_maps_and_overlay_are_in_the_raw_frames_pixels(setup, tmp_path):
     assert (maps / f"{first}_depth.png").stat().st_mtime_ns > before[f"{first}_depth.png"]
 
 
-REAL_CLIP = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "dashcam_highway.mp4"
+REAL_CLIP = REAL_DATA / "dashcam_highway.mp4"
 
 
 @pytest.mark.skipif(not REAL_CLIP.is_file(), reason="the real dashcam clip (../shared/data/real) is not present")
