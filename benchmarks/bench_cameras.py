@@ -19,7 +19,7 @@ import numpy as np
 
 from benchmarks.common import write_result
 from bsn_edge.data import BlindSpotDataset, find_clips
-from bsn_edge.metrics import Counts
+from bsn_edge.metrics import Counts, DepthBins
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.semantics import ROAD, VEHICLES
 
@@ -33,8 +33,7 @@ def evaluate(engine: Engine, clips, label: str = "T5s") -> dict[str, Any]:
     card = engine.card
     counts = Counts()
     frames = 0
-    err = {c: np.zeros(len(DEPTH_BINS_M)) for c in DEPTH_CLASSES}
-    n = {c: np.zeros(len(DEPTH_BINS_M)) for c in DEPTH_CLASSES}
+    pooled = {c: DepthBins(DEPTH_BINS_M) for c in DEPTH_CLASSES}
     for clip in clips:
         ds = BlindSpotDataset([clip], card.input_size, label_name=label, camera=card.camera, mounting=card.mounting)
         for k in range(len(ds)):
@@ -44,13 +43,9 @@ def evaluate(engine: Engine, clips, label: str = "T5s") -> dict[str, Any]:
             pred, true, sem = np.asarray(depth).reshape(item["depth"].shape), item["depth"], item["semantic"]
             for c, ids in DEPTH_CLASSES.items():
                 on = np.isin(sem, ids)
-                for b, (lo, hi) in enumerate(DEPTH_BINS_M):
-                    m = on & (true >= lo) & (true < hi)
-                    err[c][b] += float(np.sum(np.abs(pred[m] - true[m]) / true[m]))
-                    n[c][b] += int(m.sum())
+                pooled[c].add(pred[on], true[on])
             frames += 1
-    depth_abs_rel = {c: {f"{lo:g}-{hi:g}": (float(err[c][b] / n[c][b]) if n[c][b] else None)
-                         for b, (lo, hi) in enumerate(DEPTH_BINS_M)} for c in DEPTH_CLASSES}
+    depth_abs_rel = {c: pooled[c].abs_rel() for c in DEPTH_CLASSES}
     return {**counts.metrics(), "frames": frames, "depth_abs_rel": depth_abs_rel}
 
 

@@ -36,6 +36,7 @@ from bsn_edge.calibration.mounting_step import calibrate_mounting
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.metrics import depth_by_bin
 from bsn_edge.mounting import Mounting
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.media import read_video
@@ -244,16 +245,7 @@ def predict(engine: Engine, sample: Sample, way: str) -> tuple[np.ndarray, np.nd
 
 
 def metrics(pred: np.ndarray, truth: np.ndarray) -> dict[str, dict[str, float]]:
-    out = {}
-    for lo, hi in BINS:
-        m = (truth >= lo) & (truth < hi) & (pred > 0)
-        if m.sum() < 5:
-            continue
-        r = pred[m] / truth[m]
-        out[f"{lo}-{hi}"] = {"n": int(m.sum()), "abs_rel": float(np.mean(np.abs(r - 1))),
-                             "median_ratio": float(np.median(r)),
-                             "delta_1.25": float(np.mean(np.maximum(r, 1 / r) < 1.25))}
-    return out
+    return depth_by_bin(pred, truth, BINS, min_points=5)
 
 
 def object_distances(pred: np.ndarray, sample: Sample) -> tuple[np.ndarray, np.ndarray]:

@@ -1,4 +1,5 @@
-"""IoU, recall and precision of blind-spot masks inside the visibility mask V."""
+"""IoU, recall and precision of blind-spot masks inside the visibility mask V; depth errors by
+distance bin."""
 
 from __future__ import annotations
 
@@ -44,3 +45,46 @@ class ThresholdSweep:
         scores = [c.metrics() for c in self.counts]
         k = int(np.argmax([s["iou"] for s in scores]))
         return float(self.thresholds[k]), scores[k]
+
+
+def bin_name(lo: float, hi: float) -> str:
+    """How a distance bin ``[lo, hi)`` metres is named in reports: ``"5-10"``."""
+    return f"{lo:g}-{hi:g}"
+
+
+def depth_by_bin(pred: np.ndarray, truth: np.ndarray, bins, min_points: int = 1) -> dict[str, dict[str, float]]:
+    """Per distance bin ``[lo, hi)`` of the true depth, over the points with a prediction (> 0): their
+    number, AbsRel (mean ``|pred / truth - 1|``), median ratio ``pred / truth`` and the share within
+    a factor 1.25; bins with fewer than ``min_points`` points are left out."""
+    pred, truth = np.asarray(pred, np.float64).ravel(), np.asarray(truth, np.float64).ravel()
+    out = {}
+    for lo, hi in bins:
+        m = (truth >= lo) & (truth < hi) & (pred > 0)
+        if m.sum() < max(1, min_points):
+            continue
+        r = pred[m] / truth[m]
+        out[bin_name(lo, hi)] = {"n": int(m.sum()), "abs_rel": float(np.mean(np.abs(r - 1))),
+                                 "median_ratio": float(np.median(r)),
+                                 "delta_1.25": float(np.mean(np.maximum(r, 1 / r) < 1.25))}
+    return out
+
+
+class DepthBins:
+    """AbsRel per distance bin pooled over many frames, in constant memory (sums per bin)."""
+
+    def __init__(self, bins) -> None:
+        self.bins = tuple(bins)
+        self.err = np.zeros(len(self.bins))
+        self.n = np.zeros(len(self.bins), np.int64)
+
+    def add(self, pred: np.ndarray, truth: np.ndarray) -> None:
+        """Points of one frame (arrays of the same shape, already restricted to what is scored)."""
+        for b, stats in enumerate(depth_by_bin(pred, truth, self.bins).get(bin_name(*k)) for k in self.bins):
+            if stats is not None:
+                self.err[b] += stats["abs_rel"] * stats["n"]
+                self.n[b] += stats["n"]
+
+    def abs_rel(self) -> dict[str, float | None]:
+        """AbsRel per bin over every point added (None where a bin had none)."""
+        return {bin_name(lo, hi): (float(self.err[b] / self.n[b]) if self.n[b] else None)
+                for b, (lo, hi) in enumerate(self.bins)}
