@@ -15,9 +15,9 @@ its decode time is not the original's H.264).
 
 Each clip is run in every way the loop can be set (``--loops``), side by side: reading in turn with
 the model or overlapped with it (``RuntimeConfig.overlap``: decode and warp of the next frame on a
-thread of their own), onnxruntime's idle threads spinning or not (``bsn-run --no-spin``), and, while
-calibrating, the estimator's thread at normal or lower priority (``nice``). With overlap the stage
-times are work per frame on two threads: they add up to more than the frame's wall time.
+thread of their own) and onnxruntime's idle threads spinning or not (``bsn-run --no-spin``). With
+overlap the stage times are work per frame on two threads: they add up to more than the frame's
+wall time.
 
 Bars (issue: real time on every 2-core CPU): end to end >= 30 frames/s (>= 60 on a CPU with VNNI),
 >= 90 % of the model's own frames/s, p99 <= 2x p50.
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -76,12 +76,10 @@ def lengthen(video: Path, frames: int, tmp: Path) -> Path:
 
 @dataclass(frozen=True)
 class Loop:
-    """One way of setting the loop: reading overlapped with the model, onnxruntime's threads spinning,
-    the calibration thread's ``nice`` (only while calibrating)."""
+    """One way of setting the loop: reading overlapped with the model, onnxruntime's threads spinning."""
 
     overlap: bool
     spin: bool
-    nice: int = 10
 
     @property
     def name(self) -> str:
@@ -90,18 +88,16 @@ class Loop:
 
 LOOPS = {"all": [Loop(o, sp) for o in (False, True) for sp in (True, False)],
          "default": [Loop(RuntimeConfig.overlap, True)]}
-NICE_BEFORE = 0          # the calibration thread at the loop's own priority: how it ran before
 
 
 def profile(engine: Engine, video: Path, frames: int, calibration: Calibration | None, loop: Loop) -> dict[str, Any]:
-    camera = CameraState(engine.card, calibration, calibrate_nice=loop.nice)
+    camera = CameraState(engine.card, calibration)
     with CanSender("virtual", "bsn-bench") as tx:
         s = run(engine, open_source(str(video)), [tx], RuntimeConfig(overlap=loop.overlap), max_frames=frames,
                 camera=camera)
     return {"frames": s["frames"], "e2e_fps": s["fps"], "p50_ms": s["p50_ms"], "p95_ms": s["p95_ms"],
-            "p99_ms": s["p99_ms"], "stage_ms": s["stage_ms"], "dropped": s["dropped"], "camera": s["camera"],
-            "model": s["model"], "loop": loop.name, "overlap": loop.overlap, "spin": loop.spin,
-            "calibration_nice": loop.nice if calibration is None else None}
+            "p99_ms": s["p99_ms"], "wait_ms": s["wait_ms"], "stage_ms": s["stage_ms"], "dropped": s["dropped"],
+            "camera": s["camera"], "model": s["model"], "loop": loop.name, "overlap": loop.overlap, "spin": loop.spin}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -139,19 +135,15 @@ def main(argv: list[str] | None = None) -> int:
                     mo = model_only(engine, str(long), min(args.frames, 200), CameraState(engine.card, cal))
                     for loop in (lp for lp in LOOPS[args.loops] if lp.spin == spin):
                         for calibration in ([cal, None] if cal is not None else [None]):
-                            nices = [NICE_BEFORE, loop.nice] if calibration is None and args.loops == "all" else [
-                                loop.nice]
-                            for nice in nices:
-                                r = profile(engine, long, args.frames, calibration, replace(loop, nice=nice))
-                                share, tail = r["e2e_fps"] / mo, r["p99_ms"] / r["p50_ms"]
-                                r.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
-                                         model_only_fps=mo, e2e_over_model=share, p99_over_p50=tail,
-                                         passes={"fps": r["e2e_fps"] >= fps_bar, "share": share >= SHARE_BAR,
-                                                 "tail": tail <= TAIL_BAR})
-                                rows.append(r)
-                                print({k: r[k] for k in ("clip", "model_file", "camera_file", "loop",
-                                                         "calibration_nice", "e2e_fps", "model_only_fps",
-                                                         "p50_ms", "p99_ms")}, flush=True)
+                            r = profile(engine, long, args.frames, calibration, loop)
+                            share, tail = r["e2e_fps"] / mo, r["p99_ms"] / r["p50_ms"]
+                            r.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
+                                     model_only_fps=mo, e2e_over_model=share, p99_over_p50=tail,
+                                     passes={"fps": r["e2e_fps"] >= fps_bar, "share": share >= SHARE_BAR,
+                                             "tail": tail <= TAIL_BAR})
+                            rows.append(r)
+                            print({k: r[k] for k in ("clip", "model_file", "camera_file", "loop", "e2e_fps",
+                                                     "model_only_fps", "p50_ms", "p99_ms")}, flush=True)
     stages = sorted({k for r in rows for k in r["stage_ms"]}, key=lambda k: list(rows[0]["stage_ms"]).index(k)
                     if k in rows[0]["stage_ms"] else 99)
     md = ["# Edge runtime latency profile", "",
@@ -164,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
           "|---|---|---|---|---|---|---|---|---|" + "---|" * len(stages) + "---|---|"]
     for r in rows:
         bars = ", ".join(k for k, ok in r["passes"].items() if not ok)
-        cam = "file" if r["camera_file"] else f"calibrating (nice {r['calibration_nice']})"
+        cam = "file" if r["camera_file"] else "calibrating"
         md.append(f"| {r['clip']} | {r['model_file']} | {cam} | {r['loop']} | "
                   f"{r['e2e_fps']:.1f} | {r['model_only_fps']:.1f} | {100 * r['e2e_over_model']:.0f} % | "
                   f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | "

@@ -10,10 +10,12 @@ used does not depend on timing, and the estimator never takes more than one fram
 reads back (:meth:`result`) is the estimate from every frame fed before the last one, taken as that
 one is handed over: the frame at which the loop adopts a mounting does not depend on timing either.
 
-The worker runs at a lower scheduling priority (``nice``; on Linux per thread): on two cores the
-model's threads and the frame path come first, and the estimator takes what they leave. A model
-whose threads spin-wait for each other slows far more when a third thread takes one of its cores
-than the third thread's share would say.
+When the loop does not wait for it (a live source), the worker runs at a lower scheduling priority
+(``nice``; on Linux per thread): on two cores the model's threads and the frame path come first,
+and the estimator takes what they leave (a model whose threads spin-wait for each other slows far
+more when a third thread takes one of its cores than that thread's share would say). When the loop
+waits for it (a file), it keeps the loop's priority: a loop waiting on a thread that yields to the
+loop's own threads would only wait longer.
 """
 
 from __future__ import annotations
@@ -109,7 +111,8 @@ class OnlineCalibrator:
             self._thread.join(timeout=5.0)
 
     def _work(self) -> None:
-        lower_priority(self.nice)
+        if not self.wait:
+            lower_priority(self.nice)
         while True:
             with self._has_work:
                 while self._slot is None and not self._closed:

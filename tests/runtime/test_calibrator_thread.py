@@ -41,14 +41,15 @@ def nice_of(tid: int) -> int:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread priority is read from /proc")
-def test_the_estimator_runs_below_the_frame_paths_priority():
-    cal = calibrator(SlowFit(0.0), nice=10)
-    cal.feed(frame(0))
-    time.sleep(0.1)
+def test_the_estimator_runs_below_the_frame_paths_priority_unless_the_loop_waits_for_it():
     own = nice_of(threading.get_native_id())
-    assert nice_of(cal._thread.native_id) == min(19, own + 10), "the worker is niced"
-    assert nice_of(threading.get_native_id()) == own, "the caller's thread is not"
-    cal.close()
+    for wait, want in ((False, min(19, own + 10)), (True, own)):
+        cal = calibrator(SlowFit(0.0), nice=10, wait=wait)
+        cal.feed(frame(0))
+        time.sleep(0.1)
+        assert nice_of(cal._thread.native_id) == want, f"wait={wait}"
+        cal.close()
+    assert nice_of(threading.get_native_id()) == own, "the caller's thread keeps its priority"
 
 
 def test_from_a_live_source_a_busy_estimator_skips_frames_instead_of_stalling_the_loop():
