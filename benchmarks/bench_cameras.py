@@ -63,7 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--set", action="append", required=True, metavar="NAME=DIR[:CLIP,CLIP]",
                    help="a named set of labelled clips: a folder, optionally only the named clips")
-    p.add_argument("--model", action="append", required=True)
+    p.add_argument("--model", action="append", required=True, metavar="[NAME=]MODEL.onnx",
+                   help="a model to evaluate, named in the report by NAME (default: its file name)")
     p.add_argument("--out", default="benchmarks/results")
     args = p.parse_args(argv)
     sets = []
@@ -73,17 +74,19 @@ def main(argv: list[str] | None = None) -> int:
         sets.append((name, clips))
     result: dict[str, Any] = {"sets": {n: [c.path.name for c in cs] for n, cs in sets}, "models": {}}
     rows = []
-    for mp in args.model:
+    for spec in args.model:
+        label, _, mp = spec.rpartition("=")
+        label = label or Path(mp).name
         engine = Engine(mp)
         res = {}
         for name, clips in sets:
             m = evaluate(engine, clips)
             res[name] = m
             d = m["depth_abs_rel"]
-            rows.append(f"| {Path(mp).name} | {name} | {m['frames']} | {m['iou']:.3f} | {m['recall']:.3f} | "
+            rows.append(f"| {label} | {name} | {m['frames']} | {m['iou']:.3f} | {m['recall']:.3f} | "
                         f"{m['precision']:.3f} | " + " / ".join(_fmt(v) for v in d["vehicle"].values()) + " | "
                         + " / ".join(_fmt(v) for v in d["road"].values()) + " |")
-        result["models"][Path(mp).name] = res
+        result["models"][label] = res
     md = "\n".join(["# Held-out synthetic IoU, every clip in the model's own camera", "",
                     "Inside V, at each model's own threshold, int8 through onnxruntime as bsn-run runs it.", "",
                     "| model | clips | frames | IoU | recall | precision | vehicle depth AbsRel 5-10 / 10-20 / 20-40 m "
