@@ -114,11 +114,13 @@ class Feeder:
             yield item
 
     def close(self) -> None:
-        """Stop reading (idempotent); waits for the feeder's thread to let go of the source and camera."""
+        """Stop reading (idempotent): the source is told to stop too (a camera that delivers nothing
+        would otherwise keep the feeder's thread waiting), then the thread is waited for."""
         with self._cond:
             self._closed = True
             self._cond.notify_all()
         if self._thread is not None and self._thread is not threading.current_thread():
+            self.source.stop()
             self._thread.join(timeout=5.0)
 
     # -- internals -------------------------------------------------------------------------------
