@@ -150,4 +150,5 @@ class CameraState:
             m, report = self.mounting, dict(self.report)
         return {"intrinsics": "assumed: the model camera's, rescaled (no camera file)" if self.assumed_intrinsics
                 else "camera file", "mounting": None if m is None else m.to_dict(),
-                "calibrating": m is None, "calibration": report}
+                "calibrating": m is None, "calibration": report,
+                "estimator_skipped": self._calibrator.skipped if self._calibrator is not None else 0}
