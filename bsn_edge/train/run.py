@@ -122,7 +122,8 @@ class Run:
         """How the run was trained: samples and seconds summed over every piece, as the trainer
         recorded them with the checkpoint (runs from before that: the history's last training record,
         scaled to the run's last step); the clips from the checkpoint; the start and the teacher from
-        the config. None for a run with neither."""
+        the config. Counted from scratch: a run that started from another run's weights (``train.init``)
+        adds that run's record, and ``init`` names it with its own count. None for a run with neither."""
         steps = int(info.get("step") or 0)
         trained = info.get("trained")
         if trained is None:
@@ -135,10 +136,16 @@ class Run:
         teacher = _last_parts(cfg.get("teacher", {}).get("checkpoint", ""))
         if not teacher and self.teacher_path.is_file():
             teacher = f"trained in the run, {cfg.get('teacher', {}).get('steps', '?')} steps"
-        return TrainingRecord(steps=steps, samples=round(trained["samples"]),
-                              hours=round(trained["seconds"] / 3600, 2),
+        samples, hours = float(trained["samples"]), trained["seconds"] / 3600
+        init = str(cfg.get("train", {}).get("init", ""))
+        start = _last_parts(init)
+        before = Run(init).card().training if init and (Path(init) / self.CHECKPOINT).is_file() else None
+        if before is not None:
+            steps, samples, hours = steps + before.steps, samples + before.samples, hours + before.hours
+            start += f" (after {before.steps} steps)"
+        return TrainingRecord(steps=steps, samples=round(samples), hours=round(hours, 2),
                               train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),
-                              init=_last_parts(str(cfg.get("train", {}).get("init", ""))), teacher=teacher)
+                              init=start, teacher=teacher)
 
     def card(self) -> ModelCard:
         return self.info()["card"]
@@ -261,8 +268,11 @@ class Run:
             raise RunError(f"{dest}: shipping a run onto itself")
         if out.exists() and not force:
             raise RunError(f"{out.path} already holds a run; pass force to replace it")
+        # everything read before anything is written: the destination may be where this run started
+        # from or where its teacher is (the next leg of a campaign shipped over the last)
         info = self.info()
         model, card = self.load_model()
+        teacher = self.load_teacher_state()
 
         def cast(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
             return {k: (v.detach().to(dtype) if v.is_floating_point() else v.detach()).contiguous()
@@ -275,7 +285,6 @@ class Run:
         record = {k: v for k, v in info.items() if k != "card"}
         record.update(card=card.replace(weights_sha256=hashlib.sha256(weights).hexdigest()).to_dict(),
                       weights_dtype=str(dtype).removeprefix("torch."), shipped_from=self.path.name)
-        teacher = self.load_teacher_state()
         if teacher is not None:
             tdata = _to_bytes(cast(teacher))
             out.teacher_path.parent.mkdir(parents=True, exist_ok=True)

@@ -406,11 +406,17 @@ def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tm
                            "--set", "data.label=\"T2s\"", "--set", "train.steps=1",
                            "--set", f"train.init=\"{shipped}\"", "--set", f"teacher.checkpoint=\"{shipped}\""]) == 0
     ft = Run(tmp_path / "ft")
-    assert ft.card().training.init == f"{tmp_path.name}/default"
+    # counted from scratch: 1 step of batch 2 here after the 2 of batch 2 it started from
+    assert ft.card().training.init == f"{tmp_path.name}/default (after 2 steps)"
+    assert (ft.card().training.steps, ft.card().training.samples) == (3, 6)
     # a run whose teacher came from elsewhere still has it (bsn-adapt and shipping need it)
     assert not ft.teacher_path.exists() and ft.load_teacher() is not None
     ft.ship(tmp_path / "ft_shipped")
     assert Run(tmp_path / "ft_shipped").teacher_path.is_file()
+    # shipped over the run it started from, whose teacher it uses: nothing lost, no path of this machine
+    before = Run(shipped).teacher_path.read_bytes()
+    ft.ship(shipped, force=True)
+    assert Run(shipped).teacher_path.read_bytes() == before and Run(shipped).config()["teacher"]["checkpoint"] == ""
     assert eval_cli.main(["--run", str(shipped), "--data", str(data), "--clips", "all", "--out",
                           str(tmp_path / "e.json"), "--no-baselines"]) == 0
     assert export_cli.main(["--checkpoint", str(shipped), "--out", str(tmp_path / "again.onnx")]) == 0
