@@ -94,7 +94,7 @@ class Loop:
 
 
 LOOPS = {"all": [Loop(o, sp) for o in (False, True) for sp in (True, False)],
-         "default": [Loop(RuntimeConfig.overlap, True)]}
+         "default": [Loop(RuntimeConfig.overlap, False)]}
 
 
 class CameraLike:

@@ -47,10 +47,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--log", metavar="OUT.jsonl", help="one JSON line per frame")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="stop after this many frames")
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
-    p.add_argument("--no-spin", action="store_true", help="do not let idle onnxruntime threads spin")
-    p.add_argument("--no-overlap", action="store_true",
-                   help="read and warp each frame only after the model has answered the one before (by default "
-                        "the next frame is decoded and warped on a thread of its own while the model runs)")
+    spin = p.add_mutually_exclusive_group()
+    spin.add_argument("--spin", action="store_true",
+                      help="let idle onnxruntime threads spin-wait (faster for the model alone, slower end to end: "
+                           "they take the cores the loop decodes, warps and calibrates on)")
+    spin.add_argument("--no-spin", action="store_true", help="idle onnxruntime threads sleep (the default)")
+    p.add_argument("--overlap", action="store_true",
+                   help="decode and warp the next frame on a thread of its own while the model runs (by default "
+                        "each frame is read after the model has answered the one before; see the README)")
     p.add_argument("--pace", action="store_true", help="play files at their own frame rate")
     p.add_argument("--trust", metavar="KEYS",
                    help="Ed25519 public key file (or a file or folder of several): refuse any model not signed by "
@@ -206,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.trust:
                 from bsn_edge.runtime.trust import load_public_keys
                 trust = load_public_keys(args.trust)
-            engine = Engine(args.model, args.threads, not args.no_spin, trust=trust)
+            engine = Engine(args.model, args.threads, args.spin, trust=trust)
             camera = CameraState(engine.card, calibration, args.height, args.save_calib)
             source = open_source(args.source, pace=args.pace, stall_s=args.stall)
         except (FileNotFoundError, ValueError, OSError) as e:
@@ -224,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
                     if camera.calibrating and bar.n % 25 == 0:
                         bar.set_postfix_str(camera.progress(), refresh=False)
 
-                cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.no_overlap)
+                cfg = RuntimeConfig(cycle_s=args.cycle, overlap=args.overlap)
                 summary = run(engine, source, senders, cfg, overlay=args.overlay, log=args.log,
                               max_frames=args.max_frames, progress=tick, camera=camera, save_maps=maps,
                               stop=stopper.event)

@@ -29,10 +29,13 @@ class ModelError(ValueError):
 class Engine:
     """Runs the model on its preallocated input buffer ``buf`` (the loop warps frames into it)."""
 
-    def __init__(self, model: str | Path, threads: int = 2, spinning: bool = True,
+    def __init__(self, model: str | Path, threads: int = 2, spinning: bool = False,
                  trust: Mapping[str, Any] | None = None) -> None:
         """``trust``: public keys by id (:func:`bsn_edge.runtime.trust.load_public_keys`); with them, a
-        model not signed by one of them is refused (``signer`` says which key signed)."""
+        model not signed by one of them is refused (``signer`` says which key signed). ``spinning``:
+        onnxruntime's idle threads spin-wait for the next work; off by default, because between two
+        inferences the loop decodes, warps and calibrates on the same cores, which spinning threads
+        take from it (``benchmarks/results/runtime.md``)."""
         self.path = Path(model)
         mf = ModelFile.read(self.path)   # FileNotFoundError / ValueError name the file
         try:

@@ -60,7 +60,7 @@ class RuntimeConfig:
     health: HealthConfig = field(default_factory=HealthConfig)
     cycle_s: float = 0.1
     warmup: int = 3
-    overlap: bool = True         # decode and warp the next frame on a thread of its own while the model runs
+    overlap: bool = False        # decode and warp the next frame on a thread of its own while the model runs
 
     def __post_init__(self) -> None:
         if not self.cycle_s > 0 or self.warmup < 0:
@@ -246,8 +246,9 @@ class FramePipeline:
         self.emit(cap)
         t5 = time.perf_counter()
         self.timer.add("send", t5 - t4)
-        # the frame's own path, decode to alert; the time it waited for the model is counted apart
-        latency = t5 - t0 + item.warp_s + cap.decode_s
+        # a camera's frame: from its capture (the read returned) to its alert, waiting included; a
+        # file's: its own path, decode to alert (the time it waited for the model is counted apart)
+        latency = time.monotonic() - cap.t if self.source.live else t5 - t0 + item.warp_s + cap.decode_s
         self.latency.add(latency)
         self.waiting.add(max(0.0, t0 - item.ready_at))
         log = self.sinks.get("log")

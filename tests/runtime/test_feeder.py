@@ -114,6 +114,7 @@ def test_frames_the_model_had_no_time_for_are_a_fault_on_the_bus(setup):
     model, _ = setup
     engine = SlowEngine(model)
     h, w = engine.size
-    summary = run(engine, ListSource(40, live=True, gap_s=0.003, shape=(h, w, 3)), [], RuntimeConfig(warmup=0))
+    summary = run(engine, ListSource(40, live=True, gap_s=0.003, shape=(h, w, 3)), [],
+                  RuntimeConfig(warmup=0, overlap=True))
     assert summary["dropped"] > 0 and summary["frames"] + summary["dropped"] == 40
     assert summary["faults"]["dropped_frames"] == summary["dropped"]
