@@ -37,15 +37,17 @@ def _save(fig, out: Path) -> Path:
 def plot_stages(res: dict, out: Path) -> Path:
     rows = res.get("rows") or [{**res, "clip": "", "model_file": "", "camera_file": True}]
     stages = list(rows[0]["stage_ms"])
-    labels = [f"{r['clip']} {r['model_file']} {'file' if r['camera_file'] else 'calibrating'}".strip() for r in rows]
+    labels = [f"{r['clip']}, {'file' if r['camera_file'] else 'calibrating'}"
+              + (f", {r['loop']}" if r.get("loop") else "") for r in rows]
     fig, ax = plt.subplots(figsize=(8, 0.5 + 0.45 * len(rows)))
     left = [0.0] * len(rows)
     for s in stages:
         widths = [r["stage_ms"].get(s, 0.0) for r in rows]
         ax.barh(labels, widths, left=left, label=s)
         left = [a + b for a, b in zip(left, widths, strict=True)]
-    ax.set_xlabel("ms per frame")
-    ax.set_title("bsn-run stages per frame")
+    ax.set_xlabel("ms per frame (overlapped rows: work on two threads)")
+    ax.set_title(f"bsn-run stages per frame, {rows[0]['model_file']}" if rows[0].get("model_file") else
+                 "bsn-run stages per frame")
     ax.legend(fontsize=7, ncol=3, loc="lower center", bbox_to_anchor=(0.5, 1.08))
     ax.invert_yaxis()
     return _save(fig, out)
