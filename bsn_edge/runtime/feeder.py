@@ -46,13 +46,15 @@ class Feeder:
     """Iterate to get :class:`Prepared` frames of ``source``, at most ``limit``; ``close()`` stops it.
 
     ``background=False`` reads and warps on the caller's thread, into one buffer (``buffers[0]``).
-    ``background=True`` needs three buffers and uses a thread of its own; an exception there is
+    ``background=True`` needs ``BUFFERS`` of them and a thread of its own; an exception there is
     raised on the caller's thread when the iteration reaches it."""
+
+    BUFFERS = 3          # in the background: one in the model, one in the slot, one being written
 
     def __init__(self, source: Source, warp: Warp, buffers: list[np.ndarray], background: bool,
                  limit: int | None = None) -> None:
-        if background and len(buffers) < 3:
-            raise ValueError(f"a background feeder needs 3 input buffers, got {len(buffers)}")
+        if background and len(buffers) < self.BUFFERS:
+            raise ValueError(f"a background feeder needs {self.BUFFERS} input buffers, got {len(buffers)}")
         if not buffers:
             raise ValueError("a feeder needs an input buffer")
         self.source, self.warp, self.background, self.limit = source, warp, background, limit

@@ -279,7 +279,8 @@ class FramePipeline:
         self.engine.warmup(self.cfg.warmup)
         t_start = time.perf_counter()
         overlap = self.cfg.overlap
-        buffers = [self.engine.buf] + [np.empty_like(self.engine.buf) for _ in range(2 if overlap else 0)]
+        extra = Feeder.BUFFERS - 1 if overlap else 0
+        buffers = [self.engine.buf] + [np.empty_like(self.engine.buf) for _ in range(extra)]
         try:
             self.open()
             self.feeder = Feeder(self.source, self.warp, buffers, background=overlap, limit=max_frames)
