@@ -14,7 +14,8 @@ from tests.runtime.conftest import mounted
 
 
 class ListSource(Source):
-    """Frames filled with their index, ``gap_s`` apart; ``live`` like a camera."""
+    """Frames filled with their index, ``gap_s`` apart; ``live`` like a camera (its frame times on the
+    processing clock, as a camera's are)."""
 
     def __init__(self, n: int, live: bool = False, gap_s: float = 0.0, shape=(4, 6, 3)) -> None:
         self.n, self.live, self.gap_s, self.shape = n, live, gap_s, shape
@@ -23,7 +24,8 @@ class ListSource(Source):
         for i in range(self.n):
             if self.gap_s:
                 time.sleep(self.gap_s)
-            yield Captured(0.1 * i, np.full(self.shape, i % 256, np.uint8), i)
+            t = time.monotonic() if self.live else 0.1 * i
+            yield Captured(t, np.full(self.shape, i % 256, np.uint8), i)
 
 
 def copy_warp(frame, buf):
