@@ -25,11 +25,10 @@ import numpy as np
 
 from bsn_edge.camera import Intrinsics
 from bsn_edge.mounting import Mounting, angles_of
-from bsn_edge.tracks import detect, track
+from bsn_edge.tracks import MAX_CORNERS, detect, track
 
 MAX_ROLL_DEG = 15.0        # a camera rolled further is not mounted for driving
 SLOW_ROAD = 0.4            # a low corner moving slower than this share of the median road rate is not road
-WORK_WIDTH = 640           # frames are tracked at about this width (speed; the angles do not need more)
 
 
 @dataclass(frozen=True)
@@ -44,6 +43,8 @@ class MountFitConfig:
                     neighbours give, so a steadier direction of travel)
     max_spread_deg: the estimate has converged when the robust spread (1.4826 MAD) of pitch and
                     yaw over the pairs, divided by sqrt(pairs), is below this
+    work_width:     frames are tracked at about this width (wider frames are shrunk first)
+    max_corners:    corners tracked per pair at most (the cost of a pair grows with them)
     """
 
     min_flow_px: float = 1.0
@@ -52,10 +53,15 @@ class MountFitConfig:
     min_pairs: int = 20
     max_spread_deg: float = 0.15
     gap: int = 3
+    work_width: int = 640
+    max_corners: int = MAX_CORNERS
 
     def __post_init__(self) -> None:
         if self.min_flow_px <= 0 or self.max_turn_deg <= 0 or self.min_inliers < 8 or self.min_pairs < 3:
             raise ValueError("min_flow_px and max_turn_deg must be positive, min_inliers >= 8, min_pairs >= 3")
+        if self.work_width < 160 or self.max_corners < 2 * self.min_inliers:
+            raise ValueError(f"work_width must be >= 160 and max_corners >= 2 * min_inliers, got "
+                             f"{self.work_width} and {self.max_corners}")
 
 
 @dataclass
@@ -79,7 +85,7 @@ class MountFit:
         gray = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         h, w = gray.shape
         if self._K is None:
-            self._scale = min(1.0, WORK_WIDTH / w)
+            self._scale = min(1.0, self.cfg.work_width / w)
             k = self.intrinsics.scaled(round(w * self._scale), round(h * self._scale))
             self._K = k.K
         if self._scale < 1.0:
@@ -98,7 +104,7 @@ class MountFit:
         return True
 
     def _pair(self, g0: np.ndarray, g1: np.ndarray) -> str:
-        p0 = detect(g0)
+        p0 = detect(g0, max_corners=self.cfg.max_corners)
         if len(p0) < self.cfg.min_inliers:
             return "too few corners"
         p1, ok = track(g0, g1, p0)
@@ -207,12 +213,11 @@ def _road_normal(n0: np.ndarray, n1: np.ndarray, R: np.ndarray, t: np.ndarray, f
     keep = np.ones(len(x0), bool)
     m = None
     for _ in range(3):
-        rows, rhs = [], []
-        for a, b in zip(x0[keep], x1[keep], strict=True):
-            bx = np.array([[0, -b[2], b[1]], [b[2], 0, -b[0]], [-b[1], b[0], 0]])
-            rows.append(bx @ np.outer(t, a))
-            rhs.append(-bx @ (R @ a))
-        m = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+        # x1 is parallel to (R + t m^T) x0: x1 x (t (m . x0)) = -x1 x (R x0), three rows per corner
+        a, b = x0[keep], x1[keep]
+        rows = (np.cross(b, t)[:, :, None] * a[:, None, :]).reshape(-1, 3)
+        rhs = -np.cross(b, a @ R.T).reshape(-1)
+        m = np.linalg.lstsq(rows, rhs, rcond=None)[0]
         pred = x0 @ (R + np.outer(t, m)).T
         err = np.linalg.norm(pred[:, :2] / pred[:, 2:] - x1[:, :2], axis=1)
         keep = err < max(3.0 * np.median(err), 1e-4)

@@ -184,3 +184,31 @@ def test_bsn_run_leaves_calibrating_and_saves_the_camera_file(long_drive, tmp_pa
     assert states[k] in (SystemState.OK, SystemState.DEGRADED) and SystemState.CALIBRATING not in states[k:]
     got = Calibration.read(saved).mounting
     assert abs(got.pitch_deg - truth.mounting.pitch_deg) < 0.3 and abs(got.yaw_deg - truth.mounting.yaw_deg) < 0.3
+
+
+def test_road_normal_of_exact_correspondences_is_the_plane_down_direction():
+    """Road corners seen from a known camera before and after a known motion (analytic, no picture):
+    the plane solve gives the road's down direction in the camera frame; a car ahead moving with the
+    ego (corners that hardly move) does not pull it."""
+    import numpy as np
+
+    from bsn_edge.calibration.mount_fit import _road_normal
+    from bsn_edge.mounting import Mounting
+
+    cam_from_level = Mounting(1.4, 3.0, -1.5, 2.0).rotation()
+    down = cam_from_level @ np.array([0.0, 1.0, 0.0])          # level y points down
+    rng = np.random.default_rng(0)
+    ground = np.c_[rng.uniform(-4, 4, 300), np.full(300, 1.4), rng.uniform(6, 30, 300)]   # level frame
+    turn = Mounting(1.0, 0.0, 0.3, 0.0).rotation()               # the car yaws 0.3 degrees
+    step = np.array([0.0, 0.0, 1.2])                             # and moves 1.2 m forward
+    x0 = ground @ cam_from_level.T
+    x1 = ((ground - step) @ turn.T) @ cam_from_level.T           # the same points, next camera
+    R = cam_from_level @ turn @ cam_from_level.T                 # X1 = R X0 + t
+    t = -cam_from_level @ turn @ step
+    car = np.c_[rng.uniform(-0.8, 0.8, 60), rng.uniform(0.6, 1.3, 60), np.full(60, 12.0)] @ cam_from_level.T
+    n0 = np.r_[x0[:, :2] / x0[:, 2:], car[:, :2] / car[:, 2:]]
+    n1 = np.r_[x1[:, :2] / x1[:, 2:], car[:, :2] / car[:, 2:]]
+    forward = -R.T @ t / np.linalg.norm(t)
+    nd = _road_normal(n0, n1, R, t / np.linalg.norm(t), forward)
+    assert nd is not None
+    assert np.degrees(np.arccos(np.clip(nd @ down, -1, 1))) < 0.05
