@@ -7,6 +7,7 @@ import numpy as np
 
 MAX_CORNERS = 1200
 FB_MAX_PX = 1.0   # forward-backward consistency, pixels
+WINDOW_PX = 21    # Lucas-Kanade window
 
 
 def detect(gray: np.ndarray, mask: np.ndarray | None = None, max_corners: int = MAX_CORNERS) -> np.ndarray:
@@ -16,13 +17,15 @@ def detect(gray: np.ndarray, mask: np.ndarray | None = None, max_corners: int = 
     return np.zeros((0, 2), np.float32) if pts is None else pts.reshape(-1, 2)
 
 
-def track(g0: np.ndarray, g1: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def track(g0: np.ndarray, g1: np.ndarray, pts: np.ndarray, window: int = WINDOW_PX
+          ) -> tuple[np.ndarray, np.ndarray]:
     """Track ``pts`` from ``g0`` to ``g1``; returns positions in ``g1`` and a mask of tracks that
-    survive the forward-backward check."""
+    survive the forward-backward check. ``window``: the Lucas-Kanade window's side in pixels (the
+    cost of a track grows with its area)."""
     if not len(pts):
         return pts, np.zeros(0, bool)
     p0 = pts.reshape(-1, 1, 2).astype(np.float32)
-    lk = {"winSize": (21, 21), "maxLevel": 3,
+    lk = {"winSize": (window, window), "maxLevel": 3,
           "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)}
     p1, st1, _ = cv2.calcOpticalFlowPyrLK(g0, g1, p0, None, **lk)
     back, st2, _ = cv2.calcOpticalFlowPyrLK(g1, g0, p1, None, **lk)

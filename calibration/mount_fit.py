@@ -25,7 +25,7 @@ import numpy as np
 
 from bsn_edge.camera import Intrinsics
 from bsn_edge.mounting import Mounting, angles_of
-from bsn_edge.tracks import MAX_CORNERS, detect, track
+from bsn_edge.tracks import MAX_CORNERS, WINDOW_PX, detect, track
 
 MAX_ROLL_DEG = 15.0        # a camera rolled further is not mounted for driving
 SLOW_ROAD = 0.4            # a low corner moving slower than this share of the median road rate is not road
@@ -45,6 +45,7 @@ class MountFitConfig:
                     yaw over the pairs, divided by sqrt(pairs), is below this
     work_width:     frames are tracked at about this width (wider frames are shrunk first)
     max_corners:    corners tracked per pair at most (the cost of a pair grows with them)
+    window_px:      the optical flow's window (the cost of a corner grows with its area)
     """
 
     min_flow_px: float = 1.0
@@ -55,13 +56,14 @@ class MountFitConfig:
     gap: int = 3
     work_width: int = 640
     max_corners: int = MAX_CORNERS
+    window_px: int = WINDOW_PX
 
     def __post_init__(self) -> None:
         if self.min_flow_px <= 0 or self.max_turn_deg <= 0 or self.min_inliers < 8 or self.min_pairs < 3:
             raise ValueError("min_flow_px and max_turn_deg must be positive, min_inliers >= 8, min_pairs >= 3")
-        if self.work_width < 160 or self.max_corners < 2 * self.min_inliers:
-            raise ValueError(f"work_width must be >= 160 and max_corners >= 2 * min_inliers, got "
-                             f"{self.work_width} and {self.max_corners}")
+        if self.work_width < 160 or self.max_corners < 2 * self.min_inliers or not 5 <= self.window_px <= 41:
+            raise ValueError(f"work_width must be >= 160, max_corners >= 2 * min_inliers and window_px within "
+                             f"5..41, got {self.work_width}, {self.max_corners} and {self.window_px}")
 
 
 @dataclass
@@ -107,7 +109,7 @@ class MountFit:
         p0 = detect(g0, max_corners=self.cfg.max_corners)
         if len(p0) < self.cfg.min_inliers:
             return "too few corners"
-        p1, ok = track(g0, g1, p0)
+        p1, ok = track(g0, g1, p0, window=self.cfg.window_px)
         p0, p1 = p0[ok], p1[ok]
         if len(p0) < self.cfg.min_inliers:
             return "too few tracked corners"

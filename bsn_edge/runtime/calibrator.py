@@ -30,6 +30,11 @@ from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
 from bsn_edge.camera import Intrinsics
 from bsn_edge.mounting import Mounting
 
+# The online estimator tracks fewer corners in a smaller picture than ``bsn-calibrate --mount``: a
+# pair then costs a fraction of the CPU, and convergence needs many pairs more than precise ones
+# (benchmarks/results/calibration.md), so more pairs a second fit in the same share of the CPU.
+ONLINE_FIT = MountFitConfig(work_width=480, max_corners=400, window_px=11)
+
 
 def lower_priority(nice: int) -> bool:
     """Lower the calling thread's scheduling priority by ``nice`` (Linux, where a thread is a task of
@@ -47,8 +52,8 @@ def lower_priority(nice: int) -> bool:
 class OnlineCalibrator:
     """Feeds frames to a :class:`MountFit` on a worker thread; :meth:`result` is the latest estimate.
 
-    ``background=False`` runs the estimator in :meth:`feed` itself (tests, benchmarks of the
-    estimate alone)."""
+    ``cfg``: the estimator's settings (:data:`ONLINE_FIT` unless given). ``background=False`` runs
+    the estimator in :meth:`feed` itself (tests, benchmarks of the estimate alone)."""
 
     def __init__(self, intrinsics: Intrinsics, dist: tuple[float, ...], height_m: float, every: int = 3,
                  cfg: MountFitConfig | None = None, background: bool = True, nice: int = 10,
@@ -59,7 +64,7 @@ class OnlineCalibrator:
             raise ValueError(f"nice must be within 0..19, got {nice}")
         self.nice, self.wait = nice, wait
         self.skipped = 0
-        self.fit = MountFit(intrinsics, dist, cfg or MountFitConfig())
+        self.fit = MountFit(intrinsics, dist, cfg or ONLINE_FIT)
         self.height_m, self.every, self.background = height_m, int(every), background
         self.seen = 0
         self.error = ""

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.card import ModelCard
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.mounting import Mounting
@@ -34,11 +35,14 @@ class CameraState:
     may be warped on one thread (the loop's feeder) while another asks for :meth:`progress` or
     :meth:`summary`: one lock guards the state."""
 
-    CALIBRATE_HZ = 8.0
+    CALIBRATE_HZ = 12.5
 
     def __init__(self, card: ModelCard, calibration: Calibration | None = None, height_m: float | None = None,
                  save_to: str | Path | None = None, calibrate_every: int | None = None,
-                 background: bool = True, calibrate_nice: int = 10) -> None:
+                 background: bool = True, calibrate_nice: int = 10, estimator: MountFitConfig | None = None,
+                 calibrate_hz: float | None = None) -> None:
+        """``estimator`` and ``calibrate_hz``: the online estimator's settings and how many frames a
+        second it is fed (the runtime's own unless given: benchmarks compare others)."""
         self.card = card
         self.calibration = calibration
         self.save_to = Path(save_to) if save_to else None
@@ -49,7 +53,10 @@ class CameraState:
         if self.mounting is not None and height_m:
             self.mounting = Mounting(height_m, self.mounting.pitch_deg, self.mounting.yaw_deg, self.mounting.roll_deg)
         self.calibrate_every = None if calibrate_every is None else max(1, int(calibrate_every))
-        self.background, self.calibrate_nice = background, calibrate_nice
+        self.background, self.calibrate_nice, self.estimator = background, calibrate_nice, estimator
+        self.calibrate_hz = self.CALIBRATE_HZ if calibrate_hz is None else float(calibrate_hz)
+        if self.calibrate_hz <= 0:
+            raise ValueError(f"calibrate_hz must be positive, got {calibrate_hz}")
         self.calibrate_wait = True
         self.report: dict[str, Any] = {"source": "camera file" if self.mounting else "online"}
         self._calibrator: OnlineCalibrator | None = None
@@ -67,7 +74,7 @@ class CameraState:
         the estimator: a frame it is too busy for is skipped (from a file it waits, so which frames are
         used does not depend on timing)."""
         if self.calibrate_every is None and self._calibrator is None and fps > 0:
-            self.calibrate_every = max(1, round(fps / self.CALIBRATE_HZ))
+            self.calibrate_every = max(1, round(fps / self.calibrate_hz))
         self.calibrate_wait = not live
 
     def close(self) -> None:
@@ -108,7 +115,8 @@ class CameraState:
         if self._calibrator is None:
             self._calibrator = OnlineCalibrator(cam.intrinsics.scaled(w, h), cam.dist, self.height_m,
                                                 self.calibrate_every or 1, background=self.background,
-                                                nice=self.calibrate_nice, wait=self.calibrate_wait)
+                                                nice=self.calibrate_nice, wait=self.calibrate_wait,
+                                                cfg=self.estimator)
         self._calibrator.feed(frame)
         m, report = self._calibrator.result()
         with self._lock:

@@ -26,9 +26,13 @@ def frames(clip):
     return [cv2.imread(str(p)) for p in sorted((clip / "rgb").glob("*.png"))]
 
 
-def test_pitch_and_yaw_from_the_focus_of_expansion(drive):
+@pytest.mark.parametrize("online", [False, True], ids=["tracking", "online"])
+def test_pitch_and_yaw_from_the_focus_of_expansion(drive, online):
+    """The tracking estimator (bsn-calibrate --mount) and the runtime's lighter online one alike."""
+    from bsn_edge.runtime.calibrator import ONLINE_FIT
+
     truth = Calibration.read(drive / "calibration.json")
-    fit = MountFit(truth.intrinsics, truth.dist)
+    fit = MountFit(truth.intrinsics, truth.dist, ONLINE_FIT if online else MountFitConfig())
     for f in frames(drive):
         fit.add(f)
     m, report = fit.estimate(truth.mounting.height_m)
