@@ -18,7 +18,7 @@ from matplotlib.ticker import NullFormatter, ScalarFormatter
 from benchmarks.common import machine
 
 ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "floor", "int8_cpu", "runtime",
-         "footprint",
+         "calibration", "footprint",
          "realcam", "realview", "cameras", "remap")
 
 
