@@ -53,13 +53,24 @@ def summary(seconds: list[float]) -> dict[str, float]:
             "per_second": 1.0 / med, "n": len(s)}
 
 
+def portable(text: str) -> str:
+    """``text`` with this machine's paths made readable anywhere: the working folder's own prefix
+    dropped (paths relative to the checkout) and the home folder written ``~``."""
+    cwd, home = os.getcwd().rstrip("/"), os.path.expanduser("~").rstrip("/")
+    if cwd:
+        text = text.replace(cwd + "/", "")
+    return text.replace(home + "/", "~/") if home else text
+
+
 def write_result(out_dir: str | Path, name: str, result: dict[str, Any], markdown: str) -> Path:
-    """Write ``<name>.json`` and ``<name>.md`` into ``out_dir``; returns the JSON path."""
+    """Write ``<name>.json`` and ``<name>.md`` into ``out_dir``, this machine's paths in them made
+    portable (:func:`portable`); returns the JSON path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     result = {"benchmark": name, "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
               "machine": machine(), **result}
-    (out / f"{name}.json").write_text(json.dumps(result, indent=2) + "\n")
+    (out / f"{name}.json").write_text(portable(json.dumps(result, indent=2)) + "\n")
+    markdown = portable(markdown)
     m = result["machine"]
     isa = f" ({', '.join(m['isa'])})" if m["isa"] else ""
     (out / f"{name}.md").write_text(markdown.rstrip() + f"\n\nMeasured on {m['cpu']}{isa}, "
