@@ -37,7 +37,7 @@ from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth import SynthConfig, write_clip
 
 SYNTH_FRAMES = 500
-SYNTH_FPS = 25.0                # a dashcam's rate: the runtime then feeds one frame in 3
+SYNTH_FPS = 25.0                # a dashcam's rate: the runtime then feeds one frame in 2
 SYNTH_SEEDS = (971, 972, 973, 974, 975)
 BEFORE_HZ = 8.0                 # the runtime's share before the online estimator
 # (name, estimator, frames a second fed to it: None = every frame)
