@@ -83,18 +83,26 @@ def lengthen(video: Path, frames: int, tmp: Path) -> Path:
 
 @dataclass(frozen=True)
 class Loop:
-    """One way of setting the loop: reading overlapped with the model, onnxruntime's threads spinning."""
+    """One way of setting the loop: reading overlapped with the model (its thread ``nice`` steps below
+    the model's), onnxruntime's threads spinning."""
 
     overlap: bool
     spin: bool
+    nice: int = 0
 
     @property
     def name(self) -> str:
-        return f"{'overlap' if self.overlap else 'in turn'}, {'spin' if self.spin else 'no spin'}"
+        reading = "in turn" if not self.overlap else f"overlap{f' nice {self.nice}' if self.nice else ''}"
+        return f"{reading}, {'spin' if self.spin else 'no spin'}"
+
+    def config(self) -> RuntimeConfig:
+        return RuntimeConfig(overlap=self.overlap, feeder_nice=self.nice)
 
 
-LOOPS = {"all": [Loop(o, sp) for o in (False, True) for sp in (True, False)],
-         "default": [Loop(RuntimeConfig.overlap, False)]}
+_DEFAULT = RuntimeConfig()
+LOOPS = {"all": [Loop(o, sp) for o in (False, True) for sp in (True, False)] + [Loop(True, False, 10)],
+         "reading": [Loop(False, False), Loop(True, False), Loop(True, False, 10), Loop(True, False, 19)],
+         "default": [Loop(_DEFAULT.overlap, False, _DEFAULT.feeder_nice)]}
 
 
 class CameraLike:
@@ -143,11 +151,11 @@ def live(engine: Engine, video: Path, calibration: Calibration | None) -> dict[s
 def profile(engine: Engine, video: Path, frames: int, calibration: Calibration | None, loop: Loop) -> dict[str, Any]:
     camera = CameraState(engine.card, calibration)
     with CanSender("virtual", "bsn-bench") as tx:
-        s = run(engine, open_source(str(video)), [tx], RuntimeConfig(overlap=loop.overlap), max_frames=frames,
-                camera=camera)
+        s = run(engine, open_source(str(video)), [tx], loop.config(), max_frames=frames, camera=camera)
     return {"frames": s["frames"], "e2e_fps": s["fps"], "p50_ms": s["p50_ms"], "p95_ms": s["p95_ms"],
             "p99_ms": s["p99_ms"], "wait_ms": s["wait_ms"], "stage_ms": s["stage_ms"], "dropped": s["dropped"],
-            "camera": s["camera"], "model": s["model"], "loop": loop.name, "overlap": loop.overlap, "spin": loop.spin}
+            "camera": s["camera"], "model": s["model"], "loop": loop.name, "overlap": loop.overlap, "spin": loop.spin,
+            "feeder_nice": loop.nice}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -158,7 +166,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--frames", type=int, default=300)
     p.add_argument("--loops", choices=sorted(LOOPS), default="all",
-                   help="every way of setting the loop side by side, or only bsn-run's default (default: all)")
+                   help="every way of setting the loop side by side, the ways of reading (no spin), or only "
+                        "bsn-run's default (default: all)")
     args = p.parse_args(argv)
     models = args.model or [str(DEFAULT_MODEL)]
     vnni = "VNNI" in machine()["isa"]

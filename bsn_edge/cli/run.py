@@ -52,9 +52,12 @@ def build_parser() -> argparse.ArgumentParser:
                       help="let idle onnxruntime threads spin-wait (faster for the model alone, slower end to end: "
                            "they take the cores the loop decodes, warps and calibrates on)")
     spin.add_argument("--no-spin", action="store_true", help="idle onnxruntime threads sleep (the default)")
-    p.add_argument("--overlap", action="store_true",
-                   help="decode and warp the next frame on a thread of its own while the model runs (by default "
-                        "each frame is read after the model has answered the one before; see the README)")
+    reading = p.add_mutually_exclusive_group()
+    reading.add_argument("--overlap", action="store_true",
+                         help="decode and warp the next frame on a thread of its own, at a lower priority, while "
+                              "the model runs (the default; see the README)")
+    reading.add_argument("--in-turn", action="store_true",
+                         help="read each frame after the model has answered the one before (one thread)")
     p.add_argument("--pace", action="store_true", help="play files at their own frame rate")
     p.add_argument("--trust", metavar="KEYS",
                    help="Ed25519 public key file (or a file or folder of several): refuse any model not signed by "
@@ -228,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
                     if camera.calibrating and bar.n % 25 == 0:
                         bar.set_postfix_str(camera.progress(), refresh=False)
 
-                cfg = RuntimeConfig(cycle_s=args.cycle, overlap=args.overlap)
+                cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.in_turn)
                 summary = run(engine, source, senders, cfg, overlay=args.overlay, log=args.log,
                               max_frames=args.max_frames, progress=tick, camera=camera, save_maps=maps,
                               stop=stopper.event)

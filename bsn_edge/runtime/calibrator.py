@@ -20,7 +20,6 @@ loop's own threads would only wait longer.
 
 from __future__ import annotations
 
-import os
 import threading
 from typing import Any
 
@@ -29,24 +28,12 @@ import numpy as np
 from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
 from bsn_edge.camera import Intrinsics
 from bsn_edge.mounting import Mounting
+from bsn_edge.runtime.priority import lower_priority
 
 # The online estimator tracks fewer corners in a smaller picture than ``bsn-calibrate --mount``: a
 # pair then costs a fraction of the CPU, and convergence needs many pairs more than precise ones
 # (benchmarks/results/calibration.md), so more pairs a second fit in the same share of the CPU.
 ONLINE_FIT = MountFitConfig(work_width=480, max_corners=400, window_px=11)
-
-
-def lower_priority(nice: int) -> bool:
-    """Lower the calling thread's scheduling priority by ``nice`` (Linux, where a thread is a task of
-    its own); False where that is not possible (other systems, a sandbox that forbids it)."""
-    if not nice or not hasattr(os, "setpriority") or not hasattr(threading, "get_native_id"):
-        return False
-    try:
-        tid = threading.get_native_id()
-        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + nice))
-    except OSError:
-        return False
-    return True
 
 
 class OnlineCalibrator:

@@ -9,6 +9,11 @@ wins: a prepared frame the model had no time for is replaced by the next one and
 Every prepared frame is warped into an input buffer of its own, which the caller has until it asks
 for the next frame or hands it back (:meth:`Feeder.release`) once the model has read it. Three
 buffers are enough: one in the model, one in the slot, one being written.
+
+The feeder's thread may run at a lower scheduling priority (``nice``): the model's threads then keep
+the cores, and decode and warp fill the gaps they leave (between operators, while a thread waits
+for the other); when the model is done and waits for the next frame, the feeder's thread is the only
+one left to run, at full speed.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bsn_edge.model_frame import ModelFrame
+from bsn_edge.runtime.priority import lower_priority
 from bsn_edge.runtime.sources import Captured, Source
 
 
@@ -46,18 +52,21 @@ class Feeder:
     """Iterate to get :class:`Prepared` frames of ``source``, at most ``limit``; ``close()`` stops it.
 
     ``background=False`` reads and warps on the caller's thread, into one buffer (``buffers[0]``).
-    ``background=True`` needs ``BUFFERS`` of them and a thread of its own; an exception there is
-    raised on the caller's thread when the iteration reaches it."""
+    ``background=True`` needs ``BUFFERS`` of them and a thread of its own, ``nice`` steps below the
+    caller's priority (0: the same); an exception there is raised on the caller's thread when the
+    iteration reaches it."""
 
     BUFFERS = 3          # in the background: one in the model, one in the slot, one being written
 
     def __init__(self, source: Source, warp: Warp, buffers: list[np.ndarray], background: bool,
-                 limit: int | None = None) -> None:
+                 limit: int | None = None, nice: int = 0) -> None:
+        if not 0 <= nice <= 19:
+            raise ValueError(f"nice must be within 0..19, got {nice}")
         if background and len(buffers) < self.BUFFERS:
             raise ValueError(f"a background feeder needs {self.BUFFERS} input buffers, got {len(buffers)}")
         if not buffers:
             raise ValueError("a feeder needs an input buffer")
-        self.source, self.warp, self.background, self.limit = source, warp, background, limit
+        self.source, self.warp, self.background, self.limit, self.nice = source, warp, background, limit, nice
         self.newest_wins = source.live
         self._buffers = list(buffers)
         self._free = list(buffers)
@@ -139,6 +148,11 @@ class Feeder:
                 self._cond.wait()
             return None if self._closed else self._free.pop()
 
+    def _give_back(self, buf: np.ndarray) -> None:
+        with self._cond:
+            self._free.append(buf)
+            self._cond.notify_all()
+
     def _put(self, item: Prepared) -> bool:
         """Hand ``item`` over; False when the feeder was closed meanwhile."""
         with self._cond:
@@ -157,14 +171,15 @@ class Feeder:
 
     def _work(self) -> None:
         n = 0
+        lower_priority(self.nice)
         try:
             for cap in self.source:
                 buf = self._take_buffer()
                 if buf is None:
                     return
                 item = self.prepare(cap, buf)
-                if item.buf is None:
-                    self.release(buf)
+                if item.buf is None:            # nothing was warped into it: it goes back at once
+                    self._give_back(buf)
                 if not self._put(item):
                     return
                 n += 1

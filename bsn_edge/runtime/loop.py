@@ -53,18 +53,22 @@ def blind_spots(prob: np.ndarray, threshold: float, mf: ModelFrame) -> np.ndarra
 @dataclass(frozen=True)
 class RuntimeConfig:
     """How the loop runs: the alerts' state machine, the sectors, health, the send cycle, warm-up
-    inferences before the first frame, and whether reading overlaps the model (:mod:`.feeder`)."""
+    inferences before the first frame, and whether reading overlaps the model (:mod:`.feeder`), its
+    thread then ``feeder_nice`` steps below the model's priority."""
 
     alerts: AlertConfig = field(default_factory=AlertConfig)
     sectors: SectorConfig = field(default_factory=SectorConfig)
     health: HealthConfig = field(default_factory=HealthConfig)
     cycle_s: float = 0.1
     warmup: int = 3
-    overlap: bool = False        # decode and warp the next frame on a thread of its own while the model runs
+    overlap: bool = True         # decode and warp the next frame on a thread of its own while the model runs
+    feeder_nice: int = 10
 
     def __post_init__(self) -> None:
         if not self.cycle_s > 0 or self.warmup < 0:
             raise ValueError(f"cycle_s must be positive and warmup >= 0, got {self.cycle_s} and {self.warmup}")
+        if not 0 <= self.feeder_nice <= 19:
+            raise ValueError(f"feeder_nice must be within 0..19, got {self.feeder_nice}")
 
 
 @dataclass
@@ -283,7 +287,8 @@ class FramePipeline:
         buffers = [self.engine.buf] + [np.empty_like(self.engine.buf) for _ in range(extra)]
         try:
             self.open()
-            self.feeder = Feeder(self.source, self.warp, buffers, background=overlap, limit=max_frames)
+            self.feeder = Feeder(self.source, self.warp, buffers, background=overlap, limit=max_frames,
+                                 nice=self.cfg.feeder_nice)
             for item in self.feeder:
                 self.step(item)
                 if progress:

@@ -2,6 +2,8 @@
 written while the model reads it, and the loop's answers the same as reading in turn."""
 
 import json
+import os
+import threading
 import time
 
 import numpy as np
@@ -82,6 +84,60 @@ def test_at_most_limit_frames_and_errors_reach_the_caller():
     assert seen == [0, 1, 2], "the frames before the failure are delivered first"
     with pytest.raises(ValueError, match="3 input buffers"):
         Feeder(ListSource(1), copy_warp, buffers(2), background=True)
+
+
+class DamagedSource(ListSource):
+    """Frames ``bad`` do not decode (no picture), as in a video damaged in the middle."""
+
+    def __init__(self, n: int, bad: range) -> None:
+        super().__init__(n)
+        self.bad = bad
+
+    def __iter__(self):
+        for cap in super().__iter__():
+            yield Captured(cap.t, None, cap.index) if cap.index in self.bad else cap
+
+
+def test_a_run_of_undecodable_frames_longer_than_the_buffers_goes_through():
+    """Every frame is delivered in order, the ones without a picture too, however many of them come
+    in a row (each must give its input buffer back, or the feeder runs out of them)."""
+    feeder = Feeder(DamagedSource(20, range(3, 3 + 2 * Feeder.BUFFERS)), copy_warp, buffers(), background=True)
+    seen = []
+
+    def consume():
+        for item in feeder:
+            seen.append((item.cap.index, item.buf is None, None if item.buf is None else int(item.buf[0, 0, 0, 0])))
+
+    reader = threading.Thread(target=consume, daemon=True)
+    reader.start()
+    reader.join(timeout=30)
+    stuck = reader.is_alive()
+    feeder.close()
+    assert not stuck, f"the feeder stopped delivering after frame {seen[-1][0] if seen else None}"
+    assert seen == [(i, 3 <= i < 3 + 2 * Feeder.BUFFERS, None if 3 <= i < 3 + 2 * Feeder.BUFFERS else i)
+                    for i in range(20)]
+
+
+@pytest.mark.skipif(not hasattr(os, "setpriority"), reason="thread priorities are Linux's")
+def test_a_nice_feeder_reads_below_the_callers_priority():
+    """The warp runs on the feeder's thread: its priority, read from the system, is ``nice`` below the
+    caller's, whose own is untouched."""
+    seen = {}
+
+    def warp(frame, buf):
+        tid = threading.get_native_id()
+        seen[tid] = os.getpriority(os.PRIO_PROCESS, tid)
+        return copy_warp(frame, buf)
+
+    me = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    assert len(list(Feeder(ListSource(3), warp, buffers(), background=True, nice=5))) == 3
+    assert list(seen.values()) == [min(19, me + 5)]
+    assert threading.get_native_id() not in seen
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == me
+    with pytest.raises(ValueError, match="nice"):
+        Feeder(ListSource(1), copy_warp, buffers(), background=True, nice=20)
+    with pytest.raises(ValueError, match="feeder_nice"):
+        RuntimeConfig(feeder_nice=-1)
 
 
 def frame_log(path):
