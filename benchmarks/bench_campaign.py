@@ -57,7 +57,10 @@ def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> No
             axes[1].plot(x, [r.get("val_iou") for r in student], label="B: validation IoU (swept)")
             ax2 = axes[1].twinx()
             ax2.plot(x, [r.get("val_abs_rel") for r in student], color="tab:red", label="D: depth AbsRel")
-            ax2.set_ylabel("AbsRel", color="tab:red")
+            if any("val_road_abs_rel" in r for r in student):
+                ax2.plot(x, [r.get("val_road_abs_rel") for r in student], color="tab:red", ls="--",
+                         label="D: road AbsRel 5-40 m")
+            ax2.set_ylabel("AbsRel (road dashed)", color="tab:red")
         axes[1].set_title("student: validation")
         axes[1].set_xlabel("samples")
         axes[1].set_ylabel("IoU")
@@ -112,11 +115,14 @@ def main(argv: list[str] | None = None) -> int:
                          f"{t_flat['gain']:+.3f}: {'flat' if t_flat['flat'] else 'still rising'}.")
         lines.append("")
     if student:
-        lines += ["| step | samples | hours | loss | BCE | KD | depth loss | val IoU | threshold | val AbsRel |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
+        road = any("val_road_abs_rel" in r for r in student)
+        lines += ["| step | samples | hours | loss | BCE | KD | depth loss | val IoU | threshold | val AbsRel |"
+                  + (" val road AbsRel 5-40 m |" if road else ""),
+                  "|---|---|---|---|---|---|---|---|---|---|" + ("---|" if road else "")]
         lines += [f"| {r['step']} | {r['samples']} | {r['seconds'] / 3600:.2f} | {r['loss']:.3f} | {r['bce']:.3f} | "
                   f"{r['kd']:.4f} | {r['depth']:.3f} | {r.get('val_iou', float('nan')):.3f} | "
                   f"{r.get('val_threshold', float('nan')):.2f} | {r.get('val_abs_rel', float('nan')):.3f} |"
+                  + (f" {r.get('val_road_abs_rel', float('nan')):.3f} |" if road else "")
                   for r in student]
         if flat:
             lines.append(f"\nOver the last fifth (steps {flat['from_step']}-{flat['to_step']}) the validation IoU "
