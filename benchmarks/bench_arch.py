@@ -9,14 +9,18 @@ runs after warm-up, all in one run of this script.
 
 IoU: with ``--train-steps``, every architecture is trained on ``--data`` with one budget (steps,
 batch 8, ``--train-size``, one shared teacher, the 60/20/20 clip split of ``configs/quick.toml``)
-and evaluated inside V on the held-out clips, so the column compares architectures, not
-budgets. ``--runs`` adds the IoU of runs trained elsewhere (e.g. the shipped model's).
+once per ``--seeds`` and evaluated inside V on the held-out clips, so the column compares
+architectures, not budgets: mean +- std over the seeds, with each run's validation curve (flat: its
+last fifth gained under 0.01). Every finished run goes into ``bsn_arch_ledger.json`` in ``--out``
+(:mod:`benchmarks.ledger`): the command can be stopped and run again, on any machine, and trains
+only what is missing. ``--runs`` adds the IoU of runs trained elsewhere (e.g. the shipped model's).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -24,12 +28,15 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
+from benchmarks.bench_campaign import flattened
 from benchmarks.common import eval_run, summary, time_calls, train_run, write_result
+from benchmarks.ledger import Ledger, fmt
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import parse_size
 from bsn_edge.export import to_onnx
 from bsn_edge.models import create_model, describe
 from bsn_edge.runtime.model_file import session
+from bsn_edge.train import Run
 
 ARCHS = ("unet", "small", "small-light", "medium", "large")
 
@@ -56,14 +63,23 @@ def measure(name: str, size: tuple[int, int], repeats: int, workdir: Path) -> di
             "median_ms": round(1e3 * med, 2), "fps": round(1 / med, 2), "repeats": repeats}
 
 
-def train_uniform(name: str, data: Path, work: Path, steps: int, size: tuple[int, int], teacher: Path | None
-                  ) -> Path:
-    """Train ``name`` on ``data`` with the benchmark's budget into ``work/name`` (reused if done)."""
+def train_uniform(name: str, data: Path, work: Path, steps: int, size: tuple[int, int], teacher: Path | None,
+                  seed: int = 0) -> Path:
+    """Train ``name`` on ``data`` with the benchmark's budget into ``work/name`` (``work/seedN/name`` for
+    seeds after the first; reused if done), validation IoU every tenth of the steps."""
     sets = [f"model.name={name}", f"data.size=[{size[0]}, {size[1]}]", "data.val_fraction=0.2",
-            "data.test_fraction=0.2", f"train.steps={steps}", "train.batch_size=8", f"train.checkpoint_every={steps}"]
+            "data.test_fraction=0.2", f"train.steps={steps}", "train.batch_size=8", f"train.checkpoint_every={steps}",
+            f"train.seed={seed}", f"train.eval_every={max(1, steps // 10)}", "train.eval_frames=128"]
     if teacher is not None:
         sets.append(f"teacher.checkpoint={teacher}")
-    return train_run(data, work / name, sets)
+    return train_run(data, (work / name) if seed == 0 else (work / f"seed{seed}" / name), sets)
+
+
+def curve(run: Path) -> dict:
+    """A run's validation IoU records and whether its last fifth had flattened."""
+    recs = [r for r in Run(run).history() if r.get("phase") == "train" and "val_iou" in r]
+    return {"steps": [r["step"] for r in recs], "val_iou": [round(r["val_iou"], 4) for r in recs],
+            "flattened": flattened(recs)}
 
 
 def run_budget(run: Path) -> str:
@@ -78,6 +94,27 @@ def held_out_iou(run: Path, data: Path, report: Path) -> float:
     return round(eval_run(run, data, report, "--no-baselines")["overall"]["BSN"]["iou"], 4)
 
 
+def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
+    """Train every (seed, architecture) missing from ``ledger``, seeds outermost; returns the teacher."""
+    data, work = Path(args.data), Path(args.work)
+    teacher = Path(args.teacher) if args.teacher else work / "teacher" / "teacher"
+    if not args.teacher:
+        train_run(data, teacher.parent, [f"data.size=[{args.train_size[0]}, {args.train_size[1]}]",
+                                         "data.val_fraction=0.2", "data.test_fraction=0.2", "train.steps=1",
+                                         "train.checkpoint_every=1", f"teacher.steps={args.teacher_steps}",
+                                         f"teacher.eval_every={max(1, args.teacher_steps // 10)}"])
+    for seed in args.seeds:
+        for name in args.only:
+            key = f"{name}/seed{seed}"
+            if key in ledger:
+                continue
+            run = train_uniform(name, data, work, args.train_steps, args.train_size, teacher, seed)
+            ledger.put(key, {"iou": held_out_iou(run, data, tmp / f"{name}_{seed}.json"), "curve": curve(run)})
+            if not args.keep_runs:
+                shutil.rmtree(run, ignore_errors=True)
+    return teacher
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
@@ -86,8 +123,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--data", default=None, help="labelled clips: training (--train-steps) and held-out IoU")
     p.add_argument("--train-steps", type=int, default=0, help="train every architecture this many steps (0: no)")
     p.add_argument("--train-size", type=parse_size, default=(128, 256), metavar="HxW", help="training size")
-    p.add_argument("--teacher", default=None, help="a trained teacher's folder (default: the first run trains one)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0], help="training seeds (default 0; the table: 0 1 2)")
+    p.add_argument("--teacher", default=None, help="a trained teacher's folder (default: one is trained first)")
+    p.add_argument("--teacher-steps", type=int, default=300, help="steps of the teacher trained first")
     p.add_argument("--work", default="benchmarks/scratch/arch", help="runs trained by --train-steps are kept here")
+    p.add_argument("--keep-runs", action="store_true", help="keep every trained run folder")
+    p.add_argument("--fresh", action="store_true", help="start a new ledger (the finished runs are forgotten)")
     p.add_argument("--only", nargs="*", choices=ARCHS, default=list(ARCHS), help="architectures to measure")
     args = p.parse_args(argv)
     if (args.train_steps or args.runs) and not args.data:
@@ -95,34 +136,47 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(2)
     size = (256, 512)
     runs = dict(r.split("=", 1) for r in args.runs)
-    teacher = Path(args.teacher) if args.teacher else None
+    ledger = None
+    if args.train_steps:
+        clips = sorted(d.name for d in Path(args.data).iterdir() if (d / "meta.json").is_file())
+        experiment = {"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size), "clips": clips,
+                      "teacher": args.teacher or f"trained first, {args.teacher_steps} steps"}
+        try:
+            ledger = Ledger(Path(args.out) / "bsn_arch_ledger.json", experiment, fresh=args.fresh)
+        except ValueError as e:
+            print(f"bench_arch: {e}")
+            return 2
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
+        teacher = train_seeds(args, ledger, Path(tmp)) if ledger is not None else None
         for name in args.only:
             row = measure(name, size, args.repeats, Path(tmp))
-            if args.train_steps:
-                run = train_uniform(name, Path(args.data), Path(args.work), args.train_steps, args.train_size,
-                                    teacher)
-                teacher = teacher or run / "teacher"
-                row["iou"] = held_out_iou(run, Path(args.data), Path(tmp) / f"{name}_uniform.json")
+            if ledger is not None:
+                recs = [r for k, r in sorted(ledger.runs.items()) if k.startswith(f"{name}/seed")]
+                row["iou_seeds"] = [r["iou"] for r in recs]
+                row["iou"] = fmt(row["iou_seeds"])
+                gains = [r["curve"]["flattened"]["gain"] for r in recs if r["curve"].get("flattened")]
+                row["flat"] = f"{sum(g < 0.01 for g in gains)} of {len(gains)}"
             if name in runs:
                 row["iou_run"] = held_out_iou(Path(runs[name]), Path(args.data), Path(tmp) / f"{name}.json")
             rows.append(row)
             print(row, flush=True)
-    budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size),
-               "teacher": str(teacher)} if args.train_steps else None)
+    budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size), "seeds": args.seeds,
+               "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
     res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget,
            "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()}}
     lines = ["# Architectures (the paper's Table 3)", "",
              f"Fused D + B at {size[0]}x{size[1]}; frames/s of the fp32 ONNX model in onnxruntime with 2 threads.",
-             "", "| model | params (M) | GMACs | ms | frames/s | IoU | IoU (own run) |",
-             "|---|---|---|---|---|---|---|"]
+             "", "| model | params (M) | GMACs | ms | frames/s | IoU (mean +- std over seeds) | runs flat "
+                 "| IoU (own run) |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['model']} | {r['params_m']} | {r['gmacs']} | {r['median_ms']} | {r['fps']} | "
-                     f"{r.get('iou', '-')} | {r.get('iou_run', '-')} |")
+                     f"{r.get('iou', '-')} | {r.get('flat', '-')} | {r.get('iou_run', '-')} |")
     if budget:
         lines += ["", f"IoU: inside V on the held-out clips, every model trained {budget['steps']} steps of batch 8 at "
-                      f"{budget['size'][0]}x{budget['size'][1]} with one shared teacher and evaluated at that size."]
+                      f"{budget['size'][0]}x{budget['size'][1]} with one shared teacher, once per seed, and evaluated "
+                      "at that size; runs flat: the last fifth of a run's steps gained under 0.01 validation IoU."]
     if runs:
         lines += ["", "IoU (own run): " + "; ".join(f"`{k}` {run_budget(Path(v))}" for k, v in runs.items())
                   + "; evaluated at its own training size."]

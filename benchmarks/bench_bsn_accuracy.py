@@ -1,12 +1,20 @@
-"""The paper's Table 2 on held-out synthetic clips: BSN, BSN-D, BSN-KD and the three baselines,
-trained on one style, tested on both, with and without fine-tuning on 20 % of the target style.
+"""The paper's Table 2 on held-out synthetic clips, with seeds: BSN, BSN-D, BSN-KD and the three
+baselines, trained on one style, tested on both, with and without fine-tuning on 20 % of the target
+style; every trained cell as mean +- std over ``--seeds``.
 
-    python -m benchmarks.bench_bsn_accuracy --out benchmarks/results [--steps 250]
+    python -m benchmarks.bench_bsn_accuracy --out benchmarks/results [--seeds 0 1 2] [--steps 3000]
 
-One segmentation teacher is trained on the training clips of both styles (the role an
-off-the-shelf segmenter plays in the paper) and shared by every run and by the baselines.
-Fine-tuning starts from the source-style run and trains on 20 % of the target style's
-training clips. Every run has the same step budget; results are what that budget gives.
+At the research scale (``--size``, 128x256 by default: a quarter of the runtime's pixels per step).
+One segmentation teacher is trained on the training clips of both styles (the role an off-the-shelf
+segmenter plays in the paper) and shared by every run and by the baselines. Fine-tuning starts from
+the source-style run and trains on 20 % of the target style's training clips. Every run records its
+validation IoU every tenth of its steps, so the table says whether each row had flattened (the last
+fifth of its steps gained under 0.01) and draws the curves.
+
+A whole table is many CPU-hours: each finished run is written to ``bsn_accuracy_ledger.json`` in
+``--out`` at once (:mod:`benchmarks.ledger`), so the command can be stopped and run again, on any
+machine, and trains only what is missing; seeds are the outer loop, so a partial table holds whole
+seeds. The report is written from the ledger after every run.
 """
 
 from __future__ import annotations
@@ -15,114 +23,268 @@ import argparse
 import shutil
 import time
 from pathlib import Path
+from typing import Any
 
+from benchmarks.bench_campaign import flattened
 from benchmarks.common import eval_run, train_run, write_result
+from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
 from bsn_edge.cli import label as label_cli
+from bsn_edge.cli.common import parse_size
 from bsn_edge.synth import SynthConfig, write_clip
+from bsn_edge.train import Run
 
 MODELS = {"BSN": "small-light", "BSN-D": "small-light-d", "BSN-KD": "small-light-kd"}
 STYLES = ("town", "suburb")
 BASELINES = ("Traversable", "Detection-2D", "Detection-3D")
-FINETUNE_LR = 1e-4  # a tenth of training's: at 1e-3, 20 % of the target style (one clip) erases what was learnt
+METRICS = ("iou", "recall", "precision")
+FINETUNE_LR = 1e-4  # a tenth of training's: at 1e-3, 20 % of the target style erases what was learnt
+CURVE_RECORDS = 10  # validation records per run
 
 
-def make_data(work: Path, train_clips: int, test_clips: int, frames: int) -> tuple[Path, Path]:
+def make_data(work: Path, train_clips: int, test_clips: int, frames: int, size: tuple[int, int]
+              ) -> tuple[Path, Path]:
+    """Render and label the clips (once; finished clips and labels are skipped)."""
     train, test = work / "train", work / "test"
     for style in STYLES:
         for i in range(train_clips + test_clips):
             root = train if i < train_clips else test
             seq = root / f"{style}_{i}"
             if not (seq / "meta.json").exists():
-                write_clip(SynthConfig(frames=frames, style=style, seed=1000 + i), seq, video=False)
+                write_clip(SynthConfig(frames=frames, style=style, seed=1000 + i, height=size[0], width=size[1]),
+                           seq, video=False)
     for root in (train, test):
         label_cli.main([*map(str, sorted(root.iterdir())), "--jobs", "2"])
     return train, test
 
 
-def _eval(run: Path, test: Path, style: str, out: Path, baselines: bool) -> dict:
-    return eval_run(run, test, out, "--clips", "all", "--styles", style, *(() if baselines else ("--no-baselines",)))
+def _metrics(report: dict[str, Any], name: str) -> dict[str, float]:
+    m = report["overall"][name]
+    return {k: round(m[k], 4) for k in METRICS}
 
 
-def run(work: Path, steps: int, ft_steps: int, teacher_steps: int, train_clips: int, test_clips: int,
-        frames: int) -> dict:
-    t0 = time.perf_counter()
-    train, test = make_data(work, train_clips, test_clips, frames)
-    common = ["data.size=[256, 512]", "data.val_fraction=0.25", "train.batch_size=8",
-              f"train.checkpoint_every={steps}"]
+def _curve(run: Path) -> dict[str, Any]:
+    recs = [r for r in Run(run).history() if r.get("phase") == "train" and "val_iou" in r]
+    return {"steps": [r["step"] for r in recs], "val_iou": [round(r["val_iou"], 4) for r in recs],
+            "flattened": flattened(recs), "seconds": round(recs[-1]["seconds"]) if recs else None}
+
+
+def experiment(args: argparse.Namespace) -> dict[str, Any]:
+    """What a ledger's runs share; a ledger of another experiment is not mixed into."""
+    return {"steps": args.steps, "finetune_steps": args.finetune_steps, "finetune_lr": FINETUNE_LR,
+            "teacher_steps": args.teacher_steps, "batch_size": 8, "size": list(args.size),
+            "train_clips_per_style": args.train_clips, "test_clips_per_style": args.test_clips,
+            "frames_per_clip": args.frames, "models": MODELS}
+
+
+def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_record=None) -> None:
+    """Train and evaluate every (seed, model, source style) missing from ``ledger``."""
+    ex = ledger.experiment
+    train, test = make_data(work, ex["train_clips_per_style"], ex["test_clips_per_style"], ex["frames_per_clip"],
+                            tuple(ex["size"]))
+    steps, ft_steps = ex["steps"], ex["finetune_steps"]
+    h, w = ex["size"]
+    common = [f"data.size=[{h}, {w}]", "data.val_fraction=0.25", f"train.batch_size={ex['batch_size']}",
+              "train.eval_frames=128"]
     teacher = work / "runs" / "teacher"
-    train_run(train, teacher, [*common, "model.name=\"small-light\"", f"teacher.steps={teacher_steps}",
-                            "train.steps=1"])
+    trained_here = not Run(teacher).checkpoint_path.is_file()
+    train_run(train, teacher, [*common, 'model.name="small-light"', f"teacher.steps={ex['teacher_steps']}",
+                               f"teacher.eval_every={max(1, ex['teacher_steps'] // CURVE_RECORDS)}",
+                               "train.steps=1", "train.checkpoint_every=1"])
+    recs = [r for r in Run(teacher).history() if r.get("phase") == "teacher"]
+    curve = {"steps": [r["step"] for r in recs], "val_miou": [round(r["val_miou"], 4) for r in recs],
+             "flattened": flattened(recs, "val_miou")}
+    if "teacher" not in ledger:
+        ledger.put("teacher", {**curve, "retrained": []})
+    elif trained_here:
+        # the work folder was lost (another machine): the same recipe trained again, the runs after
+        # this point distil from it; the ledger says so
+        rec = ledger.runs["teacher"]
+        ledger.put("teacher", {**rec, "retrained": [*rec.get("retrained", []), curve["val_miou"][-1:]]})
     tsets = [f"teacher.checkpoint=\"{teacher / 'teacher'}\""]
-    rows = []
-    baseline_done: set[str] = set()
-    for label, name in MODELS.items():
-        for src in STYLES:
-            base = work / "runs" / f"{name}_{src}"
-            train_run(train, base, [*common, *tsets, f"model.name=\"{name}\"", f"train.steps={steps}",
-                                 f"data.train_styles=[\"{src}\"]"])
-            for tgt in STYLES:
-                runs = [(False, base)]
-                if tgt != src:
-                    ft = work / "runs" / f"{name}_{src}_ft_{tgt}"
-                    train_run(train, ft, [*common, *tsets, f"model.name=\"{name}\"", f"train.steps={ft_steps}",
-                                       f"data.train_styles=[\"{tgt}\"]", "data.fraction=0.2",
-                                       f"train.init=\"{base}\"", f"train.lr={FINETUNE_LR}"])
-                    runs.append((True, ft))
-                for finetune, r in runs:
-                    with_base = tgt not in baseline_done
-                    rep = _eval(r, test, tgt, work / "eval" / f"{r.name}_on_{tgt}.json", with_base)
-                    m = rep["overall"]["BSN"]
-                    rows.append({"model": label, "registry": name, "train_style": src, "test_style": tgt,
-                                 "finetune": finetune, **{k: round(m[k], 4) for k in ("iou", "recall", "precision")}})
-                    if with_base:
-                        baseline_done.add(tgt)
-                        for b in BASELINES:
-                            if b in rep["overall"]:
-                                mb = rep["overall"][b]
-                                rows.append({"model": b, "registry": None, "train_style": None, "test_style": tgt,
-                                             "finetune": False,
-                                             **{k: round(mb[k], 4) for k in ("iou", "recall", "precision")}})
-    return {"rows": rows, "budget": {"steps": steps, "finetune_steps": ft_steps, "finetune_lr": FINETUNE_LR,
-                                     "teacher_steps": teacher_steps,
-                                     "batch_size": 8, "size": [256, 512], "device": "CPU, 2 threads"},
-            "data": {"train_clips_per_style": train_clips, "test_clips_per_style": test_clips,
-                     "frames_per_clip": frames}, "seconds": round(time.perf_counter() - t0)}
+    for seed in seeds:
+        for label, name in MODELS.items():
+            for src in STYLES:
+                key = f"{label}/{src}/seed{seed}"
+                if key in ledger:
+                    continue
+                t0 = time.perf_counter()
+                runs = work / "runs" / f"seed{seed}"
+                base = runs / f"{name}_{src}"
+                train_run(train, base, [*common, *tsets, f'model.name="{name}"', f"train.steps={steps}",
+                                        f"train.checkpoint_every={steps}", f"train.seed={seed}",
+                                        f"train.eval_every={max(1, steps // CURVE_RECORDS)}",
+                                        f'data.train_styles=["{src}"]'])
+                record: dict[str, Any] = {"curve": _curve(base), "test": {}, "finetuned": {}}
+                for tgt in STYLES:
+                    with_baselines = f"baselines/{tgt}" not in ledger
+                    extra = ("--clips", "all", "--styles", tgt, *(() if with_baselines else ("--no-baselines",)))
+                    rep = eval_run(base, test, work / "eval" / f"seed{seed}_{base.name}_on_{tgt}.json", *extra)
+                    record["test"][tgt] = _metrics(rep, "BSN")
+                    if with_baselines:
+                        ledger.put(f"baselines/{tgt}", {b: _metrics(rep, b) for b in BASELINES if b in rep["overall"]})
+                    if tgt == src:
+                        continue
+                    ft = runs / f"{name}_{src}_ft_{tgt}"
+                    train_run(train, ft, [*common, *tsets, f'model.name="{name}"', f"train.steps={ft_steps}",
+                                          f"train.checkpoint_every={ft_steps}", f"train.seed={seed}",
+                                          f"train.eval_every={max(1, ft_steps // CURVE_RECORDS)}",
+                                          f'data.train_styles=["{tgt}"]', "data.fraction=0.2",
+                                          f'train.init="{base}"', f"train.lr={FINETUNE_LR}"])
+                    rep = eval_run(ft, test, work / "eval" / f"seed{seed}_{ft.name}_on_{tgt}.json",
+                                   "--clips", "all", "--styles", tgt, "--no-baselines")
+                    record["finetuned"][tgt] = {**_metrics(rep, "BSN"), "curve": _curve(ft)}
+                    if not keep_runs:
+                        shutil.rmtree(ft, ignore_errors=True)
+                record["seconds"] = round(time.perf_counter() - t0)
+                record["teacher"] = len(ledger.runs["teacher"]["retrained"])   # 0: the first teacher
+                ledger.put(key, record)
+                if not keep_runs:
+                    shutil.rmtree(base, ignore_errors=True)
+                if on_record:
+                    on_record()
 
 
-def markdown(res: dict) -> str:
-    b = res["budget"]
-    lines = ["# BlindSpotNet accuracy (the paper's Table 2, synthetic world)", "",
-             f"Held-out test clips ({res['data']['test_clips_per_style']} per style), inside V. Each run: "
-             f"{b['steps']} steps of batch {b['batch_size']} at {b['size'][0]}x{b['size'][1]} on {b['device']}; "
-             f"fine-tuning: {b['finetune_steps']} more steps at lr {b.get('finetune_lr', FINETUNE_LR):g} on 20 % of "
-             "the target style's training clips.", "",
-             "| model | train | test | fine-tuned | IoU | recall | precision |", "|---|---|---|---|---|---|---|"]
-    for r in res["rows"]:
-        lines.append(f"| {r['model']} | {r['train_style'] or '-'} | {r['test_style']} | "
-                     f"{'yes' if r['finetune'] else 'no'} | {r['iou']:.3f} | {r['recall']:.3f} | "
-                     f"{r['precision']:.3f} |")
+# the source style first, then the other without and with fine-tuning
+COLUMNS = [(src, tgt, ft) for src in STYLES for tgt in sorted(STYLES, key=lambda t: t != src)
+           for ft in ((False,) if src == tgt else (False, True))]
+
+
+def cells(ledger: Ledger, label: str, src: str, tgt: str, finetuned: bool, metric: str = "iou") -> list[float]:
+    """``metric`` of every seed of ``label`` trained on ``src`` and tested on ``tgt``."""
+    out = []
+    for key, rec in sorted(ledger.runs.items()):
+        if key.startswith(f"{label}/{src}/seed"):
+            part = rec["finetuned"].get(tgt) if finetuned else rec["test"].get(tgt)
+            if part:
+                out.append(part[metric])
+    return out
+
+
+def table(ledger: Ledger) -> dict[str, Any]:
+    """Per model and column: the seeds' IoUs, mean and std; the ablations' differences to BSN."""
+    rows = {}
+    for label in MODELS:
+        rows[label] = {f"{src}->{tgt}{' ft' if ft else ''}": cells(ledger, label, src, tgt, ft)
+                       for src, tgt, ft in COLUMNS}
+    for b in BASELINES:
+        rows[b] = {f"{src}->{tgt}{' ft' if ft else ''}": ([ledger.runs[f"baselines/{tgt}"][b]["iou"]]
+                                                           if f"baselines/{tgt}" in ledger
+                                                           and b in ledger.runs[f"baselines/{tgt}"] else [])
+                   for src, tgt, ft in COLUMNS}
+    beyond = {}
+    for abl in ("BSN-D", "BSN-KD"):
+        beyond[abl] = {}
+        for col, vals in rows["BSN"].items():
+            other = rows[abl][col]
+            if vals and other:
+                diff = mean_std(vals)[0] - mean_std(other)[0]
+                beyond[abl][col] = {"bsn_minus": round(diff, 4), "beyond_spread": exceeds_spread(vals, other)}
+    return {"rows": rows, "ablations": beyond}
+
+
+def plot_curves(ledger: Ledger, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(MODELS) + 1, figsize=(5 * (len(MODELS) + 1), 3.6), sharey=False)
+    t = ledger.get("teacher")
+    if t:
+        axes[0].plot(t["steps"], t["val_miou"], color="k")
+        axes[0].set_title("teacher: validation mIoU")
+        axes[0].set_xlabel("step")
+    for ax, label in zip(axes[1:], MODELS, strict=True):
+        for key, rec in sorted(ledger.runs.items()):
+            if key.startswith(f"{label}/"):
+                _, src, seed = key.split("/")
+                c = rec["curve"]
+                ax.plot(c["steps"], c["val_iou"], color="tab:blue" if src == "town" else "tab:orange",
+                        alpha=0.8, label=f"{src} {seed}")
+        ax.set_title(f"{label}: validation IoU (own style)")
+        ax.set_xlabel("step")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def markdown(ledger: Ledger, tab: dict[str, Any], figure: str) -> str:
+    ex = ledger.experiment
+    seeds = sorted({k.split("/")[2] for k in ledger.runs if k.count("/") == 2})
+    head = " | ".join(f"{s} -> {t}{', fine-tuned' if ft else ''}" for s, t, ft in COLUMNS)
+    lines = ["# BlindSpotNet accuracy (the paper's Table 2, synthetic world), with seeds", "",
+             f"Held-out test clips ({ex['test_clips_per_style']} per style), IoU inside V, mean +- std over the "
+             f"seeds run so far ({', '.join(seeds) or 'none'}). Each run: {ex['steps']} steps of batch "
+             f"{ex['batch_size']} at {ex['size'][0]}x{ex['size'][1]}; fine-tuning: {ex['finetune_steps']} more steps "
+             f"at lr {ex['finetune_lr']:g} on 20 % of the target style's training clips; one teacher of "
+             f"{ex['teacher_steps']} steps shared by all. Baselines need no training (one value).", "",
+             f"| model | {head} |", "|---" * (len(COLUMNS) + 1) + "|"]
+    for label, row in tab["rows"].items():
+        vals = [fmt(v) if label in MODELS else (f"{v[0]:.3f}" if v else "-") for v in row.values()]
+        lines.append(f"| {label} | " + " | ".join(vals) + " |")
+    lines += ["", "BSN against its ablations, per column: mean difference (BSN minus ablation), and whether it "
+                  "exceeds the seeds' spread (larger than the two standard deviations added):", ""]
+    for abl, cols in tab["ablations"].items():
+        parts = [f"{col} {v['bsn_minus']:+.3f}{' *' if v['beyond_spread'] else ''}" for col, v in cols.items()]
+        lines.append(f"- BSN - {abl}: " + ("; ".join(parts) if parts else "not run yet"))
+    lines += ["", "(`*`: beyond the spread.)", "", "Curves (validation IoU every tenth of a run's steps; "
+              "flat: the last fifth gained under 0.01):", ""]
+    for label in MODELS:
+        gains = [rec["curve"]["flattened"]["gain"] for k, rec in ledger.runs.items()
+                 if k.startswith(f"{label}/") and rec["curve"].get("flattened")]
+        if gains:
+            flat = sum(g < 0.01 for g in gains)
+            lines.append(f"- {label}: {flat} of {len(gains)} runs flat; last-fifth gain {fmt(gains)}")
+    t = ledger.get("teacher")
+    if t and t.get("flattened"):
+        lines.append(f"- teacher: validation mIoU {t['val_miou'][-1]:.3f}, last-fifth gain "
+                     f"{t['flattened']['gain']:+.3f}")
+    lines += ["", f"![curves]({figure})"]
     return "\n".join(lines)
+
+
+def write_report(ledger: Ledger, out: Path) -> Path:
+    figure = "bsn_accuracy_curves.png"
+    out.mkdir(parents=True, exist_ok=True)
+    plot_curves(ledger, out / figure)
+    tab = table(ledger)
+    return write_result(out, "bsn_accuracy", {"experiment": ledger.experiment, **tab, "figure": figure,
+                                              "ledger": ledger.path.name}, markdown(ledger, tab, figure))
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--out", default="benchmarks/results", help="results folder (the ledger is kept here too)")
     p.add_argument("--work", default="benchmarks/scratch/accuracy", help="clips and runs are kept here")
-    p.add_argument("--steps", type=int, default=250)
-    p.add_argument("--finetune-steps", type=int, default=80)
-    p.add_argument("--teacher-steps", type=int, default=300)
-    p.add_argument("--train-clips", type=int, default=5, help="training clips per style")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="training seeds (default 0 1 2)")
+    p.add_argument("--size", type=parse_size, default=(128, 256), metavar="HxW",
+                   help="clip and training size (default 128x256)")
+    p.add_argument("--steps", type=int, default=3000, help="steps of batch 8 per run (default 3000)")
+    p.add_argument("--finetune-steps", type=int, default=600)
+    p.add_argument("--teacher-steps", type=int, default=3000)
+    p.add_argument("--train-clips", type=int, default=8, help="training clips per style")
     p.add_argument("--test-clips", type=int, default=2, help="test clips per style")
     p.add_argument("--frames", type=int, default=200)
-    p.add_argument("--fresh", action="store_true", help="delete the work folder first")
+    p.add_argument("--keep-runs", action="store_true", help="keep the run folders (about 90 MB each)")
+    p.add_argument("--report-only", action="store_true", help="write the report from the ledger, train nothing")
+    p.add_argument("--fresh", action="store_true", help="delete the work folder and start a new ledger")
     args = p.parse_args(argv)
-    work = Path(args.work)
+    for name in ("steps", "finetune_steps", "teacher_steps", "train_clips", "test_clips", "frames"):
+        if getattr(args, name) < 1:
+            p.error(f"--{name.replace('_', '-')} must be at least 1")
+    work, out = Path(args.work), Path(args.out)
     if args.fresh:
         shutil.rmtree(work, ignore_errors=True)
-    res = run(work, args.steps, args.finetune_steps, args.teacher_steps, args.train_clips, args.test_clips,
-              args.frames)
-    path = write_result(args.out, "bsn_accuracy", res, markdown(res))
-    print(markdown(res))
+    try:
+        ledger = Ledger(out / "bsn_accuracy_ledger.json", experiment(args), fresh=args.fresh)
+    except ValueError as e:
+        print(f"bench_bsn_accuracy: {e}")
+        return 2
+    if not args.report_only:
+        run_table(work, ledger, args.seeds, args.keep_runs, on_record=lambda: write_report(ledger, out))
+    path = write_report(ledger, out)
+    print((out / "bsn_accuracy.md").read_text())
     print(f"wrote {path}")
     return 0
 

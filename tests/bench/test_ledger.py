@@ -1,0 +1,68 @@
+"""The seeded benchmarks' ledger: runs survive a stop, another experiment is refused, and the
+table's statistics match values worked out by hand."""
+
+import json
+
+import pytest
+
+from benchmarks.bench_bsn_accuracy import table
+from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
+
+EXPERIMENT = {"steps": 3000, "size": [128, 256], "models": {"BSN": "small-light"}}
+
+
+def test_a_run_put_is_on_disk_at_once_and_read_back_by_the_next_sitting(tmp_path):
+    path = tmp_path / "results" / "t_ledger.json"
+    a = Ledger(path, EXPERIMENT)
+    a.put("BSN/town/seed0", {"test": {"town": {"iou": 0.41}}})
+    on_disk = json.loads(path.read_text())
+    assert on_disk["runs"]["BSN/town/seed0"]["test"]["town"]["iou"] == 0.41
+    b = Ledger(path, dict(EXPERIMENT))
+    assert "BSN/town/seed0" in b and "BSN/town/seed1" not in b
+    assert b.get("BSN/town/seed0") == {"test": {"town": {"iou": 0.41}}}
+
+
+def test_another_experiment_is_refused_naming_what_differs_and_fresh_starts_over(tmp_path):
+    path = tmp_path / "t_ledger.json"
+    Ledger(path, EXPERIMENT).put("k", {"x": 1})
+    with pytest.raises(ValueError, match=r"differs in steps.*--fresh"):
+        Ledger(path, {**EXPERIMENT, "steps": 2000})
+    assert json.loads(path.read_text())["runs"] == {"k": {"x": 1}}      # nothing lost by the refusal
+    fresh = Ledger(path, {**EXPERIMENT, "steps": 2000}, fresh=True)
+    assert "k" not in fresh
+
+
+def test_a_damaged_ledger_is_an_error_not_an_empty_table(tmp_path):
+    path = tmp_path / "t_ledger.json"
+    path.write_text('{"runs": ')
+    with pytest.raises(ValueError, match="not a ledger"):
+        Ledger(path, EXPERIMENT)
+
+
+def test_mean_std_and_spread_against_hand_values():
+    m, s, n = mean_std([0.40, 0.44, 0.48])
+    assert (round(m, 6), round(s, 6), n) == (0.44, 0.04, 3)      # sample std: sqrt(0.0032 / 2)
+    # means 0.44 and 0.38, stds 0.04 and 0.01: 0.06 > 0.05, beyond the spread
+    assert exceeds_spread([0.40, 0.44, 0.48], [0.37, 0.38, 0.39]) is True
+    # means 0.44 and 0.41, stds 0.04 and 0.01: 0.03 < 0.05, within it
+    assert exceeds_spread([0.40, 0.44, 0.48], [0.40, 0.41, 0.42]) is False
+    assert exceeds_spread([0.4], [0.3, 0.2]) is None
+    assert fmt([0.40, 0.44, 0.48]) == "0.440 +- 0.040" and fmt([0.5]) == "0.500 (1 seed)" and fmt([]) == "-"
+
+
+def test_table_takes_each_cell_from_its_own_seeds(tmp_path):
+    led = Ledger(tmp_path / "l.json", EXPERIMENT)
+    for seed, (same, cross, ft) in enumerate([(0.50, 0.20, 0.30), (0.54, 0.22, 0.34)]):
+        led.put(f"BSN/town/seed{seed}", {"curve": {}, "test": {"town": {"iou": same}, "suburb": {"iou": cross}},
+                                         "finetuned": {"suburb": {"iou": ft}}})
+    led.put("BSN-D/town/seed0", {"curve": {}, "test": {"town": {"iou": 0.45}, "suburb": {"iou": 0.25}},
+                                 "finetuned": {"suburb": {"iou": 0.31}}})
+    led.put("baselines/town", {"Traversable": {"iou": 0.1}})
+    tab = table(led)
+    assert tab["rows"]["BSN"]["town->town"] == [0.50, 0.54]
+    assert tab["rows"]["BSN"]["town->suburb"] == [0.20, 0.22]
+    assert tab["rows"]["BSN"]["town->suburb ft"] == [0.30, 0.34]
+    assert tab["rows"]["BSN"]["suburb->suburb"] == []
+    assert tab["rows"]["Traversable"]["suburb->town"] == [0.1]
+    d = tab["ablations"]["BSN-D"]["town->town"]
+    assert d["bsn_minus"] == pytest.approx(0.07) and d["beyond_spread"] is None   # one seed of BSN-D
