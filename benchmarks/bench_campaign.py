@@ -65,7 +65,8 @@ def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> No
         axes[1].set_xlabel("samples")
         axes[1].set_ylabel("IoU")
         for k in ("loss", "bce", "kd", "depth"):
-            axes[2].plot(x, [r[k] for r in student], label=k)
+            xs = [r["samples"] for r in student if k in r]     # a run started from another: no losses at 0
+            axes[2].plot(xs, [r[k] for r in student if k in r], label=k)
         axes[2].set_yscale("log")
         axes[2].set_title("student: training losses (mean since the last record)")
         axes[2].set_xlabel("samples")
@@ -119,8 +120,10 @@ def main(argv: list[str] | None = None) -> int:
         lines += ["| step | samples | hours | loss | BCE | KD | depth loss | val IoU | threshold | val AbsRel |"
                   + (" val road AbsRel 5-40 m |" if road else ""),
                   "|---|---|---|---|---|---|---|---|---|---|" + ("---|" if road else "")]
-        lines += [f"| {r['step']} | {r['samples']} | {r['seconds'] / 3600:.2f} | {r['loss']:.3f} | {r['bce']:.3f} | "
-                  f"{r['kd']:.4f} | {r['depth']:.3f} | {r.get('val_iou', float('nan')):.3f} | "
+        nan = float("nan")
+        lines += [f"| {r['step']} | {r['samples']} | {r['seconds'] / 3600:.2f} | {r.get('loss', nan):.3f} | "
+                  f"{r.get('bce', nan):.3f} | {r.get('kd', nan):.4f} | {r.get('depth', nan):.3f} | "
+                  f"{r.get('val_iou', nan):.3f} | "
                   f"{r.get('val_threshold', float('nan')):.2f} | {r.get('val_abs_rel', float('nan')):.3f} |"
                   + (f" {r.get('val_road_abs_rel', float('nan')):.3f} |" if road else "")
                   for r in student]

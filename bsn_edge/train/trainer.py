@@ -431,6 +431,11 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         torch.set_rng_state(state["torch_rng"])
     if rank == 0:
         run.trim_history("train", start)
+        if start == 0 and cfg.train.init and cfg.train.eval_every and val_cache is not None:
+            # where a run started from another begins: its gain is then measured, not assumed
+            run.append_history({"phase": "train", "step": 0, "samples": 0, "seconds": 0.0,
+                                **{f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
+                                                                      cl).items()}})
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
                disable=True if (not progress or rank) else None)
     history: list[list[float]] = []

@@ -429,3 +429,20 @@ def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tm
     dst.teacher_path.write_bytes(bytes(data_))
     with pytest.raises(RunError, match="teacher does not match"):
         dst.load_teacher_state()
+
+
+def test_a_run_started_from_another_records_where_it_begins(data, tmp_path):
+    """Step 0 of a run with train.init is the validation of the weights it starts from: the same
+    figures the run it starts from measured at its last step, on the same split."""
+    from bsn_edge.train.trainer import train
+    sets = ["data.label=\"T2s\"", "data.val_fraction=0.34", "train.distill_weight=0", "train.eval_every=2",
+            "train.steps=2"]
+    first, second = tmp_path / "a", tmp_path / "b"
+    train(load_config(SMOKE, sets), data, first, progress=False)
+    train(load_config(SMOKE, [*sets, f"train.init=\"{first}\""]), data, second, progress=False)
+    a = [r for r in Run(first).history() if r["phase"] == "train"]
+    b = [r for r in Run(second).history() if r["phase"] == "train"]
+    assert [r["step"] for r in a] == [2] and [r["step"] for r in b] == [0, 2]
+    assert "val_iou" in a[-1] and "loss" not in b[0] and b[0]["samples"] == 0
+    for k in ("val_iou", "val_threshold", "val_abs_rel"):
+        assert b[0][k] == pytest.approx(a[-1][k], rel=1e-5), k
