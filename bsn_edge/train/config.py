@@ -108,11 +108,15 @@ class TeacherConfig:
     scale: float = 0.5                       # the teacher sees the frame at this scale (its features
                                              # are pooled to a coarse grid for distillation anyway)
     checkpoint: str = ""                     # a trained teacher's folder; empty trains one first
+    init: str = ""                           # train the run's teacher on from this trained teacher's weights
     eval_every: int = 0                      # steps between held-out mIoU records in the run's history (0: off)
 
     def __post_init__(self) -> None:
         if not 0.1 <= self.scale <= 1.0:
             raise ValueError(f"teacher.scale must be in [0.1, 1], got {self.scale}")
+        if self.checkpoint and self.init:
+            raise ValueError("teacher.checkpoint uses a trained teacher as it is, teacher.init trains one on from "
+                             "it: set one of them")
 
 
 @dataclass(frozen=True)

@@ -136,6 +136,8 @@ class Run:
         teacher = _last_parts(cfg.get("teacher", {}).get("checkpoint", ""))
         if not teacher and self.teacher_path.is_file():
             teacher = f"trained in the run, {cfg.get('teacher', {}).get('steps', '?')} steps"
+            if t_init := cfg.get("teacher", {}).get("init", ""):
+                teacher += f" on from {_last_parts(t_init)}"
         samples, hours = float(trained["samples"]), trained["seconds"] / 3600
         init = str(cfg.get("train", {}).get("init", ""))
         start = _last_parts(init)

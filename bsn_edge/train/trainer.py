@@ -249,6 +249,11 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
     if state is not None:
         teacher.load_state_dict(state)
         return teacher.to(dev).eval()
+    if t.init:
+        state = Run.of_teacher(t.init).load_teacher_state()
+        if state is None:
+            raise FileNotFoundError(f"teacher.init {t.init}: no teacher/teacher.pt there")
+        teacher.load_state_dict(state)
     teacher.to(dev)
     cl = cfg.train.channels_last
     teacher.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
@@ -259,6 +264,11 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
     bar = tqdm(range(t.steps), desc="teacher", disable=True if (not progress or rank) else None, unit="step")
     if rank == 0:
         run.trim_history("teacher", 0)
+        if t.init and val_cache is not None and t.eval_every:
+            # where a teacher trained on from another begins
+            run.append_history({"phase": "teacher", "step": 0, "samples": 0, "seconds": 0.0,
+                                **{f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, t.scale,
+                                                                           cfg.train.eval_frames, dtype).items()}})
     model.train()
     losses: list[float] = []
     t0 = time.perf_counter()

@@ -446,3 +446,20 @@ def test_a_run_started_from_another_records_where_it_begins(data, tmp_path):
     assert "val_iou" in a[-1] and "loss" not in b[0] and b[0]["samples"] == 0
     for k in ("val_iou", "val_threshold", "val_abs_rel"):
         assert b[0][k] == pytest.approx(a[-1][k], rel=1e-5), k
+
+
+def test_a_teacher_trained_on_from_another_starts_where_that_one_ended(data, tmp_path):
+    from bsn_edge.train.trainer import train
+    sets = ["data.label=\"T2s\"", "data.val_fraction=0.34", "train.steps=1", "teacher.steps=2",
+            "teacher.eval_every=2"]
+    first, second = tmp_path / "a", tmp_path / "b"
+    train(load_config(SMOKE, sets), data, first, progress=False)
+    train(load_config(SMOKE, [*sets, f"teacher.init=\"{first}\""]), data, second, progress=False)
+    a = [r for r in Run(first).history() if r["phase"] == "teacher"]
+    b = [r for r in Run(second).history() if r["phase"] == "teacher"]
+    assert [r["step"] for r in a] == [2] and [r["step"] for r in b] == [0, 2]
+    assert b[0]["val_miou"] == pytest.approx(a[-1]["val_miou"], rel=1e-6)
+    assert Run(second).card().training.teacher == f"trained in the run, 2 steps on from {tmp_path.name}/a"
+    assert Run(second).teacher_path.read_bytes() != Run(first).teacher_path.read_bytes()   # it did train on
+    with pytest.raises(ValueError, match="set one of them"):
+        load_config(SMOKE, [f"teacher.init=\"{first}\"", f"teacher.checkpoint=\"{first}\""])
