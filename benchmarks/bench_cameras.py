@@ -12,6 +12,7 @@ depth's AbsRel on vehicle and on road pixels, 5-10, 10-20 and 20-40 m, against t
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 from typing import Any
 
@@ -59,6 +60,24 @@ def parse_set(text: str) -> tuple[str, Path, list[str]]:
     return name, Path(folder), [n for n in names.split(",") if n]
 
 
+def _row(label: str, name: str, m: dict[str, Any]) -> str:
+    d = m["depth_abs_rel"]
+    return (f"| {label} | {name} | {m['frames']} | {m['iou']:.3f} | {m['recall']:.3f} | {m['precision']:.3f} | "
+            + " / ".join(_fmt(v) for v in d["vehicle"].values()) + " | "
+            + " / ".join(_fmt(v) for v in d["road"].values()) + " |")
+
+
+def kept_models(path: Path, sets: dict[str, list[str]], measured: list[str]) -> dict[str, Any]:
+    """The models of an earlier report at ``path`` measured on the same ``sets`` and not measured
+    again now (``--keep``); nothing from a report of other sets."""
+    if not path.is_file():
+        return {}
+    old = json.loads(path.read_text())
+    if old.get("sets") != sets:
+        raise ValueError(f"{path} was measured on other sets: --keep needs the same --set arguments")
+    return {k: v for k, v in old.get("models", {}).items() if k not in measured}
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--set", action="append", required=True, metavar="NAME=DIR[:CLIP,CLIP]",
@@ -66,6 +85,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--model", action="append", required=True, metavar="[NAME=]MODEL.onnx",
                    help="a model to evaluate, named in the report by NAME (default: its file name)")
     p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--keep", action="store_true",
+                   help="keep the rows of models the existing report measured on the same sets (models whose "
+                        "files are gone), first; a model named again is measured again")
     args = p.parse_args(argv)
     sets = []
     for text in args.set:
@@ -73,20 +95,18 @@ def main(argv: list[str] | None = None) -> int:
         clips = [c for c in find_clips(folder) if not names or c.path.name in names]
         sets.append((name, clips))
     result: dict[str, Any] = {"sets": {n: [c.path.name for c in cs] for n, cs in sets}, "models": {}}
-    rows = []
-    for spec in args.model:
-        label, _, mp = spec.rpartition("=")
-        label = label or Path(mp).name
+    labels = [(spec.rpartition("=")[0] or Path(spec.rpartition("=")[2]).name, spec.rpartition("=")[2])
+              for spec in args.model]
+    if args.keep:
+        try:
+            result["models"] = kept_models(Path(args.out) / "cameras.json", result["sets"], [lb for lb, _ in labels])
+        except ValueError as e:
+            print(f"bench_cameras: {e}")
+            return 2
+    for label, mp in labels:
         engine = Engine(mp)
-        res = {}
-        for name, clips in sets:
-            m = evaluate(engine, clips)
-            res[name] = m
-            d = m["depth_abs_rel"]
-            rows.append(f"| {label} | {name} | {m['frames']} | {m['iou']:.3f} | {m['recall']:.3f} | "
-                        f"{m['precision']:.3f} | " + " / ".join(_fmt(v) for v in d["vehicle"].values()) + " | "
-                        + " / ".join(_fmt(v) for v in d["road"].values()) + " |")
-        result["models"][label] = res
+        result["models"][label] = {name: evaluate(engine, clips) for name, clips in sets}
+    rows = [_row(label, name, m) for label, res in result["models"].items() for name, m in res.items()]
     md = "\n".join(["# Held-out synthetic IoU, every clip in the model's own camera", "",
                     "Inside V, at each model's own threshold, int8 through onnxruntime as bsn-run runs it.", "",
                     "| model | clips | frames | IoU | recall | precision | vehicle depth AbsRel 5-10 / 10-20 / 20-40 m "
