@@ -121,8 +121,12 @@ def main(argv: list[str] | None = None) -> int:
                   + (" val road AbsRel 5-40 m |" if road else ""),
                   "|---|---|---|---|---|---|---|---|---|---|" + ("---|" if road else "")]
         nan = float("nan")
-        lines += [f"| {r['step']} | {r['samples']} | {r['seconds'] / 3600:.2f} | {r.get('loss', nan):.3f} | "
-                  f"{r.get('bce', nan):.3f} | {r.get('kd', nan):.4f} | {r.get('depth', nan):.3f} | "
+
+        def f(r: dict[str, Any], k: str, spec: str) -> str:    # a run's starting point has no losses
+            return format(r[k], spec) if k in r else "-"
+
+        lines += [f"| {r['step']} | {r['samples']} | {r['seconds'] / 3600:.2f} | {f(r, 'loss', '.3f')} | "
+                  f"{f(r, 'bce', '.3f')} | {f(r, 'kd', '.4f')} | {f(r, 'depth', '.3f')} | "
                   f"{r.get('val_iou', nan):.3f} | "
                   f"{r.get('val_threshold', float('nan')):.2f} | {r.get('val_abs_rel', float('nan')):.3f} |"
                   + (f" {r.get('val_road_abs_rel', float('nan')):.3f} |" if road else "")
@@ -131,6 +135,10 @@ def main(argv: list[str] | None = None) -> int:
             lines.append(f"\nOver the last fifth (steps {flat['from_step']}-{flat['to_step']}) the validation IoU "
                          f"gained {flat['gain']:+.3f}: {'flattened' if flat['flat'] else 'still rising'} "
                          f"(flat: under {FLAT_IOU}).")
+        start = next((r for r in student if r["step"] == 0 and "val_iou" in r), None)
+        if start is not None and "val_iou" in student[-1]:
+            lines.append(f"From where the run began (step 0, the weights it started from) to its last record the "
+                         f"validation IoU moved {student[-1]['val_iou'] - start['val_iou']:+.3f}.")
     result = {"run": run.path.name, "config": cfg, "teacher": teacher, "student": student, "flattened": flat,
               "teacher_flattened": t_flat, "figure": png}
     write_result(out, f"campaign_{args.name}", result, "\n".join(lines))
