@@ -303,6 +303,7 @@ class FramePipeline:
         card, frames = self.engine.card, self.frames
         maps = self.outputs.maps
         return {"frames": frames, "valid_frames": self.valid, "dropped": self.dropped,
+                "before_start": self.source.before_start,
                 "overlap": self.cfg.overlap,
                 "seconds": round(elapsed, 3), "fps": frames / elapsed if elapsed else 0.0,
                 **self.latency.percentiles(),

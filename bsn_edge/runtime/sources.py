@@ -31,13 +31,15 @@ class Captured:
 
 
 class Source:
-    """Base: iterate to get frames; ``dropped`` counts frames a live source had to skip;
-    ``failure`` says why a source ended before its end (None when it ended normally);
+    """Base: iterate to get frames; ``dropped`` counts frames a live source had to skip while the loop
+    ran (``before_start`` those it replaced before the loop first asked: the model was still warming
+    up, no frame was due yet); ``failure`` says why a source ended before its end (None when it ended normally);
     ``stop()`` ends the iteration early (safe to call from a signal handler)."""
 
     live = False
     fps = 10.0                   # frames per second of the source's own clock (a file's, a folder's; nominal when live)
     dropped = 0
+    before_start = 0
     reconnects = 0
     unread = 0                   # frames of a file that never decoded at its end (counted as decode errors)
     failure: str | None = None
@@ -59,9 +61,16 @@ class VideoFileSource(Source):
     frames after it keep their true times and indices. A file that stops decoding for ``give_up``
     frames in a row before its end has failed."""
 
-    def __init__(self, path: str | Path, pace: bool = False, give_up: int = 250) -> None:
+    def __init__(self, path: str | Path, pace: bool = False, give_up: int = 250, decode_threads: int = 1) -> None:
+        """``decode_threads``: FFmpeg's decoding threads (0: its own choice, one per core). One by default:
+        the frame is then decoded on the thread that reads it, at that thread's priority (the loop's
+        feeder runs below the model's), and with less CPU than frame threading takes."""
+        if decode_threads < 0:
+            raise ValueError(f"decode_threads must be >= 0, got {decode_threads}")
         self.path = Path(path)
-        self.cap = cv2.VideoCapture(str(self.path))
+        self.cap = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, decode_threads])
+        if not self.cap.isOpened():          # a file FFmpeg does not read: whichever backend can
+            self.cap = cv2.VideoCapture(str(self.path))
         if not self.cap.isOpened():
             raise ValueError(f"{self.path}: OpenCV cannot open this video")
         self.fps = self.cap.get(cv2.CAP_PROP_FPS) or 10.0
@@ -198,6 +207,7 @@ class LiveSource(Source):
         self._lock = threading.Lock()
         self._newest: Captured | None = None
         self._taken = True
+        self._asked = False        # the loop has asked for a frame: from then on a replaced one is dropped
         self._last_frame = time.monotonic()
         self._stop = threading.Event()
         self._ended = threading.Event()
@@ -251,8 +261,10 @@ class LiveSource(Source):
             now = time.monotonic()
             with self._lock:
                 self._last_frame = now
-                if not self._taken:
+                if not self._taken and self._asked:
                     self.dropped += 1
+                elif not self._taken:
+                    self.before_start += 1
                 self._newest, self._taken = Captured(now, frame, i, dt), False
             i += 1
 
@@ -260,7 +272,7 @@ class LiveSource(Source):
         while not self._stop.is_set():
             with self._lock:
                 item, fresh = self._newest, not self._taken
-                self._taken = True
+                self._taken = self._asked = True
             if fresh and item is not None:
                 yield item
             elif self._ended.is_set():
@@ -284,9 +296,11 @@ class LiveSource(Source):
             self.cap.release()
 
 
-def open_source(spec: str, pace: bool = False, fps: float = 10.0, stall_s: float = Reconnect.stall_s) -> Source:
+def open_source(spec: str, pace: bool = False, fps: float = 10.0, stall_s: float = Reconnect.stall_s,
+                decode_threads: int = 1) -> Source:
     """``VIDEO`` file, image ``DIR``, camera index (``0``), or stream ``URL`` (``rtsp://...``); a camera
-    or stream that delivers nothing for ``stall_s`` is taken as lost and reopened."""
+    or stream that delivers nothing for ``stall_s`` is taken as lost and reopened. ``decode_threads``:
+    a video file's (:class:`VideoFileSource`)."""
     if spec.isdigit():
         return LiveSource(int(spec), Reconnect(stall_s=stall_s))
     if "://" in spec:
@@ -295,5 +309,5 @@ def open_source(spec: str, pace: bool = False, fps: float = 10.0, stall_s: float
     if p.is_dir():
         return ImageFolderSource(p, fps)
     if p.is_file():
-        return VideoFileSource(p, pace)
+        return VideoFileSource(p, pace, decode_threads=decode_threads)
     raise FileNotFoundError(f"source {spec!r} is not a file, a folder, a camera index or a URL")

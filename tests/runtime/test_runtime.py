@@ -263,6 +263,25 @@ def test_live_source_keeps_the_newest_frame_and_counts_drops():
     assert seen == [5] and src.dropped == 2
 
 
+def test_frames_replaced_before_the_loop_first_asks_are_not_drops():
+    """A camera delivers while the model warms up: those frames were never due, so they are counted
+    apart (``before_start``) and the bus's dropped-frames counter starts at 0."""
+    from bsn_edge.runtime.sources import LiveSource, Reconnect
+    cam = GatedCamera(5)
+    src = LiveSource("camera", Reconnect(max_tries=0), opener=lambda _: cam)
+    for g in cam.gates[:3]:                  # 0, 1, 2 arrive before anyone asks
+        g.set()
+    wait_for(lambda: src.before_start == 2)
+    it = iter(src)
+    assert int(next(it).frame[0, 0, 0]) == 2 and src.dropped == 0
+    for g in cam.gates[3:]:                  # 3 and 4 arrive while the consumer is busy: 3 is dropped
+        g.set()
+    wait_for(lambda: src.dropped == 1)
+    seen = [int(c.frame[0, 0, 0]) for c in it]
+    src.close()
+    assert seen == [4] and (src.before_start, src.dropped) == (2, 1)
+
+
 def test_a_narrow_camera_reads_no_blind_spot_in_the_mirrored_border():
     """A 40 degree camera fills tan(20) / tan(40) of an 80 degree model camera's width; outside it
     the model sees the frame mirrored, and nothing found there may reach the sectors."""

@@ -339,3 +339,31 @@ def test_a_video_file_source_lets_its_file_go_when_closed(setup):
         next(iter(src))
         src.close()
     assert open_fds() <= before
+
+
+def test_a_video_file_is_decoded_on_the_reading_thread_with_the_same_frames(tmp_path):
+    """One decoding thread by default (the feeder's priority then holds for decoding too): the frames,
+    indices and times are those FFmpeg's own frame threads give; a negative count is refused."""
+    import cv2
+
+    from bsn_edge.runtime.sources import VideoFileSource
+    path = tmp_path / "v.mp4"
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 25, (192, 96))
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        w.write(rng.integers(0, 256, (96, 192, 3), dtype=np.uint8))
+    w.release()
+
+    def frames(**kw):
+        src = VideoFileSource(path, **kw)
+        threads = src.cap.get(cv2.CAP_PROP_N_THREADS)
+        got = [(c.index, c.t, c.frame) for c in src]
+        src.close()
+        return got, threads
+
+    one, n_one = frames()
+    many, _ = frames(decode_threads=0)
+    assert n_one == 1 and len(one) == len(many) == 30
+    assert all(a[:2] == b[:2] and np.array_equal(a[2], b[2]) for a, b in zip(one, many, strict=True))
+    with pytest.raises(ValueError, match="decode_threads"):
+        VideoFileSource(path, decode_threads=-1)
