@@ -33,6 +33,15 @@ def machine() -> dict[str, Any]:
             "platform": platform.platform()}
 
 
+def class_name(base: str) -> str:
+    """A per-machine report's name for this CPU's int8 class: ``base`` with VNNI, ``base_avx2`` on an x86
+    CPU without it, ``base_<arch>`` elsewhere (so one class's results never overwrite another's)."""
+    isa = machine()["isa"]
+    if "VNNI" in isa or "AVX-VNNI" in isa:
+        return base
+    return f"{base}_avx2" if "AVX2" in isa else f"{base}_{platform.machine().lower()}"
+
+
 def time_calls(fn: Callable[[int], Any], n: int, warmup: int = 3) -> list[float]:
     """Seconds per call of ``fn(i)`` for ``i`` in ``range(n)``, after ``warmup`` calls."""
     for i in range(warmup):
@@ -79,13 +88,18 @@ def write_result(out_dir: str | Path, name: str, result: dict[str, Any], markdow
 
 
 def train_run(data: Path, out: Path, sets: list[str]) -> Path:
-    """``bsn-train --data data --out out --set ...`` in this process; a finished run is reused."""
+    """``bsn-train --data data --out out --set ...`` in this process; a finished run is reused, one
+    stopped part-way goes on from its last saved state (``--resume``)."""
     from bsn_edge.cli import train as train_cli
     from bsn_edge.train.run import Run
 
-    if Run(out).checkpoint_path.is_file():
+    run = Run(out)
+    if run.checkpoint_path.is_file():
         return out
     argv = ["--data", str(data), "--out", str(out), "--quiet"]
+    if run.state_path.is_file():
+        print(f"{out}: going on from its saved training state", flush=True)
+        argv.append("--resume")
     for s in sets:
         argv += ["--set", s]
     if train_cli.main(argv):
