@@ -36,7 +36,7 @@ from onnxruntime.quantization.shape_inference import quant_pre_process
 
 from benchmarks.bench_arch import count_gmacs
 from benchmarks.bench_quant import kernel_times, latency
-from benchmarks.common import machine, write_result
+from benchmarks.common import class_name, machine, write_result
 from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
 from bsn_edge.export.seal import read_card
@@ -162,6 +162,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--model", default=str(DEFAULT_MODEL), help="an int8 model exported by bsn-export")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--runs", type=int, default=60)
+    p.add_argument("--name", help="the report's name in --out (default: floor with VNNI, floor_avx2 without)")
     args = p.parse_args(argv)
     card = read_card(args.model)
     h, w = card.input_size
@@ -209,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
               "| kind | ms per run | GMACs | TMAC/s | share of peak |", "|---|---|---|---|---|"]
     lines += [f"| {k} | {c['ms']:.2f} | {c['gmacs']:.3f} | {c['tmacs_per_s']:.3f} | "
               f"{100 * c['tmacs_per_s'] / peak:.0f} % |" for k, c in convs.items()]
-    write_result(args.out, "floor", result, "\n".join(lines))
+    write_result(args.out, args.name or class_name("floor"), result, "\n".join(lines))
     print("\n".join(lines))
     return 0
 

@@ -17,8 +17,8 @@ from matplotlib.ticker import NullFormatter, ScalarFormatter
 
 from benchmarks.common import machine
 
-ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "floor", "int8_cpu", "runtime",
-         "calibration", "footprint",
+ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "floor", "floor_avx2", "int8_cpu",
+         "runtime", "runtime_avx2", "runtime_avx2_decode", "calibration", "footprint",
          "realcam", "realview", "cameras", "remap")
 
 
@@ -102,8 +102,10 @@ def build(results: Path) -> Path:
     m = machine()
     parts = ["# bsn-edge benchmark report", "",
              f"Measured on {m['cpu']}, {m['cores']} cores, Python {m['python']} ({m['platform']}).",
-             "Each section is one benchmark's own report; the JSON beside it has every number.", ""]
-    plots = {"runtime": ("stages.png", plot_stages), "bsn_arch": ("arch.png", plot_arch),
+             "Each section is one benchmark's own report, measured on the machine its last line names (a "
+             "`_avx2` section on a CPU without VNNI); the JSON beside it has every number.", ""]
+    plots = {"runtime": ("stages.png", plot_stages), "runtime_avx2": ("stages_avx2.png", plot_stages),
+             "bsn_arch": ("arch.png", plot_arch),
              "quant": ("quant.png", plot_quant)}
     for name in ORDER:
         md = results / f"{name}.md"

@@ -103,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
                     _py("-m", "bsn_edge.cli.synth", str(work / "clip"), "--frames", "300", "--seed", "42",
                         "--force")
                 source = ["--source", str(clip)]
-            _py("-m", "benchmarks.bench_runtime", "--model", str(DEFAULT_MODEL), *source, "--out", out)
+            _py("-m", "benchmarks.bench_runtime", "--model", str(DEFAULT_MODEL), *source, "--repeats", "3",
+                "--out", out)
         if "realcam" in names:
             _py("-m", "benchmarks.bench_realcam", "--out", out)
         if "realview" in names:
