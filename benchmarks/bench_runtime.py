@@ -15,7 +15,9 @@ its decode time is not the original's H.264).
 
 Each clip is run in every way the loop can be set (``--loops``), side by side: reading in turn with
 the model or overlapped with it (``RuntimeConfig.overlap``: decode and warp of the next frame on a
-thread of their own) and onnxruntime's idle threads spinning or not (``bsn-run --no-spin``). With
+thread of their own), onnxruntime's idle threads spinning or not (``bsn-run --no-spin``), and two
+frames in flight on one-thread engines (``bsn-run --in-flight 2``). Model only is always the
+two-thread engine, one frame at a time: the model's own rate as the default runs it. With
 overlap the stage times are work per frame on two threads: they add up to more than the frame's
 wall time.
 
@@ -96,19 +98,29 @@ class Loop:
     spin: bool
     nice: int = 0
     decode_threads: int = 1      # FFmpeg's (0: its own choice, frame threads on every core)
+    in_flight: int = 1           # frames in the model at once, on engines of one thread each when > 1
 
     @property
     def name(self) -> str:
         reading = "in turn" if not self.overlap else f"overlap{f' nice {self.nice}' if self.nice else ''}"
         decode = "" if self.decode_threads == 1 else f", decode {self.decode_threads or 'FFmpeg'} threads"
-        return f"{reading}, {'spin' if self.spin else 'no spin'}{decode}"
+        flight = "" if self.in_flight == 1 else f", {self.in_flight} in flight"
+        return f"{reading}, {'spin' if self.spin else 'no spin'}{decode}{flight}"
+
+    @property
+    def threads(self) -> int:
+        """onnxruntime intra-op threads per inference, as ``bsn-run`` chooses them."""
+        return 2 if self.in_flight == 1 else 1
 
     def config(self) -> RuntimeConfig:
-        return RuntimeConfig(overlap=self.overlap, feeder_nice=self.nice)
+        return RuntimeConfig(overlap=self.overlap, feeder_nice=self.nice, in_flight=self.in_flight)
 
 
 _DEFAULT = RuntimeConfig()
-LOOPS = {"all": [Loop(o, sp) for o in (False, True) for sp in (True, False)] + [Loop(True, False, 10)],
+LOOPS = {"all": [Loop(o, sp) for o in (False, True) for sp in (True, False)] + [Loop(True, False, 10),
+                                                                                 Loop(True, False, 10, in_flight=2)],
+         "flight": [Loop(_DEFAULT.overlap, False, _DEFAULT.feeder_nice),
+                    Loop(_DEFAULT.overlap, False, _DEFAULT.feeder_nice, in_flight=2)],
          "reading": [Loop(False, False), Loop(True, False), Loop(True, False, 10), Loop(True, False, 19)],
          "default": [Loop(_DEFAULT.overlap, False, _DEFAULT.feeder_nice)],
          "decode": [Loop(_DEFAULT.overlap, False, _DEFAULT.feeder_nice, 0), Loop(_DEFAULT.overlap, False,
@@ -234,9 +246,12 @@ def main(argv: list[str] | None = None) -> int:
                 for spin in sorted({lp.spin for lp in LOOPS[args.loops]}, reverse=True):
                     engine = Engine(model, threads=2, spinning=spin)
                     mo = model_only(engine, str(long), min(args.frames, 200), CameraState(engine.card, cal))
+                    engines = {2: engine}
                     for loop in (lp for lp in LOOPS[args.loops] if lp.spin == spin):
+                        if loop.threads not in engines:
+                            engines[loop.threads] = Engine(model, threads=loop.threads, spinning=spin)
                         for calibration in ([cal, None] if cal is not None else [None]):
-                            r = profile(engine, long, args.frames, calibration, loop)
+                            r = profile(engines[loop.threads], long, args.frames, calibration, loop)
                             share, tail = r["e2e_fps"] / mo, r["p99_ms"] / r["p50_ms"]
                             r.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
                                      repeat=repeat, model_only_fps=mo, e2e_over_model=share, p99_over_p50=tail,

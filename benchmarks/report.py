@@ -18,7 +18,8 @@ from matplotlib.ticker import NullFormatter, ScalarFormatter
 from benchmarks.common import machine
 
 ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "floor", "floor_avx2", "int8_cpu",
-         "runtime", "runtime_avx2", "runtime_avx2_decode", "calibration", "footprint",
+         "runtime", "runtime_avx2", "runtime_avx2_decode",
+         "runtime_avx2_flight", "calibration", "footprint",
          "realcam", "realview", "cameras", "remap")
 
 

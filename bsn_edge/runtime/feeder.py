@@ -8,7 +8,9 @@ wins: a prepared frame the model had no time for is replaced by the next one and
 
 Every prepared frame is warped into an input buffer of its own, which the caller has until it asks
 for the next frame or hands it back (:meth:`Feeder.release`) once the model has read it. Three
-buffers are enough: one in the model, one in the slot, one being written.
+buffers are enough: one in the model, one in the slot, one being written. A caller that keeps
+``held`` frames in the model at once (two inferences side by side) hands each back itself and needs
+``held + 2``.
 
 The feeder's thread may run at a lower scheduling priority (``nice``): the model's threads then keep
 the cores, and decode and warp fill the gaps they leave (between operators, while a thread waits
@@ -52,25 +54,35 @@ class Feeder:
     """Iterate to get :class:`Prepared` frames of ``source``, at most ``limit``; ``close()`` stops it.
 
     ``background=False`` reads and warps on the caller's thread, into one buffer (``buffers[0]``).
-    ``background=True`` needs ``BUFFERS`` of them and a thread of its own, ``nice`` steps below the
-    caller's priority (0: the same); an exception there is raised on the caller's thread when the
-    iteration reaches it."""
+    ``background=True`` needs ``held + 2`` of them (:meth:`buffers_needed`) and a thread of its own,
+    ``nice`` steps below the caller's priority (0: the same); an exception there is raised on the
+    caller's thread when the iteration reaches it. With ``held`` > 1 (background only) asking for the
+    next frame releases nothing: the caller hands each buffer back when the model has read it."""
 
     BUFFERS = 3          # in the background: one in the model, one in the slot, one being written
 
+    @staticmethod
+    def buffers_needed(held: int = 1) -> int:
+        """Input buffers a background feeder needs when the caller keeps ``held`` frames at once."""
+        return held + 2
+
     def __init__(self, source: Source, warp: Warp, buffers: list[np.ndarray], background: bool,
-                 limit: int | None = None, nice: int = 0) -> None:
+                 limit: int | None = None, nice: int = 0, held: int = 1) -> None:
         if not 0 <= nice <= 19:
             raise ValueError(f"nice must be within 0..19, got {nice}")
-        if background and len(buffers) < self.BUFFERS:
-            raise ValueError(f"a background feeder needs {self.BUFFERS} input buffers, got {len(buffers)}")
+        if held < 1 or (held > 1 and not background):
+            raise ValueError(f"held must be 1, or more with a background feeder; got {held}")
+        if background and len(buffers) < self.buffers_needed(held):
+            raise ValueError(f"a background feeder that lets {held} frame(s) be held needs "
+                             f"{self.buffers_needed(held)} input buffers, got {len(buffers)}")
         if not buffers:
             raise ValueError("a feeder needs an input buffer")
         self.source, self.warp, self.background, self.limit, self.nice = source, warp, background, limit, nice
         self.newest_wins = source.live
         self._buffers = list(buffers)
         self._free = list(buffers)
-        self._held: np.ndarray | None = None      # the buffer of the frame the caller has
+        self._auto_release = held == 1
+        self._held: list[np.ndarray] = []        # the buffers of the frames the caller has
         self._cond = threading.Condition()
         self._slot: Prepared | None = None
         self._ended = False
@@ -98,11 +110,12 @@ class Feeder:
         """The model has read ``buf``: the feeder may warp the next frame into it. Asking for the next
         frame releases the one before anyway; releasing early lets the feeder start sooner."""
         with self._cond:
-            if buf is None or self._held is None or buf is not self._held:
-                return
-            self._free.append(buf)
-            self._held = None
-            self._cond.notify_all()
+            for i, b in enumerate(self._held):
+                if b is buf:
+                    del self._held[i]
+                    self._free.append(buf)
+                    self._cond.notify_all()
+                    return
 
     def __iter__(self) -> Iterator[Prepared]:
         if not self.background:
@@ -111,12 +124,15 @@ class Feeder:
         self._thread = threading.Thread(target=self._work, name="bsn-feeder", daemon=True)
         self._thread.start()
         while True:
-            self.release(self._held)
+            if self._auto_release:
+                for buf in list(self._held):
+                    self.release(buf)
             with self._cond:
                 while self._slot is None and not self._ended:
                     self._cond.wait()
                 item, self._slot = self._slot, None
-                self._held = None if item is None else item.buf
+                if item is not None and item.buf is not None:
+                    self._held.append(item.buf)
                 self._cond.notify_all()
                 if item is None:
                     if self._error is not None:

@@ -10,7 +10,9 @@ from __future__ import annotations
 import json
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,6 +43,7 @@ from bsn_edge.runtime.stats import LatencyStats
 from bsn_edge.sequence.folder import frame_name
 
 STAGES = ("decode", "preprocess", "inference", "postprocess", "send")
+MAX_IN_FLIGHT = 4
 
 
 def blind_spots(prob: np.ndarray, threshold: float, mf: ModelFrame) -> np.ndarray:
@@ -63,12 +66,17 @@ class RuntimeConfig:
     warmup: int = 3
     overlap: bool = True         # decode and warp the next frame on a thread of its own while the model runs
     feeder_nice: int = 10
+    in_flight: int = 1           # frames the model runs at once, each inference on a thread of its own
 
     def __post_init__(self) -> None:
         if not self.cycle_s > 0 or self.warmup < 0:
             raise ValueError(f"cycle_s must be positive and warmup >= 0, got {self.cycle_s} and {self.warmup}")
         if not 0 <= self.feeder_nice <= 19:
             raise ValueError(f"feeder_nice must be within 0..19, got {self.feeder_nice}")
+        if not 1 <= self.in_flight <= MAX_IN_FLIGHT:
+            raise ValueError(f"in_flight must be within 1..{MAX_IN_FLIGHT}, got {self.in_flight}")
+        if self.in_flight > 1 and not self.overlap:
+            raise ValueError("more than one frame in flight needs reading overlapped with the model (overlap=True)")
 
 
 @dataclass
@@ -124,6 +132,7 @@ class FramePipeline:
         self.sinks: dict[str, GuardedSink] = {}
         self.heartbeat: Heartbeat | None = None
         self.feeder: Feeder | None = None
+        self.pool: ThreadPoolExecutor | None = None     # the inference threads, with frames in flight
         self.frames = self.valid = 0
         self.last_shape: tuple[int, ...] | None = None
         self.last_t = 0.0
@@ -162,7 +171,23 @@ class FramePipeline:
 
     def infer(self, buf: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """The model on ``buf``; None (and counted) when it answers NaN or infinity."""
-        prob, depth = self.engine.infer(buf)
+        return self.checked(*self.engine.infer(buf))
+
+    def start(self, item: Prepared) -> Future | None:
+        """The frame's inference started on one of the loop's inference threads (``in_flight`` > 1):
+        the future answers (prob, depth, when it began, seconds); None when there is nothing to run."""
+        if item.cap.frame is None or item.buf is None or self.pool is None:
+            return None
+
+        def timed(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+            t0 = time.perf_counter()
+            prob, depth = self.engine.infer(buf)
+            return prob, depth, t0, time.perf_counter() - t0
+
+        return self.pool.submit(timed, item.buf)
+
+    def checked(self, prob: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The model's answer; None (and counted) when it is NaN or infinity."""
         if not (np.isfinite(prob).all() and np.isfinite(depth).all()):
             self.health.fault(Fault.NAN_OUTPUTS)
             return None
@@ -223,18 +248,25 @@ class FramePipeline:
         if out.maps is not None:
             self.sinks["maps"] = GuardedSink("maps", out.maps.write, None, fault)
 
-    def step(self, item: Prepared) -> None:
-        """One prepared frame through the remaining stages, timed."""
+    def step(self, item: Prepared, inflight: Future | None = None) -> None:
+        """One prepared frame through the remaining stages, timed; ``inflight``: its inference, already
+        started on another thread (:meth:`start`), whose answer is waited for here."""
         cap = item.cap
         t0 = time.perf_counter()
         rec: dict[str, Any] = {"frame": cap.index, "t": round(cap.t, 4)}
         self.timer.add("preprocess", item.warp_s)
         if self.read(cap, rec) and item.mf is not None and item.buf is not None:
             self.health.calibrating(item.calibrating)
-            out = self.infer(item.buf)
+            if inflight is None:
+                out = self.infer(item.buf)
+                seconds = time.perf_counter() - t0
+            else:
+                prob, depth, began, seconds = inflight.result()
+                t0 = min(t0, began)          # the frame's path began with its inference
+                out = self.checked(prob, depth)
             self.feeder.release(item.buf)
             t2 = time.perf_counter()
-            self.timer.add("inference", t2 - t0)
+            self.timer.add("inference", seconds)
             if out is None:
                 rec["fault"] = "nan_output"
             else:
@@ -279,23 +311,44 @@ class FramePipeline:
 
     def run(self, max_frames: int | None = None, progress: Callable[[int], Any] | None = None,
             stop: threading.Event | None = None) -> dict[str, Any]:
-        """Process the source until it ends, ``max_frames`` or ``stop``; returns the summary."""
+        """Process the source until it ends, ``max_frames`` or ``stop``; returns the summary.
+
+        With ``in_flight`` > 1 the model runs that many frames at once, each on an inference thread of
+        its own (an engine of one intra-op thread each: two on two cores do more frames a second than
+        one inference split over both, each frame's answer later); everything after the inference
+        happens on this thread, in the frames' order, as with one in flight."""
         self.engine.warmup(self.cfg.warmup)
         t_start = time.perf_counter()
-        overlap = self.cfg.overlap
-        extra = Feeder.BUFFERS - 1 if overlap else 0
+        overlap, held = self.cfg.overlap, self.cfg.in_flight
+        extra = Feeder.buffers_needed(held) - 1 if overlap else 0
         buffers = [self.engine.buf] + [np.empty_like(self.engine.buf) for _ in range(extra)]
+        pending: deque[tuple[Prepared, Future | None]] = deque()
         try:
             self.open()
             self.feeder = Feeder(self.source, self.warp, buffers, background=overlap, limit=max_frames,
-                                 nice=self.cfg.feeder_nice)
+                                 nice=self.cfg.feeder_nice, held=held)
+            if held > 1:
+                self.pool = ThreadPoolExecutor(held, thread_name_prefix="bsn-infer")
+            def done() -> bool:
+                return (max_frames is not None and self.frames >= max_frames) or (stop is not None and stop.is_set())
+
             for item in self.feeder:
-                self.step(item)
+                pending.append((item, self.start(item)))
+                if len(pending) < held:
+                    continue
+                self.step(*pending.popleft())
                 if progress:
                     progress(1)
-                if (max_frames is not None and self.frames >= max_frames) or (stop is not None and stop.is_set()):
+                if done():
                     break
+            else:
+                while pending and not done():     # the source ended with frames still in the model
+                    self.step(*pending.popleft())
+                    if progress:
+                        progress(1)
         finally:
+            if self.pool is not None:
+                self.pool.shutdown(wait=True, cancel_futures=True)
             self.close()
         return self.summary(time.perf_counter() - t_start, stop)
 
@@ -304,7 +357,7 @@ class FramePipeline:
         maps = self.outputs.maps
         return {"frames": frames, "valid_frames": self.valid, "dropped": self.dropped,
                 "before_start": self.source.before_start,
-                "overlap": self.cfg.overlap,
+                "overlap": self.cfg.overlap, "in_flight": self.cfg.in_flight,
                 "seconds": round(elapsed, 3), "fps": frames / elapsed if elapsed else 0.0,
                 **self.latency.percentiles(),
                 "wait_ms": {k.removesuffix("_ms"): v for k, v in self.waiting.percentiles().items()},

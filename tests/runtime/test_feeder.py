@@ -176,3 +176,34 @@ def test_frames_the_model_had_no_time_for_are_a_fault_on_the_bus(setup):
                   RuntimeConfig(warmup=0, overlap=True))
     assert summary["dropped"] > 0 and summary["frames"] + summary["dropped"] == 40
     assert summary["faults"]["dropped_frames"] == summary["dropped"]
+
+
+@pytest.mark.parametrize("calibrating", [False, True])
+def test_two_frames_in_flight_change_no_answer(setup, tmp_path, calibrating):
+    """Two inferences side by side on one-thread engines: the same frames, alerts and maps, in the same
+    order, as one at a time."""
+    model, clip = setup
+    out = {}
+    for in_flight in (1, 2):
+        engine = Engine(model, threads=3 - in_flight)
+        camera = None if calibrating else mounted(engine, clip)
+        log, maps = tmp_path / f"log{in_flight}.jsonl", tmp_path / f"maps{in_flight}"
+        summary = run(engine, open_source(str(clip / "video.mp4")), [], RuntimeConfig(in_flight=in_flight),
+                      log=log, camera=camera, save_maps=maps)
+        assert summary["in_flight"] == in_flight and summary["frames"] == 15 and summary["dropped"] == 0
+        out[in_flight] = frame_log(log), {p.name: p.read_bytes() for p in sorted(maps.iterdir())}
+    assert [r["frame"] for r in out[2][0]] == list(range(15))
+    assert out[2][0] == out[1][0] and out[2][1] == out[1][1]
+
+
+def test_frames_in_flight_stop_at_max_frames_and_need_overlap(setup):
+    model, clip = setup
+    summary = run(Engine(model, threads=1), open_source(str(clip / "video.mp4")), [], RuntimeConfig(in_flight=2),
+                  max_frames=6)
+    assert summary["frames"] == 6 and summary["valid_frames"] == 6
+    with pytest.raises(ValueError, match="overlap"):
+        RuntimeConfig(in_flight=2, overlap=False)
+    with pytest.raises(ValueError, match="in_flight"):
+        RuntimeConfig(in_flight=0)
+    with pytest.raises(ValueError, match="4 input buffers"):
+        Feeder(ListSource(3), lambda f, b: (None, False), [np.empty(1)] * 3, background=True, held=2)

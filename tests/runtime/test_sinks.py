@@ -367,3 +367,20 @@ def test_a_video_file_is_decoded_on_the_reading_thread_with_the_same_frames(tmp_
     assert all(a[:2] == b[:2] and np.array_equal(a[2], b[2]) for a, b in zip(one, many, strict=True))
     with pytest.raises(ValueError, match="decode_threads"):
         VideoFileSource(path, decode_threads=-1)
+
+
+def test_frames_in_flight_without_overlap_are_refused_with_unavailable(setup, capsys):
+    model, clip = setup
+    code, got = run_on_bus("bsn-inflight", ["--model", str(model), "--source", str(clip / "video.mp4"),
+                                            "--in-flight", "2", "--in-turn"])
+    assert code == 2 and "overlap" in capsys.readouterr().err
+    assert [d.signals["System_State"] for d in got if d.name == "BSN_Status"] == [SystemState.UNAVAILABLE]
+
+
+def test_two_frames_in_flight_run_on_one_thread_each(setup, tmp_path):
+    model, clip = setup
+    summ = tmp_path / "s.json"
+    code, _ = run_on_bus("bsn-inflight2", ["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                                           str(clip / "calibration.json"), "--in-flight", "2", "--summary", str(summ)])
+    s = json.loads(summ.read_text())
+    assert code == 0 and s["in_flight"] == 2 and s["frames"] == s["valid_frames"] == 15
