@@ -97,7 +97,7 @@ def train_run(data: Path, out: Path, sets: list[str]) -> Path:
     if run.checkpoint_path.is_file():
         return out
     argv = ["--data", str(data), "--out", str(out), "--quiet"]
-    if run.state_path.is_file():
+    if run.state_path.is_file() or run.teacher_state_path.is_file():
         print(f"{out}: going on from its saved training state", flush=True)
         argv.append("--resume")
     for s in sets:

@@ -7,6 +7,7 @@
     RUN/checkpoint.json    {"card": the model card, "step", clips, validation metrics, ...}
     RUN/state.pt           what resuming needs, in one file: weights, optimizer, schedule, step
     RUN/teacher/teacher.pt the segmentation teacher
+    RUN/teacher/state.pt   while the teacher trains: what resuming it needs, as ``state.pt``
     RUN/history.jsonl      one JSON record per line: losses and validation figures along the way
 
 Nothing is unpickled beyond tensors and numbers. A save writes ``state.pt`` first (one atomic
@@ -90,12 +91,18 @@ class Run:
         return self.path / self.TEACHER / "teacher.pt"
 
     @property
+    def teacher_state_path(self) -> Path:
+        """What resuming the teacher's training needs, while it is unfinished (gone once ``teacher.pt`` is)."""
+        return self.path / self.TEACHER / self.STATE
+
+    @property
     def history_path(self) -> Path:
         return self.path / self.HISTORY
 
     def exists(self) -> bool:
         """Whether anything of a run is already here."""
-        return any(p.exists() for p in (self.model_path, self.checkpoint_path, self.state_path))
+        return any(p.exists() for p in (self.model_path, self.checkpoint_path, self.state_path,
+                                        self.teacher_state_path))
 
     # -- reading ---------------------------------------------------------------------------------
 
@@ -325,8 +332,31 @@ class Run:
         atomic_write_bytes(self.history_path, "".join(json.dumps(r) + "\n" for r in kept).encode())
 
     def save_teacher(self, state: dict[str, torch.Tensor]) -> None:
+        """The finished teacher's weights; its training state goes (nothing is left to resume)."""
         self.teacher_path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(self.teacher_path, _to_bytes(state))
+        self.teacher_state_path.unlink(missing_ok=True)
+
+    def save_teacher_progress(self, weights: dict[str, torch.Tensor], resume_state: dict[str, Any]) -> None:
+        """The unfinished teacher's weights and what resuming it needs (optimizer, scheduler, step...), in
+        one atomic file with the weights' sha256."""
+        self.teacher_state_path.parent.mkdir(parents=True, exist_ok=True)
+        data = _to_bytes({k: v.detach().cpu().contiguous() for k, v in weights.items()})
+        atomic_write_bytes(self.teacher_state_path, _to_bytes({**resume_state, "weights": data,
+                                                               "weights_sha256": hashlib.sha256(data).hexdigest()}))
+
+    def load_teacher_progress(self) -> dict[str, Any] | None:
+        """The unfinished teacher's state (``weights``, ``optimizer``, ``step``...), verified; None if none."""
+        p = self.teacher_state_path
+        if not p.is_file():
+            return None
+        state = _from_bytes(p.read_bytes(), p)
+        if not isinstance(state, dict) or not {"weights", "weights_sha256", "optimizer", "step"} <= set(state):
+            raise RunError(f"{p}: not a teacher training state of this version")
+        if hashlib.sha256(state["weights"]).hexdigest() != state["weights_sha256"]:
+            raise RunError(f"{p}: damaged (its weights' sha256 differs); --force starts the run again")
+        state["weights"] = _from_bytes(state["weights"], p)
+        return state
 
     def save(self, model: torch.nn.Module, card_fields: dict[str, Any], info: dict[str, Any],
              resume_state: dict[str, Any] | None = None) -> ModelCard:

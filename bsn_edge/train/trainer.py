@@ -233,9 +233,12 @@ def teacher_miou(teacher: torch.nn.Module, cache: SampleCache, scale: float, fra
 
 
 def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool,
-                  cache: SampleCache | None = None, val_cache: SampleCache | None = None) -> torch.nn.Module:
+                  cache: SampleCache | None = None, val_cache: SampleCache | None = None,
+                  resume: bool = False) -> torch.nn.Module:
     """The segmentation teacher, trained on the dataset's semantics (or loaded). With ``val_cache``
-    and ``teacher.eval_every``, its held-out mIoU is recorded in the run's history."""
+    and ``teacher.eval_every``, its held-out mIoU is recorded in the run's history. Its state is saved
+    every ``train.checkpoint_every`` steps; ``resume`` goes on from the last one, on the same stream
+    of batches (the schedule spans ``teacher.steps``)."""
     t = cfg.teacher
     dev = train_device(cfg)
     teacher = create_teacher(t.encoder, t.width)
@@ -254,17 +257,28 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         if state is None:
             raise FileNotFoundError(f"teacher.init {t.init}: no teacher/teacher.pt there")
         teacher.load_state_dict(state)
+    saved = run.load_teacher_progress() if resume else None
+    if saved is not None:
+        teacher.load_state_dict(saved["weights"])
     teacher.to(dev)
     cl = cfg.train.channels_last
     teacher.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
     dtype = autocast_dtype(cfg, dev)
     model = torch.nn.parallel.DistributedDataParallel(teacher) if world > 1 else teacher
     optim = Optimizer(model.parameters(), t.lr, t.steps, cfg.train)
-    batches = training_batches(ds, cache, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers, device=dev)
-    bar = tqdm(range(t.steps), desc="teacher", disable=True if (not progress or rank) else None, unit="step")
+    start, seconds_before = 0, 0.0
+    if saved is not None:
+        optim.load_state_dict(saved)
+        start, seconds_before = int(saved["step"]), float(saved.get("seconds", 0.0))
+    batches = training_batches(ds, cache, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers, start,
+                               device=dev)
+    if saved is not None and "torch_rng" in saved:
+        torch.set_rng_state(saved["torch_rng"])
+    bar = tqdm(range(start, t.steps), initial=start, total=t.steps, desc="teacher",
+               disable=True if (not progress or rank) else None, unit="step")
     if rank == 0:
-        run.trim_history("teacher", 0)
-        if t.init and val_cache is not None and t.eval_every:
+        run.trim_history("teacher", start)
+        if start == 0 and t.init and val_cache is not None and t.eval_every:
             # where a teacher trained on from another begins
             run.append_history({"phase": "teacher", "step": 0, "samples": 0, "seconds": 0.0,
                                 **{f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, t.scale,
@@ -282,12 +296,16 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         losses.append(loss.item())
         bar.set_postfix(ce=f"{losses[-1]:.3f}")
         done = step + 1
+        seconds = seconds_before + time.perf_counter() - t0
         if rank == 0 and val_cache is not None and t.eval_every and (done % t.eval_every == 0 or done == t.steps):
             run.append_history({"phase": "teacher", "step": done, "samples": done * t.batch_size * world,
-                                "seconds": round(time.perf_counter() - t0, 1), "ce": float(np.mean(losses)),
+                                "seconds": round(seconds, 1), "ce": float(np.mean(losses)),
                                 **{f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, t.scale,
                                                                            cfg.train.eval_frames, dtype).items()}})
             losses = []
+        if rank == 0 and done < t.steps and done % cfg.train.checkpoint_every == 0:
+            run.save_teacher_progress(teacher.state_dict(), {**optim.state_dict(), "step": done,
+                                                             "torch_rng": torch.get_rng_state(), "seconds": seconds})
     if rank == 0:
         run.save_teacher({k: v.contiguous() for k, v in teacher.state_dict().items()})
     return teacher.eval()
@@ -395,7 +413,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     np.random.seed(cfg.train.seed + rank)
     torch.set_num_threads(cfg.train.threads)
     state = run.load_state() if resume else None
-    if resume and state is None and run.exists():
+    if resume and state is None and run.exists() and not run.teacher_state_path.is_file():
         raise RunError(f"{run.path}: no {Run.STATE} to resume from (made by an older version, or a run that "
                        "never checkpointed); --force starts it again")
     if resume and run.config_path.is_file() and run.config().get("model", {}).get("name") not in (None, cfg.model.name):
@@ -409,7 +427,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     if data.val_ds is not None and cfg.data.cache != "off":
         val_cache = sample_cache(cfg, data.val_ds, show, "caching validation samples")
     lam = cfg.distill_weight
-    teacher = train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val_cache) if lam > 0 else None
+    teacher = (train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val_cache, resume=resume)
+               if lam > 0 else None)
     dev = train_device(cfg)
     dtype = autocast_dtype(cfg, dev)
     cl = cfg.train.channels_last

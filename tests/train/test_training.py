@@ -463,3 +463,39 @@ def test_a_teacher_trained_on_from_another_starts_where_that_one_ended(data, tmp
     assert Run(second).teacher_path.read_bytes() != Run(first).teacher_path.read_bytes()   # it did train on
     with pytest.raises(ValueError, match="set one of them"):
         load_config(SMOKE, [f"teacher.init=\"{first}\"", f"teacher.checkpoint=\"{first}\""])
+
+
+TEACHER = ["--config", SMOKE, "--quiet", "--set", "data.label=\"T2s\"", "--set", "train.distill_weight=0.5",
+           "--set", "teacher.steps=6", "--set", "train.checkpoint_every=3", "--set", "train.steps=1"]
+
+
+def test_a_teacher_stopped_part_way_goes_on_from_its_last_state(data, tmp_path, monkeypatch, capsys):
+    """Killed as its sixth step would be saved: the run is refused without --resume, and resumed it runs
+    only the teacher's last three steps, ending with the uninterrupted run's teacher."""
+    from bsn_edge.train import optim
+
+    full, run = tmp_path / "full", tmp_path / "run"
+    assert train_cli.main([*TEACHER, "--data", str(data), "--out", str(full)]) == 0
+    real = Run.save_teacher
+
+    def killed(self, state):
+        raise KilledError
+
+    monkeypatch.setattr(Run, "save_teacher", killed)
+    with pytest.raises(KilledError):
+        train_cli.main([*TEACHER, "--data", str(data), "--out", str(run)])
+    monkeypatch.setattr(Run, "save_teacher", real)
+    assert Run(run).load_teacher_progress()["step"] == 3 and not Run(run).teacher_path.exists()
+    capsys.readouterr()
+    assert train_cli.main([*TEACHER, "--data", str(data), "--out", str(run)]) == 2
+    assert "--resume" in capsys.readouterr().err
+    steps = []
+    step = optim.Optimizer.step
+    monkeypatch.setattr(optim.Optimizer, "step", lambda self, loss: steps.append(1) or step(self, loss))
+    assert train_cli.main([*TEACHER, "--data", str(data), "--out", str(run), "--resume"]) == 0
+    assert len(steps) == 3 + 1, "three teacher steps and the one training step"
+    assert not Run(run).teacher_state_path.exists()
+    a, b = Run(full).load_teacher_state(), Run(run).load_teacher_state()
+    assert all(torch.allclose(a[k].float(), b[k].float(), atol=1e-6) for k in a)
+    recs = [r["step"] for r in Run(run).history() if r.get("phase") == "teacher"]
+    assert recs == sorted(set(recs)), "no teacher record twice"
