@@ -107,11 +107,6 @@ class Loop:
         flight = "" if self.in_flight == 1 else f", {self.in_flight} in flight"
         return f"{reading}, {'spin' if self.spin else 'no spin'}{decode}{flight}"
 
-    @property
-    def threads(self) -> int:
-        """onnxruntime intra-op threads per inference, as ``bsn-run`` chooses them."""
-        return 2 if self.in_flight == 1 else 1
-
     def config(self) -> RuntimeConfig:
         return RuntimeConfig(overlap=self.overlap, feeder_nice=self.nice, in_flight=self.in_flight)
 
@@ -217,7 +212,8 @@ def main(argv: list[str] | None = None) -> int:
                                   "without it)")
     p.add_argument("--loops", choices=sorted(LOOPS), default="all",
                    help="every way of setting the loop side by side, the ways of reading (no spin), FFmpeg's "
-                        "decoding threads against one, or only bsn-run's default (default: all)")
+                        "decoding threads against one (decode), two frames in flight against one (flight), or "
+                        "only bsn-run's default (default: all)")
     args = p.parse_args(argv)
     if args.repeats < 1:
         p.error(f"--repeats must be at least 1, got {args.repeats}")
@@ -248,10 +244,11 @@ def main(argv: list[str] | None = None) -> int:
                     mo = model_only(engine, str(long), min(args.frames, 200), CameraState(engine.card, cal))
                     engines = {2: engine}
                     for loop in (lp for lp in LOOPS[args.loops] if lp.spin == spin):
-                        if loop.threads not in engines:
-                            engines[loop.threads] = Engine(model, threads=loop.threads, spinning=spin)
+                        threads = loop.config().engine_threads        # as bsn-run chooses them
+                        if threads not in engines:
+                            engines[threads] = Engine(model, threads=threads, spinning=spin)
                         for calibration in ([cal, None] if cal is not None else [None]):
-                            r = profile(engines[loop.threads], long, args.frames, calibration, loop)
+                            r = profile(engines[threads], long, args.frames, calibration, loop)
                             share, tail = r["e2e_fps"] / mo, r["p99_ms"] / r["p50_ms"]
                             r.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
                                      repeat=repeat, model_only_fps=mo, e2e_over_model=share, p99_over_p50=tail,

@@ -219,7 +219,7 @@ def main(argv: list[str] | None = None) -> int:
                 from bsn_edge.runtime.trust import load_public_keys
                 trust = load_public_keys(args.trust)
             cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.in_turn, in_flight=args.in_flight)
-            threads = args.threads if args.threads is not None else (2 if args.in_flight == 1 else 1)
+            threads = cfg.engine_threads if args.threads is None else args.threads
             engine = Engine(args.model, threads, args.spin, trust=trust)
             camera = CameraState(engine.card, calibration, args.height, args.save_calib)
             source = open_source(args.source, pace=args.pace, stall_s=args.stall)

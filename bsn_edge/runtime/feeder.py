@@ -64,7 +64,7 @@ class Feeder:
     @staticmethod
     def buffers_needed(held: int = 1) -> int:
         """Input buffers a background feeder needs when the caller keeps ``held`` frames at once."""
-        return held + 2
+        return Feeder.BUFFERS + held - 1
 
     def __init__(self, source: Source, warp: Warp, buffers: list[np.ndarray], background: bool,
                  limit: int | None = None, nice: int = 0, held: int = 1) -> None:

@@ -78,6 +78,12 @@ class RuntimeConfig:
         if self.in_flight > 1 and not self.overlap:
             raise ValueError("more than one frame in flight needs reading overlapped with the model (overlap=True)")
 
+    @property
+    def engine_threads(self) -> int:
+        """onnxruntime intra-op threads per inference that suit ``in_flight`` on 2 cores: both for one
+        frame at a time, one each for frames side by side."""
+        return 2 if self.in_flight == 1 else 1
+
 
 @dataclass
 class Outputs:
@@ -178,13 +184,12 @@ class FramePipeline:
         the future answers (prob, depth, when it began, seconds); None when there is nothing to run."""
         if item.cap.frame is None or item.buf is None or self.pool is None:
             return None
+        return self.pool.submit(self._timed_infer, item.buf)
 
-        def timed(buf: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
-            t0 = time.perf_counter()
-            prob, depth = self.engine.infer(buf)
-            return prob, depth, t0, time.perf_counter() - t0
-
-        return self.pool.submit(timed, item.buf)
+    def _timed_infer(self, buf: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+        t0 = time.perf_counter()
+        prob, depth = self.engine.infer(buf)
+        return prob, depth, t0, time.perf_counter() - t0
 
     def checked(self, prob: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """The model's answer; None (and counted) when it is NaN or infinity."""
