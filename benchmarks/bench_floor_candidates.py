@@ -51,6 +51,7 @@ def main() -> int:
         "3x3 stem": (light, three_by_three_stem, True),
         "dense 3x3 decoder": (dense, None, True),
         "3x3 stem + dense decoder + heads in int8": (dense, three_by_three_stem, False),
+        "one encoder for D and B (shared-light)": (registry.get_spec("shared-light"), None, True),
     }
     h, w = SIZE
     camera = Intrinsics.from_fov(w, h, 80.0)

@@ -9,6 +9,7 @@ from bsn_edge.models.registry import (
     create_teacher,
     describe,
     get_spec,
+    start_from,
     weights_bytes,
 )
 
@@ -25,5 +26,6 @@ __all__ = [
     "depth_feature",
     "describe",
     "get_spec",
+    "start_from",
     "weights_bytes",
 ]

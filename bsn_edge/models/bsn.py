@@ -44,7 +44,7 @@ class BlindSpotNet(nn.Module):
     back to the frame's size: the cheapest lever on a CPU's frame rate.
     """
 
-    def __init__(self, blindspot: nn.Module, depth_net: DepthNet, use_depth: bool = True,
+    def __init__(self, blindspot: nn.Module, depth_net: nn.Module, use_depth: bool = True,
                  input_scale: float = 1.0) -> None:
         super().__init__()
         if not 0.1 <= input_scale <= 1.0:
@@ -65,11 +65,18 @@ class BlindSpotNet(nn.Module):
                               antialias=False)
         return self.forward_scaled(x, size)
 
-    def forward_scaled(self, x: Tensor, size) -> tuple[Tensor, Tensor, Tensor]:
-        """``forward`` for an input already resized by ``input_scale``; outputs at ``size``."""
+    def predict(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Blind-spot logits, depth in metres and B's decoder features, at the size of ``x`` (the
+        input already resized by ``input_scale``). Subclasses with another layout fill this hook;
+        :meth:`forward_scaled` owns bringing the outputs back to the frame's size."""
         depth = self.depth_net(x)
         inp = torch.cat([x, depth_feature(depth.detach())], 1) if self.use_depth else x
         logits, feats = self.blindspot(inp)
+        return logits, depth, feats
+
+    def forward_scaled(self, x: Tensor, size) -> tuple[Tensor, Tensor, Tensor]:
+        """``forward`` for an input already resized by ``input_scale``; outputs at ``size``."""
+        logits, depth, feats = self.predict(x)
         if self.input_scale != 1.0:
             # a constant scale factor, not the input's traced shape: exported graphs stay static,
             # which OpenCV's DNN module needs

@@ -21,6 +21,12 @@ def conv_bn_relu(cin: int, cout: int, k: int = 3, dilation: int = 1,
                          nn.ReLU(inplace=True))
 
 
+def aspp_rates(output_stride: int) -> tuple[int, int, int]:
+    """ASPP's dilation rates for an encoder's output stride: DeepLabV3+'s are set for 16; at 32 the
+    same field of view needs half the rates."""
+    return (6, 12, 18) if output_stride == 16 else (3, 6, 9)
+
+
 class ASPP(nn.Module):
     """Atrous spatial pyramid pooling: a 1x1 branch, one dilated 3x3 per rate, image pooling."""
 
@@ -82,9 +88,8 @@ class EncoderDecoder(nn.Module):
     def __init__(self, encoder: nn.Module, classes: int, width: int = 256, separable: bool = False) -> None:
         super().__init__()
         self.encoder = encoder
-        # ASPP rates are set for output stride 16; at 32 the same field of view needs half the rates
-        rates = (6, 12, 18) if encoder.strides[-1] == 16 else (3, 6, 9)
-        self.decoder = DeepLabV3PlusDecoder(encoder.out_channels, width, separable=separable, rates=rates)
+        self.decoder = DeepLabV3PlusDecoder(encoder.out_channels, width, separable=separable,
+                                            rates=aspp_rates(encoder.strides[-1]))
         self.head = SegmentationHead(self.decoder.out_channels, classes, encoder.strides[0])
 
     def forward(self, x: Tensor) -> tuple[Tensor, Tensor]:

@@ -14,6 +14,7 @@ from bsn_edge.card import ModelCard
 from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, DepthNet
 from bsn_edge.models.deeplab import EncoderDecoder
 from bsn_edge.models.resnet import ResNetEncoder
+from bsn_edge.models.shared import SharedEncoderBSN
 from bsn_edge.models.unet import UNet
 from bsn_edge.semantics import NUM_CLASSES
 
@@ -25,7 +26,9 @@ class ModelSpec:
     arch: ``deeplab`` (ResNet + ASPP + DeepLabV3+ decoder) or ``unet``.
     encoder_depth: ResNet depth of B. decoder_width / separable: B's decoder (256 dense is the
     paper's; 64 separable is the light one). use_depth: B sees D's depth. distill: trained with
-    the teacher's pairwise-similarity loss (lambda = 1) or without (lambda = 0).
+    the teacher's pairwise-similarity loss (lambda = 1) or without (lambda = 0). shared_encoder:
+    D and B read one ResNet-18 encoder (:class:`~bsn_edge.models.shared.SharedEncoderBSN`) instead
+    of one each.
     """
 
     arch: str = "deeplab"
@@ -37,10 +40,13 @@ class ModelSpec:
     depth_width: int = 64       # D's light decoder
     output_stride: int = 16     # of both encoders
     input_scale: float = 1.0    # both networks run on the frame resized by this
+    shared_encoder: bool = False
 
     def __post_init__(self) -> None:
         if self.arch not in ("deeplab", "unet"):
             raise ValueError(f"unknown arch {self.arch!r}; valid: deeplab, unet")
+        if self.shared_encoder and (self.arch != "deeplab" or self.encoder_depth != 18):
+            raise ValueError("a shared encoder is D's ResNet-18: it needs arch 'deeplab' and encoder_depth 18")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -59,6 +65,9 @@ MODELS: dict[str, ModelSpec] = {
     "small-kd": ModelSpec(distill=False),
     "small-light-d": ModelSpec(use_depth=False, **_LIGHT),
     "small-light-kd": ModelSpec(distill=False, **_LIGHT),
+    "shared-light": ModelSpec(shared_encoder=True, **_LIGHT),
+    "shared-light-d": ModelSpec(shared_encoder=True, use_depth=False, **_LIGHT),
+    "shared-light-kd": ModelSpec(shared_encoder=True, distill=False, **_LIGHT),
 }
 
 
@@ -70,6 +79,9 @@ def get_spec(name: str) -> ModelSpec:
 
 
 def build(spec: ModelSpec) -> BlindSpotNet:
+    if spec.shared_encoder:
+        return SharedEncoderBSN(spec.encoder_depth, spec.output_stride, spec.decoder_width, spec.depth_width,
+                                spec.separable, spec.use_depth, spec.input_scale)
     in_ch = 4 if spec.use_depth else 3
     if spec.arch == "unet":
         b: nn.Module = UNet(in_ch, 1)
@@ -83,6 +95,25 @@ def build(spec: ModelSpec) -> BlindSpotNet:
 def create_model(name: str) -> BlindSpotNet:
     """A fresh BlindSpotNet for a registry name (``small``, ``small-light``, ``medium``, ...)."""
     return build(get_spec(name))
+
+
+def start_from(model: BlindSpotNet, name: str, source: BlindSpotNet, source_name: str) -> str:
+    """Load ``source``'s weights (a ``source_name`` network) into ``model`` (a ``name`` network) to
+    train on from: all of them for the same variant, or D alone into a shared-encoder model from a
+    two-network one with the same D (its encoder, decoder and head carry over whole; B's decoder,
+    which read another encoder's features, starts fresh). Returns ``"all"`` or ``"D"``; ValueError
+    for any other pair."""
+    if name == source_name:
+        model.load_state_dict(source.state_dict())
+        return "all"
+    spec, src = get_spec(name), get_spec(source_name)
+    same_d = (spec.depth_width, spec.output_stride, spec.input_scale) == (src.depth_width, src.output_stride,
+                                                                          src.input_scale)
+    if not (spec.shared_encoder and not src.shared_encoder and src.arch == "deeplab" and same_d):
+        raise ValueError(f"a {name!r} model starts from a {name!r} run, or from a two-network run with the same D "
+                         f"when it shares its encoder; got a {source_name!r} run")
+    model.depth_net.load_state_dict(source.depth_net.net.state_dict())
+    return "D"
 
 
 def create_teacher(encoder_depth: int = 18, width: int = 128) -> EncoderDecoder:

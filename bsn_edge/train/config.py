@@ -110,8 +110,11 @@ class TeacherConfig:
     checkpoint: str = ""                     # a trained teacher's folder; empty trains one first
     init: str = ""                           # train the run's teacher on from this trained teacher's weights
     eval_every: int = 0                      # steps between held-out mIoU records in the run's history (0: off)
+    checkpoint_every: int = 500              # steps between saved training states (--resume goes on from the last)
 
     def __post_init__(self) -> None:
+        if self.checkpoint_every < 1:
+            raise ValueError(f"teacher.checkpoint_every must be >= 1, got {self.checkpoint_every}")
         if not 0.1 <= self.scale <= 1.0:
             raise ValueError(f"teacher.scale must be in [0.1, 1], got {self.scale}")
         if self.checkpoint and self.init:

@@ -148,10 +148,13 @@ class Run:
         samples, hours = float(trained["samples"]), trained["seconds"] / 3600
         init = str(cfg.get("train", {}).get("init", ""))
         start = _last_parts(init)
-        before = Run(init).card().training if init and (Path(init) / self.CHECKPOINT).is_file() else None
+        init_card = Run(init).card() if init and (Path(init) / self.CHECKPOINT).is_file() else None
+        before = init_card.training if init_card is not None else None
         if before is not None:
             steps, samples, hours = steps + before.steps, samples + before.samples, hours + before.hours
-            start += f" (after {before.steps} steps)"
+            # a shared-encoder model takes only D from a two-network run (models.start_from)
+            d_only = init_card.variant != cfg.get("model", {}).get("name", init_card.variant)
+            start += f" ({'its D, ' if d_only else ''}after {before.steps} steps)"
         return TrainingRecord(steps=steps, samples=round(samples), hours=round(hours, 2),
                               train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),
                               init=start, teacher=teacher)

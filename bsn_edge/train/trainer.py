@@ -30,7 +30,7 @@ from bsn_edge.data import BlindSpotDataset, Clip, find_clips, split_clips
 from bsn_edge.data.cache import SampleCache, default_cache_root
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.metrics import ThresholdSweep
-from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, create_model, create_teacher, get_spec
+from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, create_model, create_teacher, get_spec, start_from
 from bsn_edge.sequence import SequenceMeta
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.train.config import Config
@@ -237,7 +237,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
                   resume: bool = False) -> torch.nn.Module:
     """The segmentation teacher, trained on the dataset's semantics (or loaded). With ``val_cache``
     and ``teacher.eval_every``, its held-out mIoU is recorded in the run's history. Its state is saved
-    every ``train.checkpoint_every`` steps; ``resume`` goes on from the last one, on the same stream
+    every ``teacher.checkpoint_every`` steps; ``resume`` goes on from the last one, on the same stream
     of batches (the schedule spans ``teacher.steps``)."""
     t = cfg.teacher
     dev = train_device(cfg)
@@ -303,7 +303,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
                                 **{f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, t.scale,
                                                                            cfg.train.eval_frames, dtype).items()}})
             losses = []
-        if rank == 0 and done < t.steps and done % cfg.train.checkpoint_every == 0:
+        if rank == 0 and done < t.steps and done % t.checkpoint_every == 0:
             run.save_teacher_progress(teacher.state_dict(), {**optim.state_dict(), "step": done,
                                                              "torch_rng": torch.get_rng_state(), "seconds": seconds})
     if rank == 0:
@@ -439,10 +439,10 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     model = create_model(cfg.model.name)
     if cfg.train.init:
         init, init_card = Run(cfg.train.init).load_model()
-        if init_card.variant != cfg.model.name:
-            raise ValueError(f"train.init {cfg.train.init} holds a {init_card.variant!r} model, "
-                             f"not {cfg.model.name!r}")
-        model.load_state_dict(init.state_dict())
+        try:
+            start_from(model, cfg.model.name, init, init_card.variant)
+        except ValueError as e:
+            raise ValueError(f"train.init {cfg.train.init}: {e}") from None
     model.to(dev)
     start, seconds_before = 0, 0.0
     optim = Optimizer(model.parameters(), cfg.train.lr, cfg.train.steps, cfg.train)

@@ -431,6 +431,27 @@ def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tm
         dst.load_teacher_state()
 
 
+def test_a_shared_encoder_run_starts_from_a_two_network_runs_d(data, tmp_path):
+    """train.init of a two-network run into a shared-encoder model: D's weights carry over (so its
+    depth at step 0 is the source's, measured on the same split), the card says only D was taken,
+    and a pair the registry cannot map is refused with both names."""
+    from bsn_edge.train.trainer import train
+    sets = ["data.label=\"T2s\"", "data.val_fraction=0.34", "train.distill_weight=0", "train.eval_every=2",
+            "train.steps=2"]
+    first, second = tmp_path / "a", tmp_path / "b"
+    train(load_config(SMOKE, sets), data, first, progress=False)
+    train(load_config(SMOKE, [*sets, 'model.name="shared-light"', f"train.init=\"{first}\""]), data, second,
+          progress=False)
+    a = [r for r in Run(first).history() if r["phase"] == "train"]
+    b = [r for r in Run(second).history() if r["phase"] == "train"]
+    assert b[0]["step"] == 0 and b[0]["val_abs_rel"] == pytest.approx(a[-1]["val_abs_rel"], rel=1e-5)
+    record = Run(second).card().training
+    assert record.init.endswith("/a (its D, after 2 steps)") and record.steps == 4
+    with pytest.raises(ValueError, match=r"'small' model starts from .*'shared-light' run"):
+        train(load_config(SMOKE, [*sets, 'model.name="small"', f"train.init=\"{second}\""]), data,
+              tmp_path / "c", progress=False)
+
+
 def test_a_run_started_from_another_records_where_it_begins(data, tmp_path):
     """Step 0 of a run with train.init is the validation of the weights it starts from: the same
     figures the run it starts from measured at its last step, on the same split."""
@@ -466,7 +487,7 @@ def test_a_teacher_trained_on_from_another_starts_where_that_one_ended(data, tmp
 
 
 TEACHER = ["--config", SMOKE, "--quiet", "--set", "data.label=\"T2s\"", "--set", "train.distill_weight=0.5",
-           "--set", "teacher.steps=6", "--set", "train.checkpoint_every=3", "--set", "train.steps=1"]
+           "--set", "teacher.steps=6", "--set", "teacher.checkpoint_every=3", "--set", "train.steps=1"]
 
 
 def test_a_teacher_stopped_part_way_goes_on_from_its_last_state(data, tmp_path, monkeypatch, capsys):

@@ -1,0 +1,78 @@
+"""The shared-encoder BlindSpotNet: one encoder's cost, B still reading D's depth, D carried over
+whole from a two-network run, and an exported graph that agrees with torch."""
+
+import numpy as np
+import pytest
+import torch
+
+from benchmarks.bench_arch import count_gmacs
+from bsn_edge.export import FusedModel, to_onnx
+from bsn_edge.models import create_model, get_spec, start_from
+from bsn_edge.runtime.model_file import session
+from tests.cards import card_for
+
+
+def test_one_encoder_costs_about_half_of_two():
+    two, one = (count_gmacs(create_model(n).eval(), (256, 512)) for n in ("small-light", "shared-light"))
+    # a ResNet-18 at 128x256 is about 1.2 GMACs: the second one is nearly all the difference
+    assert 1.1 < two - one < 1.3 and one < 0.55 * two
+
+
+def _shift_depth(model) -> None:
+    with torch.no_grad():
+        model.depth_net.head.conv.bias.add_(1.0)    # every depth x e
+
+
+@pytest.mark.parametrize("name, reads_depth", [("shared-light", True), ("shared-light-d", False)])
+def test_b_reads_ds_depth_only_when_its_spec_says_so(name, reads_depth):
+    torch.manual_seed(0)
+    m = create_model(name).eval()
+    x = torch.randn(1, 3, 64, 128)
+    with torch.no_grad():
+        before, depth_before, _ = m(x)
+        _shift_depth(m)
+        after, depth_after, _ = m(x)
+    assert get_spec(name).use_depth is reads_depth
+    assert not torch.allclose(depth_before, depth_after)
+    assert (not torch.allclose(before, after)) is reads_depth
+
+
+def test_bs_loss_trains_the_shared_encoder_but_not_ds_decoder():
+    torch.manual_seed(0)
+    m = create_model("shared-light")
+    logits, _, feats = m(torch.randn(2, 3, 64, 128))
+    (logits.mean() + feats.mean()).backward()
+    assert all(p.grad is None for p in m.depth_net.decoder.parameters())
+    assert all(p.grad is None for p in m.depth_net.head.parameters())
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in m.depth_net.encoder.parameters())
+
+
+def test_a_shared_model_takes_d_whole_from_a_two_network_run():
+    torch.manual_seed(0)
+    source = create_model("small-light").eval()
+    torch.manual_seed(1)
+    model = create_model("shared-light").eval()
+    b_before = {k: v.clone() for k, v in model.blindspot.state_dict().items()}
+    assert start_from(model, "shared-light", source, "small-light") == "D"
+    x = torch.randn(1, 3, 64, 128)
+    with torch.no_grad():
+        # D of the source, run alone, is the truth the shared model's depth must reproduce
+        torch.testing.assert_close(model(x)[1], source(x)[1], atol=0, rtol=0)
+    assert all(torch.equal(v, model.blindspot.state_dict()[k]) for k, v in b_before.items())
+    with pytest.raises(ValueError, match="got a 'shared-light' run"):
+        start_from(create_model("small-light"), "small-light", model, "shared-light")
+    with pytest.raises(ValueError, match="'small'"):
+        start_from(model, "shared-light", create_model("small"), "small")
+
+
+def test_the_exported_graph_agrees_with_torch(tmp_path):
+    torch.manual_seed(0)
+    model = create_model("shared-light").eval()
+    out = tmp_path / "m.onnx"
+    to_onnx(model, out, card_for((64, 128), variant="shared-light"))
+    frame = np.random.default_rng(0).integers(0, 256, (1, 64, 128, 3), dtype=np.uint8)
+    p, d = session(out).run(None, {"frame": frame})
+    with torch.no_grad():
+        pt, dt = FusedModel(model)(torch.from_numpy(frame))
+    np.testing.assert_allclose(p, pt.numpy(), atol=1e-4)
+    np.testing.assert_allclose(d, dt.numpy(), rtol=1e-3)
