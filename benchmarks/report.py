@@ -19,7 +19,7 @@ from benchmarks.common import machine
 
 ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "floor", "floor_avx2", "int8_cpu",
          "runtime", "runtime_avx2", "runtime_avx2_decode",
-         "runtime_avx2_flight", "calibration", "footprint",
+         "runtime_avx2_flight", "runtime_avx2_shared", "tradeoff", "tradeoff_avx2", "calibration", "footprint",
          "realcam", "realview", "cameras", "remap")
 
 

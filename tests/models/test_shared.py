@@ -76,3 +76,12 @@ def test_the_exported_graph_agrees_with_torch(tmp_path):
         pt, dt = FusedModel(model)(torch.from_numpy(frame))
     np.testing.assert_allclose(p, pt.numpy(), atol=1e-4)
     np.testing.assert_allclose(d, dt.numpy(), rtol=1e-3)
+
+
+def test_d_and_b_split_the_parameters_so_adapt_can_freeze_d():
+    """bsn-adapt freezes ``depth_net`` and trains ``blindspot``: in the shared model the encoder must
+    be on D's side of that split, and every parameter on exactly one side."""
+    m = create_model("shared-light")
+    d, b = ({id(p) for p in part.parameters()} for part in (m.depth_net, m.blindspot))
+    assert not d & b and d | b == {id(p) for p in m.parameters()}
+    assert {id(p) for p in m.depth_net.encoder.parameters()} <= d
