@@ -2,7 +2,10 @@
 baselines, trained on one style, tested on both, with and without fine-tuning on 20 % of the target
 style; every trained cell as mean +- std over ``--seeds``.
 
-    python -m benchmarks.bench_bsn_accuracy --out benchmarks/results [--seeds 0 1 2] [--steps 3000]
+    python -m benchmarks.bench_bsn_accuracy --out benchmarks/results [--seeds 0 1 2] [--steps 3000] \
+        [--family small-light|shared-light]
+
+BSN is the ``--family`` architecture, BSN-D and BSN-KD its ``-d`` and ``-kd`` registry entries.
 
 At the research scale (``--size``, 128x256 by default: a quarter of the runtime's pixels per step).
 One segmentation teacher is trained on the training clips of both styles (the role an off-the-shelf
@@ -11,10 +14,11 @@ the source-style run and trains on 20 % of the target style's training clips. Ev
 validation IoU every tenth of its steps, so the table says whether each row had flattened (the last
 fifth of its steps gained under 0.01) and draws the curves.
 
-A whole table is many CPU-hours: each finished run is written to ``bsn_accuracy_ledger.json`` in
-``--out`` at once (:mod:`benchmarks.ledger`), so the command can be stopped and run again, on any
-machine, and trains only what is missing; seeds are the outer loop, so a partial table holds whole
-seeds. The report is written from the ledger after every run.
+A whole table is many CPU-hours: each finished run is written to the family's ledger
+(``bsn_accuracy_ledger.json``, ``bsn_accuracy_shared-light_ledger.json``) in ``--out`` at once
+(:mod:`benchmarks.ledger`), so the command can be stopped and run again, on any machine, and
+trains only what is missing; seeds are the outer loop, so a partial table holds whole seeds. The
+report is written from the ledger after every run.
 """
 
 from __future__ import annotations
@@ -33,7 +37,18 @@ from bsn_edge.cli.common import parse_size
 from bsn_edge.synth import SynthConfig, write_clip
 from bsn_edge.train import Run
 
-MODELS = {"BSN": "small-light", "BSN-D": "small-light-d", "BSN-KD": "small-light-kd"}
+FAMILIES = ("small-light", "shared-light")   # an architecture with its -d and -kd ablations in the registry
+
+
+def family_models(family: str) -> dict[str, str]:
+    """BSN and its ablations, BSN-D and BSN-KD, as registry names of ``family``."""
+    return {"BSN": family, "BSN-D": f"{family}-d", "BSN-KD": f"{family}-kd"}
+
+
+def report_name(family: str) -> str:
+    """The report of a family's table (``bsn_accuracy`` for the first, the others by name); its ledger
+    is ``<report>_ledger.json``."""
+    return "bsn_accuracy" if family == FAMILIES[0] else f"bsn_accuracy_{family}"
 STYLES = ("town", "suburb")
 BASELINES = ("Traversable", "Detection-2D", "Detection-3D")
 METRICS = ("iou", "recall", "precision")
@@ -73,7 +88,7 @@ def experiment(args: argparse.Namespace) -> dict[str, Any]:
     return {"steps": args.steps, "finetune_steps": args.finetune_steps, "finetune_lr": FINETUNE_LR,
             "teacher_steps": args.teacher_steps, "batch_size": 8, "size": list(args.size),
             "train_clips_per_style": args.train_clips, "test_clips_per_style": args.test_clips,
-            "frames_per_clip": args.frames, "models": MODELS}
+            "frames_per_clip": args.frames, "models": family_models(args.family)}
 
 
 def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_record=None) -> None:
@@ -102,7 +117,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
         ledger.put("teacher", {**rec, "retrained": [*rec.get("retrained", []), curve["val_miou"][-1:]]})
     tsets = [f"teacher.checkpoint=\"{teacher / 'teacher'}\""]
     for seed in seeds:
-        for label, name in MODELS.items():
+        for label, name in ledger.experiment["models"].items():
             for src in STYLES:
                 key = f"{label}/{src}/seed{seed}"
                 if key in ledger:
@@ -163,7 +178,7 @@ def cells(ledger: Ledger, label: str, src: str, tgt: str, finetuned: bool, metri
 def table(ledger: Ledger) -> dict[str, Any]:
     """Per model and column: the seeds' IoUs, mean and std; the ablations' differences to BSN."""
     rows = {}
-    for label in MODELS:
+    for label in ledger.experiment["models"]:
         rows[label] = {f"{src}->{tgt}{' ft' if ft else ''}": cells(ledger, label, src, tgt, ft)
                        for src, tgt, ft in COLUMNS}
     for b in BASELINES:
@@ -188,13 +203,14 @@ def plot_curves(ledger: Ledger, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(MODELS) + 1, figsize=(5 * (len(MODELS) + 1), 3.6), sharey=False)
+    models = ledger.experiment["models"]
+    fig, axes = plt.subplots(1, len(models) + 1, figsize=(5 * (len(models) + 1), 3.6), sharey=False)
     t = ledger.get("teacher")
     if t:
         axes[0].plot(t["steps"], t["val_miou"], color="k")
         axes[0].set_title("teacher: validation mIoU")
         axes[0].set_xlabel("step")
-    for ax, label in zip(axes[1:], MODELS, strict=True):
+    for ax, label in zip(axes[1:], models, strict=True):
         for key, rec in sorted(ledger.runs.items()):
             if key.startswith(f"{label}/"):
                 _, src, seed = key.split("/")
@@ -221,7 +237,7 @@ def markdown(ledger: Ledger, tab: dict[str, Any], figure: str) -> str:
              f"{ex['teacher_steps']} steps shared by all. Baselines need no training (one value).", "",
              f"| model | {head} |", "|---" * (len(COLUMNS) + 1) + "|"]
     for label, row in tab["rows"].items():
-        vals = [fmt(v) if label in MODELS else (f"{v[0]:.3f}" if v else "-") for v in row.values()]
+        vals = [fmt(v) if label in ex["models"] else (f"{v[0]:.3f}" if v else "-") for v in row.values()]
         lines.append(f"| {label} | " + " | ".join(vals) + " |")
     lines += ["", "BSN against its ablations, per column: mean difference (BSN minus ablation), and whether it "
                   "exceeds the seeds' spread (larger than the two standard deviations added):", ""]
@@ -230,7 +246,7 @@ def markdown(ledger: Ledger, tab: dict[str, Any], figure: str) -> str:
         lines.append(f"- BSN - {abl}: " + ("; ".join(parts) if parts else "not run yet"))
     lines += ["", "(`*`: beyond the spread.)", "", "Curves (validation IoU every tenth of a run's steps; "
               "flat: the last fifth gained under 0.01):", ""]
-    for label in MODELS:
+    for label in ex["models"]:
         gains = [rec["curve"]["flattened"]["gain"] for k, rec in ledger.runs.items()
                  if k.startswith(f"{label}/") and rec["curve"].get("flattened")]
         if gains:
@@ -245,11 +261,12 @@ def markdown(ledger: Ledger, tab: dict[str, Any], figure: str) -> str:
 
 
 def write_report(ledger: Ledger, out: Path) -> Path:
-    figure = "bsn_accuracy_curves.png"
+    name = report_name(ledger.experiment["models"]["BSN"])
+    figure = f"{name}_curves.png"
     out.mkdir(parents=True, exist_ok=True)
     plot_curves(ledger, out / figure)
     tab = table(ledger)
-    return write_result(out, "bsn_accuracy", {"experiment": ledger.experiment, **tab, "figure": figure,
+    return write_result(out, name, {"experiment": ledger.experiment, **tab, "figure": figure,
                                               "ledger": ledger.path.name}, markdown(ledger, tab, figure))
 
 
@@ -266,6 +283,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--train-clips", type=int, default=8, help="training clips per style")
     p.add_argument("--test-clips", type=int, default=2, help="test clips per style")
     p.add_argument("--frames", type=int, default=200)
+    p.add_argument("--family", choices=FAMILIES, default=FAMILIES[0],
+                   help="the architecture of BSN (its -d and -kd registry entries are the ablations); each "
+                        "family has its own ledger and report (default %(default)s)")
     p.add_argument("--keep-runs", action="store_true", help="keep the run folders (about 90 MB each)")
     p.add_argument("--report-only", action="store_true", help="write the report from the ledger, train nothing")
     p.add_argument("--fresh", action="store_true", help="delete the work folder and start a new ledger")
@@ -277,14 +297,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.fresh:
         shutil.rmtree(work, ignore_errors=True)
     try:
-        ledger = Ledger(out / "bsn_accuracy_ledger.json", experiment(args), fresh=args.fresh)
+        ledger = Ledger(out / f"{report_name(args.family)}_ledger.json", experiment(args), fresh=args.fresh)
     except ValueError as e:
         print(f"bench_bsn_accuracy: {e}")
         return 2
     if not args.report_only:
         run_table(work, ledger, args.seeds, args.keep_runs, on_record=lambda: write_report(ledger, out))
     path = write_report(ledger, out)
-    print((out / "bsn_accuracy.md").read_text())
+    print((out / f"{report_name(args.family)}.md").read_text())
     print(f"wrote {path}")
     return 0
 

@@ -8,7 +8,8 @@ import pytest
 from benchmarks.bench_bsn_accuracy import table
 from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
 
-EXPERIMENT = {"steps": 3000, "size": [128, 256], "models": {"BSN": "small-light"}}
+EXPERIMENT = {"steps": 3000, "size": [128, 256],
+              "models": {"BSN": "small-light", "BSN-D": "small-light-d", "BSN-KD": "small-light-kd"}}
 
 
 def test_a_run_put_is_on_disk_at_once_and_read_back_by_the_next_sitting(tmp_path):
