@@ -22,6 +22,11 @@ def depth_feature(depth: Tensor) -> Tensor:
     return DEPTH_FEATURE_M / (depth + DEPTH_FEATURE_M)
 
 
+def metres_from_log(log_depth: Tensor) -> Tensor:
+    """D's log-depth as metres within its output range."""
+    return log_depth.clamp(LOG_MIN_DEPTH, LOG_MAX_DEPTH).exp()
+
+
 class DepthNet(nn.Module):
     """D: monocular metric depth. Predicts log-depth, returned as metres in [0.5, 120]."""
 
@@ -32,7 +37,7 @@ class DepthNet(nn.Module):
 
     def forward(self, x: Tensor) -> Tensor:
         log_d, _ = self.net(x)
-        return log_d.clamp(LOG_MIN_DEPTH, LOG_MAX_DEPTH).exp()
+        return metres_from_log(log_d)
 
 
 class BlindSpotNet(nn.Module):

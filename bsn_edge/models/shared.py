@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from bsn_edge.models.bsn import LOG_MAX_DEPTH, LOG_MIN_DEPTH, BlindSpotNet, depth_feature
+from bsn_edge.models.bsn import BlindSpotNet, depth_feature, metres_from_log
 from bsn_edge.models.deeplab import DeepLabV3PlusDecoder, SegmentationHead, aspp_rates, conv_bn_relu
 from bsn_edge.models.resnet import ResNetEncoder
 
@@ -36,11 +36,8 @@ class SharedDepth(nn.Module):
         """Log-depth at the decoder's stride (the encoder's first), unclamped."""
         return self.head.conv(self.decoder(feats))
 
-    def metres(self, log_depth: Tensor) -> Tensor:
-        return log_depth.clamp(LOG_MIN_DEPTH, LOG_MAX_DEPTH).exp()
-
     def forward(self, x: Tensor) -> Tensor:
-        return self.metres(self.head.up(self.coarse(self.encoder(x))))
+        return metres_from_log(self.head.up(self.coarse(self.encoder(x))))
 
 
 class DepthAwareDecoder(nn.Module):
@@ -86,7 +83,7 @@ class SharedEncoderBSN(BlindSpotNet):
     def predict(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         feats = self.depth_net.encoder(x)
         log_coarse = self.depth_net.coarse(feats)
-        depth = self.depth_net.metres(self.depth_net.head.up(log_coarse))
-        seen = depth_feature(self.depth_net.metres(log_coarse).detach()) if self.use_depth else None
+        depth = metres_from_log(self.depth_net.head.up(log_coarse))
+        seen = depth_feature(metres_from_log(log_coarse).detach()) if self.use_depth else None
         logits, b_feats = self.blindspot(feats, seen)
         return logits, depth, b_feats

@@ -58,6 +58,21 @@ def _from_bytes(data: bytes, what: Path) -> Any:
         raise RunError(f"{what}: not a weights-only torch file, or damaged ({first[:160]})") from None
 
 
+def _state_bytes(data: bytes, sha: str, resume_state: dict[str, Any]) -> bytes:
+    """A training state in one file: what resuming needs, the weights' bytes and their sha256."""
+    return _to_bytes({**resume_state, "weights": data, "weights_sha256": sha})
+
+
+def _read_state(path: Path, what: str) -> dict[str, Any]:
+    """A training state written by :func:`_state_bytes`, verified; its ``weights`` still as bytes."""
+    state = _from_bytes(path.read_bytes(), path)
+    if not isinstance(state, dict) or not {"weights", "weights_sha256", "optimizer", "step"} <= set(state):
+        raise RunError(f"{path}: not a {what} of this version")
+    if hashlib.sha256(state["weights"]).hexdigest() != state["weights_sha256"]:
+        raise RunError(f"{path}: damaged (its weights' sha256 differs); --force starts the run again")
+    return state
+
+
 class Run:
     """One run folder: where each file is, and the only code that reads or writes them."""
 
@@ -199,11 +214,7 @@ class Run:
         the run has no state. A ``model.pt`` that matches neither the checkpoint nor the state is refused."""
         if not self.state_path.is_file():
             return None
-        state = _from_bytes(self.state_path.read_bytes(), self.state_path)
-        if not isinstance(state, dict) or not {"weights", "weights_sha256", "optimizer", "step"} <= set(state):
-            raise RunError(f"{self.state_path}: not a training state of this version")
-        if hashlib.sha256(state["weights"]).hexdigest() != state["weights_sha256"]:
-            raise RunError(f"{self.state_path}: damaged (its weights' sha256 differs)")
+        state = _read_state(self.state_path, "training state")
         if self.model_path.is_file():
             have = hashlib.sha256(self.model_path.read_bytes()).hexdigest()
             known = {state["weights_sha256"]}
@@ -345,19 +356,14 @@ class Run:
         one atomic file with the weights' sha256."""
         self.teacher_state_path.parent.mkdir(parents=True, exist_ok=True)
         data = _to_bytes({k: v.detach().cpu().contiguous() for k, v in weights.items()})
-        atomic_write_bytes(self.teacher_state_path, _to_bytes({**resume_state, "weights": data,
-                                                               "weights_sha256": hashlib.sha256(data).hexdigest()}))
+        atomic_write_bytes(self.teacher_state_path, _state_bytes(data, hashlib.sha256(data).hexdigest(), resume_state))
 
     def load_teacher_progress(self) -> dict[str, Any] | None:
         """The unfinished teacher's state (``weights``, ``optimizer``, ``step``...), verified; None if none."""
         p = self.teacher_state_path
         if not p.is_file():
             return None
-        state = _from_bytes(p.read_bytes(), p)
-        if not isinstance(state, dict) or not {"weights", "weights_sha256", "optimizer", "step"} <= set(state):
-            raise RunError(f"{p}: not a teacher training state of this version")
-        if hashlib.sha256(state["weights"]).hexdigest() != state["weights_sha256"]:
-            raise RunError(f"{p}: damaged (its weights' sha256 differs); --force starts the run again")
+        state = _read_state(p, "teacher training state")
         state["weights"] = _from_bytes(state["weights"], p)
         return state
 
@@ -371,7 +377,7 @@ class Run:
         sha = hashlib.sha256(data).hexdigest()
         card = ModelCard(**card_fields, weights_sha256=sha)
         if resume_state is not None:
-            atomic_write_bytes(self.state_path, _to_bytes({**resume_state, "weights": data, "weights_sha256": sha}))
+            atomic_write_bytes(self.state_path, _state_bytes(data, sha, resume_state))
         atomic_write_bytes(self.model_path, data)
         record = {"card": card.to_dict(), **{k: v for k, v in info.items() if k != "card"}}
         atomic_write_bytes(self.checkpoint_path, (json.dumps(record, indent=2) + "\n").encode())
