@@ -13,7 +13,9 @@ once per ``--seeds`` and evaluated inside V on the held-out clips, so the column
 architectures, not budgets: mean +- std over the seeds, with each run's validation curve (flat: its
 last fifth gained under 0.01). Every finished run goes into ``bsn_arch_ledger.json`` in ``--out``
 (:mod:`benchmarks.ledger`): the command can be stopped and run again, on any machine, and trains
-only what is missing. ``--runs`` adds the IoU of runs trained elsewhere (e.g. the shipped model's).
+only what is missing. ``--report NAME`` writes ``NAME.md`` and ``NAME_ledger.json`` instead, e.g. a
+table of two architectures (``--only``) that leaves the whole table as it is. ``--runs`` adds the
+IoU of runs trained elsewhere (e.g. the shipped model's).
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from bsn_edge.models import create_model, describe
 from bsn_edge.runtime.model_file import session
 from bsn_edge.train import Run
 
-ARCHS = ("unet", "small", "small-light", "medium", "large")
+ARCHS = ("unet", "small", "small-light", "shared-light", "medium", "large")
 
 
 def count_gmacs(model: torch.nn.Module, size: tuple[int, int]) -> float:
@@ -130,6 +132,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--keep-runs", action="store_true", help="keep every trained run folder")
     p.add_argument("--fresh", action="store_true", help="start a new ledger (the finished runs are forgotten)")
     p.add_argument("--only", nargs="*", choices=ARCHS, default=list(ARCHS), help="architectures to measure")
+    p.add_argument("--report", default="bsn_arch",
+                   help="name of the report (and of its ledger, NAME_ledger.json) in --out; a table of a few "
+                        "architectures under a name of its own leaves the whole table as it is")
     args = p.parse_args(argv)
     if (args.train_steps or args.runs) and not args.data:
         p.error("--train-steps and --runs need --data")
@@ -142,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
         experiment = {"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size), "clips": clips,
                       "teacher": args.teacher or f"trained first, {args.teacher_steps} steps"}
         try:
-            ledger = Ledger(Path(args.out) / "bsn_arch_ledger.json", experiment, fresh=args.fresh)
+            ledger = Ledger(Path(args.out) / f"{args.report}_ledger.json", experiment, fresh=args.fresh)
         except ValueError as e:
             print(f"bench_arch: {e}")
             return 2
@@ -180,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
     if runs:
         lines += ["", "IoU (own run): " + "; ".join(f"`{k}` {run_budget(Path(v))}" for k, v in runs.items())
                   + "; evaluated at its own training size."]
-    path = write_result(args.out, "bsn_arch", res, "\n".join(lines))
+    path = write_result(args.out, args.report, res, "\n".join(lines))
     print(f"wrote {path}")
     return 0
 

@@ -16,8 +16,10 @@ import matplotlib.pyplot as plt
 from matplotlib.ticker import NullFormatter, ScalarFormatter
 
 from benchmarks.common import machine
+from benchmarks.ledger import mean_std
 
-ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_arch", "quant", "floor", "floor_avx2", "int8_cpu",
+ORDER = ("synth", "labels", "train_step", "bsn_accuracy", "bsn_accuracy_shared-light", "bsn_arch", "bsn_arch_light",
+         "quant", "floor", "floor_avx2", "int8_cpu",
          "runtime", "runtime_avx2", "runtime_avx2_decode",
          "runtime_avx2_flight", "runtime_avx2_shared", "tradeoff", "tradeoff_avx2", "calibration", "footprint",
          "realcam", "realview", "cameras", "remap")
@@ -55,14 +57,17 @@ def plot_stages(res: dict, out: Path) -> Path:
 
 
 def plot_arch(res: dict, out: Path) -> Path:
-    with_iou = [r for r in res["rows"] if "iou" in r]
+    # a seeded table carries each seed's IoU (drawn as mean +- std); the earlier one IoU per row
+    with_iou = [(r, r["iou_seeds"] if r.get("iou_seeds") else [r["iou"]]) for r in res["rows"]
+                if r.get("iou_seeds") or isinstance(r.get("iou"), float)]
     fig, axes = plt.subplots(1, 2 if with_iou else 1, figsize=(10 if with_iou else 5, 3.4), squeeze=False)
     ax = axes[0, 0]
     if with_iou:
         a2 = axes[0, 1]
-        for r in with_iou:
-            a2.scatter(r["fps"], r["iou"], s=30)
-            a2.annotate(r["model"], (r["fps"], r["iou"]), textcoords="offset points", xytext=(4, 4), fontsize=8)
+        for r, ious in with_iou:
+            m, s, _ = mean_std(ious)
+            a2.errorbar(r["fps"], m, yerr=s, fmt="o", capsize=3)
+            a2.annotate(r["model"], (r["fps"], m), textcoords="offset points", xytext=(4, 4), fontsize=8)
         a2.set_xscale("log")
         a2.set_xticks([2, 5, 10, 20, 50, 100, 200])
         a2.set_xlabel("frames/s (fp32, 2 threads)")
@@ -106,7 +111,7 @@ def build(results: Path) -> Path:
              "Each section is one benchmark's own report, measured on the machine its last line names (a "
              "`_avx2` section on a CPU without VNNI); the JSON beside it has every number.", ""]
     plots = {"runtime": ("stages.png", plot_stages), "runtime_avx2": ("stages_avx2.png", plot_stages),
-             "bsn_arch": ("arch.png", plot_arch),
+             "bsn_arch": ("arch.png", plot_arch), "bsn_arch_light": ("arch_light.png", plot_arch),
              "quant": ("quant.png", plot_quant)}
     for name in ORDER:
         md = results / f"{name}.md"

@@ -67,3 +67,14 @@ def test_table_takes_each_cell_from_its_own_seeds(tmp_path):
     assert tab["rows"]["Traversable"]["suburb->town"] == [0.1]
     d = tab["ablations"]["BSN-D"]["town->town"]
     assert d["bsn_minus"] == pytest.approx(0.07) and d["beyond_spread"] is None   # one seed of BSN-D
+
+
+def test_the_architecture_plot_draws_a_seeded_table_and_the_earlier_single_figure_one(tmp_path):
+    from benchmarks.report import plot_arch
+    seeded = {"rows": [{"model": "small-light", "gmacs": 2.45, "fps": 76.3, "iou": "0.420 +- 0.010",
+                        "iou_seeds": [0.41, 0.42, 0.43]},
+                       {"model": "shared-light", "gmacs": 1.24, "fps": 120.0, "iou": "-", "iou_seeds": []}]}
+    earlier = {"rows": [{"model": "unet", "gmacs": 29.47, "fps": 7.89, "iou": 0.2661}]}
+    for name, res in (("seeded", seeded), ("earlier", earlier)):
+        out = plot_arch(res, tmp_path / f"{name}.png")
+        assert out.is_file() and out.stat().st_size > 0
