@@ -26,6 +26,10 @@ Then, as a car runs it, each clip delivered like a camera (a frame every 1 / its
 camera file and calibrating: whether the loop keeps up (frames dropped), its latency, and where
 online calibration stands at the end.
 
+Last, where a frame's CPU goes: reading (decode, warp, online calibration) and the model, each timed
+alone in CPU time of every thread, and the ceiling they leave end to end on 2 cores (both must be
+done for every frame): what the >= 90 % bar can reach on this machine at all.
+
 ``--repeats N`` runs the whole matrix N times over (a shared machine's speed drifts between
 minutes): the summary table gives each row's median over the runs and judges the bars on it.
 The report is ``runtime`` on a CPU with VNNI, ``runtime_avx2`` on AVX2 without it (``--name``
@@ -41,11 +45,13 @@ import argparse
 import statistics
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import cv2
+import numpy as np
 
 from benchmarks.bench_realcam import REAL, udacity_camera
 from benchmarks.common import class_name, machine, summary, time_calls, write_result
@@ -66,6 +72,61 @@ TAIL_BAR = 2.0
 def model_only(engine: Engine, video: str, frames: int, camera: CameraState) -> float:
     batches = [camera.frame_for(f).to_model(f)[None] for f in read_video(video, frames)]
     return summary(time_calls(lambda i: engine.infer(batches[i]), len(batches), warmup=5))["per_second"]
+
+
+def per_call_ms(fn: Callable[[int], object], n: int, warmup: int = 5) -> tuple[float, float]:
+    """Wall and CPU milliseconds per call of ``fn(i)``, ``i`` from 0 to ``n`` - 1 after ``warmup`` calls
+    of ``fn(0)``; CPU: user + system of every thread of this process (the model's pool, FFmpeg's,
+    online calibration's)."""
+    for _ in range(warmup):
+        fn(0)
+    w0, c0 = time.perf_counter(), time.process_time()
+    for i in range(n):
+        fn(i)
+    return 1e3 * (time.perf_counter() - w0) / n, 1e3 * (time.process_time() - c0) / n
+
+
+def ceiling(model_wall_ms: float, model_cpu_ms: float, reading_cpu_ms: float, cores: int = 2) -> dict[str, float]:
+    """The most frames/s end to end can reach on ``cores`` when reading a frame (decode, warp, online
+    calibration) costs ``reading_cpu_ms`` of CPU and the model ``model_cpu_ms`` of CPU in
+    ``model_wall_ms``: the cores must do both for every frame, and no frame is faster than the model
+    alone. ``share``: that ceiling over the model's own frames/s."""
+    if min(model_wall_ms, model_cpu_ms) <= 0 or reading_cpu_ms < 0 or cores < 1:
+        raise ValueError(f"times must be positive and cores >= 1, got {model_wall_ms}, {model_cpu_ms}, "
+                         f"{reading_cpu_ms}, {cores}")
+    model_fps = 1e3 / model_wall_ms
+    fps = min(model_fps, cores * 1e3 / (model_cpu_ms + reading_cpu_ms))
+    return {"fps": fps, "share": fps / model_fps}
+
+
+def cpu_budget(model: str, video: Path, frames: int, calibration: Calibration | None) -> dict[str, float]:
+    """Where a frame's CPU goes, each part timed on its own: reading (decode, warp into the model camera
+    and, without a camera file, online calibration, as ``bsn-run``'s feeder does them) and the model
+    (2 threads, idle threads sleeping, as ``bsn-run`` runs it); and the ceiling they leave end to end."""
+    engine = Engine(model, threads=2, spinning=False)
+    camera = CameraState(engine.card, calibration)
+    source = open_source(str(video))
+    camera.use_frame_rate(source.fps)
+    buf = np.empty((1, *engine.card.input_size, 3), np.uint8)
+    caps = iter(source)
+    batches: list[np.ndarray] = []
+
+    def read(_: int) -> None:
+        frame = next(caps).frame
+        if frame is not None:
+            camera.frame_for(frame).to_model(frame, dst=buf[0])
+            if len(batches) < frames:
+                batches.append(buf.copy())
+
+    try:
+        read_wall, read_cpu = per_call_ms(read, frames)
+    finally:
+        camera.close()
+        source.stop()
+    model_wall, model_cpu = per_call_ms(lambda i: engine.infer(batches[i % len(batches)]), len(batches))
+    c = ceiling(model_wall, model_cpu, read_cpu)
+    return {"read_wall_ms": read_wall, "read_cpu_ms": read_cpu, "model_wall_ms": model_wall,
+            "model_cpu_ms": model_cpu, "ceiling_fps": c["fps"], "ceiling_share": c["share"]}
 
 
 def lengthen(video: Path, frames: int, tmp: Path) -> Path:
@@ -217,11 +278,14 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.repeats < 1:
         p.error(f"--repeats must be at least 1, got {args.repeats}")
+    if args.frames < 20:
+        p.error(f"--frames must be at least 20, got {args.frames}")
     models = args.model or [str(DEFAULT_MODEL)]
     vnni = "VNNI" in machine()["isa"]
     fps_bar = FPS_BAR_VNNI if vnni else FPS_BAR
     rows: list[dict[str, Any]] = []
     live_rows: list[dict[str, Any]] = []
+    budget_rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         clips: list[tuple[str, Path, Calibration | None]] = []
@@ -265,6 +329,12 @@ def main(argv: list[str] | None = None) -> int:
                     live_rows.append(r)
                     print({k: r[k] for k in ("clip", "camera_file", "frames", "dropped", "camera_fps", "p50_ms",
                                              "p99_ms", "calibrated")}, flush=True)
+                for calibration in ([cal, None] if cal is not None else [None]):
+                    b = cpu_budget(model, long, min(args.frames - 5, 200), calibration)
+                    b.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
+                             repeat=repeat)
+                    budget_rows.append(b)
+                    print(b, flush=True)
     stages = sorted({k for r in rows for k in r["stage_ms"]}, key=lambda k: list(rows[0]["stage_ms"]).index(k)
                     if k in rows[0]["stage_ms"] else 99)
     md = ["# Edge runtime latency profile", "", *median_table(rows, args.repeats, fps_bar),
@@ -295,9 +365,22 @@ def main(argv: list[str] | None = None) -> int:
                   f"{r['camera_fps']:.1f} | {r['frames']} | {r['dropped']} | {r['before_start']} | "
                   f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | "
                   f"{r['wait_ms']['p50']:.1f} | {cal} |")
+    md += ["", "## Where a frame's CPU goes, and the ceiling it leaves end to end", "",
+           "Each part timed on its own: reading (decode, warp into the model camera, and online calibration "
+           "without a camera file, as `bsn-run`'s feeder does them, one thread) and the model (2 threads, idle "
+           "threads sleeping); CPU: user + system of every thread. The 2 cores must do both for every frame, "
+           f"so end to end cannot pass 2 / (model CPU + reading CPU), nor the model's own rate: that ceiling, "
+           f"against the {100 * SHARE_BAR:.0f} % bar.", "",
+           "| clip | model | camera | reading ms (CPU ms) | model ms (CPU ms) | ceiling frames/s | ceiling, % of "
+           "model only |", "|---|---|---|---|---|---|---|"]
+    for b in budget_rows:
+        md.append(f"| {b['clip']} | {b['model_file']} | {'file' if b['camera_file'] else 'calibrating'} | "
+                  f"{b['read_wall_ms']:.1f} ({b['read_cpu_ms']:.1f}) | {b['model_wall_ms']:.1f} "
+                  f"({b['model_cpu_ms']:.1f}) | {b['ceiling_fps']:.1f} | {100 * b['ceiling_share']:.0f} % |")
     path = write_result(args.out, args.name or class_name("runtime"), {"frames": args.frames, "repeats": args.repeats,
                                               "fps_bar": fps_bar, "share_bar": SHARE_BAR,
-                                              "tail_bar": TAIL_BAR, "rows": rows, "live": live_rows}, "\n".join(md))
+                                              "tail_bar": TAIL_BAR, "rows": rows, "live": live_rows,
+                                              "cpu_budget": budget_rows}, "\n".join(md))
     print("\n".join(md))
     print(f"wrote {path}")
     return 0

@@ -47,3 +47,33 @@ def test_a_benchmark_run_stopped_part_way_goes_on_from_its_state(monkeypatch, tm
         common.train_run(tmp_path / "data", folder, ["train.steps=10"])
     assert len(calls) == 2 and "--resume" not in calls[0] and "--resume" in calls[1]
     assert calls[1][calls[1].index("--out") + 1] == str(stopped)
+
+
+def test_the_ceiling_is_what_two_cores_can_do_for_both_parts_and_never_above_the_model_alone():
+    from benchmarks.bench_runtime import ceiling
+    # the model keeps both cores busy (20 ms of CPU in 10 ms): 2 cores / (20 + 5) ms = 80 frames/s of its 100
+    assert ceiling(10.0, 20.0, 5.0) == pytest.approx({"fps": 80.0, "share": 0.8})
+    # a model that leaves most of a core idle: reading fits in the gaps, the model's own rate is the limit
+    assert ceiling(10.0, 12.0, 4.0) == pytest.approx({"fps": 100.0, "share": 1.0})
+    assert ceiling(10.0, 10.0, 10.0, cores=1) == pytest.approx({"fps": 50.0, "share": 0.5})
+    with pytest.raises(ValueError, match="positive"):
+        ceiling(0.0, 20.0, 5.0)
+
+
+def test_the_cpu_budget_times_reading_and_the_model_of_the_shipped_model_on_a_short_clip(tmp_path):
+    import cv2
+    import numpy as np
+
+    from benchmarks.bench_runtime import cpu_budget
+    from bsn_edge.cli.demo import DEFAULT_MODEL
+    if not DEFAULT_MODEL.is_file():
+        pytest.skip("the shipped model is not in this checkout")
+    video = tmp_path / "clip.mp4"
+    wr = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), 25.0, (640, 360))
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        wr.write(rng.integers(0, 256, (360, 640, 3), dtype=np.uint8))
+    wr.release()
+    b = cpu_budget(str(DEFAULT_MODEL), video, 12, None)
+    assert {"read_wall_ms", "read_cpu_ms", "model_wall_ms", "model_cpu_ms", "ceiling_fps", "ceiling_share"} <= set(b)
+    assert b["read_cpu_ms"] > 0 and b["model_cpu_ms"] > 0 and 0 < b["ceiling_share"] <= 1
