@@ -129,6 +129,30 @@ def cpu_budget(model: str, video: Path, frames: int, calibration: Calibration | 
             "model_cpu_ms": model_cpu, "ceiling_fps": c["fps"], "ceiling_share": c["share"]}
 
 
+BUDGET_KEYS = ("read_wall_ms", "read_cpu_ms", "model_wall_ms", "model_cpu_ms", "ceiling_fps", "ceiling_share")
+
+
+def budget_table(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown: :func:`cpu_budget`'s figures, each (clip, model, camera)'s median over its runs."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault((r["clip"], r["model_file"], r["camera_file"]), []).append(r)
+    out = ["## Where a frame's CPU goes, and the ceiling it leaves end to end", "",
+           "Each part timed on its own: reading (decode, warp into the model camera, and online calibration "
+           "without a camera file, as `bsn-run`'s feeder does them) and the model (2 threads, idle threads "
+           "sleeping); CPU: user + system of every thread. The 2 cores must do both for every frame, so end to "
+           "end cannot pass 2 / (model CPU + reading CPU), nor the model's own rate: that ceiling, against the "
+           f"{100 * SHARE_BAR:.0f} % bar. Medians over the runs (their number in brackets).", "",
+           "| clip | model | camera | reading ms (CPU ms) | model ms (CPU ms) | ceiling frames/s | ceiling, % of "
+           "model only |", "|---|---|---|---|---|---|---|"]
+    for (clip, model, cam), rs in groups.items():
+        m = {k: statistics.median(r[k] for r in rs) for k in BUDGET_KEYS}
+        out.append(f"| {clip} | {model} | {'file' if cam else 'calibrating'} | {m['read_wall_ms']:.1f} "
+                   f"({m['read_cpu_ms']:.1f}) | {m['model_wall_ms']:.1f} ({m['model_cpu_ms']:.1f}) | "
+                   f"{m['ceiling_fps']:.1f} ({len(rs)}) | {100 * m['ceiling_share']:.0f} % |")
+    return out
+
+
 def lengthen(video: Path, frames: int, tmp: Path) -> Path:
     """``video`` itself when it holds ``frames``, else forwards-backwards copies of it re-encoded."""
     cap = cv2.VideoCapture(str(video))
@@ -365,18 +389,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{r['camera_fps']:.1f} | {r['frames']} | {r['dropped']} | {r['before_start']} | "
                   f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | "
                   f"{r['wait_ms']['p50']:.1f} | {cal} |")
-    md += ["", "## Where a frame's CPU goes, and the ceiling it leaves end to end", "",
-           "Each part timed on its own: reading (decode, warp into the model camera, and online calibration "
-           "without a camera file, as `bsn-run`'s feeder does them, one thread) and the model (2 threads, idle "
-           "threads sleeping); CPU: user + system of every thread. The 2 cores must do both for every frame, "
-           f"so end to end cannot pass 2 / (model CPU + reading CPU), nor the model's own rate: that ceiling, "
-           f"against the {100 * SHARE_BAR:.0f} % bar.", "",
-           "| clip | model | camera | reading ms (CPU ms) | model ms (CPU ms) | ceiling frames/s | ceiling, % of "
-           "model only |", "|---|---|---|---|---|---|---|"]
-    for b in budget_rows:
-        md.append(f"| {b['clip']} | {b['model_file']} | {'file' if b['camera_file'] else 'calibrating'} | "
-                  f"{b['read_wall_ms']:.1f} ({b['read_cpu_ms']:.1f}) | {b['model_wall_ms']:.1f} "
-                  f"({b['model_cpu_ms']:.1f}) | {b['ceiling_fps']:.1f} | {100 * b['ceiling_share']:.0f} % |")
+    md += ["", *budget_table(budget_rows)]
     path = write_result(args.out, args.name or class_name("runtime"), {"frames": args.frames, "repeats": args.repeats,
                                               "fps_bar": fps_bar, "share_bar": SHARE_BAR,
                                               "tail_bar": TAIL_BAR, "rows": rows, "live": live_rows,

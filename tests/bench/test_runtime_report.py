@@ -77,3 +77,16 @@ def test_the_cpu_budget_times_reading_and_the_model_of_the_shipped_model_on_a_sh
     b = cpu_budget(str(DEFAULT_MODEL), video, 12, None)
     assert {"read_wall_ms", "read_cpu_ms", "model_wall_ms", "model_cpu_ms", "ceiling_fps", "ceiling_share"} <= set(b)
     assert b["read_cpu_ms"] > 0 and b["model_cpu_ms"] > 0 and 0 < b["ceiling_share"] <= 1
+
+
+def test_the_cpu_budget_table_gives_each_rows_median_over_its_runs():
+    from benchmarks.bench_runtime import budget_table
+
+    def b(read_cpu: float, share: float) -> dict:
+        return {"clip": "highway 960x540", "model_file": "m.onnx", "camera_file": False, "read_wall_ms": 5.0,
+                "read_cpu_ms": read_cpu, "model_wall_ms": 20.0, "model_cpu_ms": 38.0, "ceiling_fps": 45.0,
+                "ceiling_share": share}
+
+    lines = budget_table([b(9.0, 0.90), b(7.0, 0.93), b(11.0, 0.86)])
+    (line,) = [ln for ln in lines if ln.startswith("| highway")]
+    assert line == "| highway 960x540 | m.onnx | calibrating | 5.0 (9.0) | 20.0 (38.0) | 45.0 (3) | 90 % |"
