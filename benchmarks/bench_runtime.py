@@ -123,6 +123,8 @@ def cpu_budget(model: str, video: Path, frames: int, calibration: Calibration | 
     finally:
         camera.close()
         source.stop()
+    if not batches:
+        raise ValueError(f"{video}: no frame of it decoded")
     model_wall, model_cpu = per_call_ms(lambda i: engine.infer(batches[i % len(batches)]), len(batches))
     c = ceiling(model_wall, model_cpu, read_cpu)
     return {"read_wall_ms": read_wall, "read_cpu_ms": read_cpu, "model_wall_ms": model_wall,
