@@ -37,3 +37,14 @@ def world_with(layout: RoadLayout, boxes: Boxes) -> World:
 def _sample_cache_in_tmp(tmp_path_factory) -> None:
     """Training's sample caches go to a temporary folder, never the user's cache folder."""
     os.environ["BSN_EDGE_CACHE"] = str(tmp_path_factory.mktemp("sample-cache"))
+
+
+def noise_video(path, frames: int, width: int, height: int, fps: float = 25.0, seed: int = 0):
+    """An MPEG-4 file of ``frames`` frames of uniform noise (nothing to calibrate on, everything to decode)."""
+    import cv2
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (width, height))
+    rng = np.random.default_rng(seed)
+    for _ in range(frames):
+        w.write(rng.integers(0, 256, (height, width, 3), dtype=np.uint8))
+    w.release()
+    return path

@@ -61,19 +61,12 @@ def test_the_ceiling_is_what_two_cores_can_do_for_both_parts_and_never_above_the
 
 
 def test_the_cpu_budget_times_reading_and_the_model_of_the_shipped_model_on_a_short_clip(tmp_path):
-    import cv2
-    import numpy as np
-
     from benchmarks.bench_runtime import cpu_budget
     from bsn_edge.cli.demo import DEFAULT_MODEL
+    from tests.conftest import noise_video
     if not DEFAULT_MODEL.is_file():
         pytest.skip("the shipped model is not in this checkout")
-    video = tmp_path / "clip.mp4"
-    wr = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), 25.0, (640, 360))
-    rng = np.random.default_rng(0)
-    for _ in range(20):
-        wr.write(rng.integers(0, 256, (360, 640, 3), dtype=np.uint8))
-    wr.release()
+    video = noise_video(tmp_path / "clip.mp4", 20, 640, 360)
     b = cpu_budget(str(DEFAULT_MODEL), video, 12, None)
     assert {"read_wall_ms", "read_cpu_ms", "model_wall_ms", "model_cpu_ms", "ceiling_fps", "ceiling_share"} <= set(b)
     assert b["read_cpu_ms"] > 0 and b["model_cpu_ms"] > 0 and 0 < b["ceiling_share"] <= 1

@@ -347,12 +347,8 @@ def test_a_video_file_is_decoded_on_the_reading_thread_with_the_same_frames(tmp_
     import cv2
 
     from bsn_edge.runtime.sources import VideoFileSource
-    path = tmp_path / "v.mp4"
-    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 25, (192, 96))
-    rng = np.random.default_rng(3)
-    for _ in range(30):
-        w.write(rng.integers(0, 256, (96, 192, 3), dtype=np.uint8))
-    w.release()
+    from tests.conftest import noise_video
+    path = noise_video(tmp_path / "v.mp4", 30, 192, 96, seed=3)
 
     def frames(**kw):
         src = VideoFileSource(path, **kw)
