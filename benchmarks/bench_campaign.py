@@ -43,34 +43,37 @@ def flattened(records: list[dict[str, Any]], key: str = "val_iou", share: float 
 
 
 def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> None:
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4))
+    # only the panels with records: a leg that starts from a trained teacher has no teacher curve
+    panels = (["teacher"] if teacher else []) + (["validation", "losses"] if student else [])
+    fig, axes = plt.subplots(1, max(len(panels), 1), figsize=(5 * max(len(panels), 1), 4), squeeze=False)
+    ax = dict(zip(panels, axes[0], strict=False))
     if teacher:
         x = [r["samples"] for r in teacher]
         for k in ("road", "sidewalk", "vehicle", "person", "miou"):
-            axes[0].plot(x, [r[f"val_{k}"] for r in teacher], label=k, lw=2 if k == "miou" else 1)
-        axes[0].set_title("teacher: held-out IoU")
-        axes[0].set_xlabel("samples")
-        axes[0].legend(fontsize=8)
+            ax["teacher"].plot(x, [r[f"val_{k}"] for r in teacher], label=k, lw=2 if k == "miou" else 1)
+        ax["teacher"].set_title("teacher: held-out IoU")
+        ax["teacher"].set_xlabel("samples")
+        ax["teacher"].legend(fontsize=8)
     if student:
         x = [r["samples"] for r in student]
         if any("val_iou" in r for r in student):
-            axes[1].plot(x, [r.get("val_iou") for r in student], label="B: validation IoU (swept)")
-            ax2 = axes[1].twinx()
+            ax["validation"].plot(x, [r.get("val_iou") for r in student], label="B: validation IoU (swept)")
+            ax2 = ax["validation"].twinx()
             ax2.plot(x, [r.get("val_abs_rel") for r in student], color="tab:red", label="D: depth AbsRel")
             if any("val_road_abs_rel" in r for r in student):
                 ax2.plot(x, [r.get("val_road_abs_rel") for r in student], color="tab:red", ls="--",
                          label="D: road AbsRel 5-40 m")
             ax2.set_ylabel("AbsRel (road dashed)", color="tab:red")
-        axes[1].set_title("student: validation")
-        axes[1].set_xlabel("samples")
-        axes[1].set_ylabel("IoU")
+        ax["validation"].set_title("student: validation")
+        ax["validation"].set_xlabel("samples")
+        ax["validation"].set_ylabel("IoU")
         for k in ("loss", "bce", "kd", "depth"):
             xs = [r["samples"] for r in student if k in r]     # a run started from another: no losses at 0
-            axes[2].plot(xs, [r[k] for r in student if k in r], label=k)
-        axes[2].set_yscale("log")
-        axes[2].set_title("student: training losses (mean since the last record)")
-        axes[2].set_xlabel("samples")
-        axes[2].legend(fontsize=8)
+            ax["losses"].plot(xs, [r[k] for r in student if k in r], label=k)
+        ax["losses"].set_yscale("log")
+        ax["losses"].set_title("student: training losses\n(mean since the last record)")
+        ax["losses"].set_xlabel("samples")
+        ax["losses"].legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
