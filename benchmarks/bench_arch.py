@@ -13,9 +13,10 @@ once per ``--seeds`` and evaluated inside V on the held-out clips, so the column
 architectures, not budgets: mean +- std over the seeds, with each run's validation curve (flat: its
 last fifth gained under 0.01). Every finished run goes into ``bsn_arch_ledger.json`` in ``--out``
 (:mod:`benchmarks.ledger`): the command can be stopped and run again, on any machine, and trains
-only what is missing. ``--report NAME`` writes ``NAME.md`` and ``NAME_ledger.json`` instead, e.g. a
-table of two architectures (``--only``) that leaves the whole table as it is. ``--runs`` adds the
-IoU of runs trained elsewhere (e.g. the shipped model's).
+only what is missing, a run stopped part-way going on from its last tenth. ``--report NAME`` writes
+``NAME.md`` and ``NAME_ledger.json`` instead, e.g. a table of two architectures (``--only``) that
+leaves the whole table as it is. ``--runs`` adds the IoU of runs trained elsewhere (e.g. the shipped
+model's).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from benchmarks.bench_campaign import flattened
-from benchmarks.common import eval_run, summary, time_calls, train_run, write_result
+from benchmarks.common import eval_run, records, summary, time_calls, train_run, write_result
 from benchmarks.ledger import Ledger, fmt
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import parse_size
@@ -70,8 +71,8 @@ def train_uniform(name: str, data: Path, work: Path, steps: int, size: tuple[int
     """Train ``name`` on ``data`` with the benchmark's budget into ``work/name`` (``work/seedN/name`` for
     seeds after the first; reused if done), validation IoU every tenth of the steps."""
     sets = [f"model.name={name}", f"data.size=[{size[0]}, {size[1]}]", "data.val_fraction=0.2",
-            "data.test_fraction=0.2", f"train.steps={steps}", "train.batch_size=8", f"train.checkpoint_every={steps}",
-            f"train.seed={seed}", f"train.eval_every={max(1, steps // 10)}", "train.eval_frames=128"]
+            "data.test_fraction=0.2", f"train.steps={steps}", "train.batch_size=8", *records(steps),
+            f"train.seed={seed}", "train.eval_frames=128"]
     if teacher is not None:
         sets.append(f"teacher.checkpoint={teacher}")
     return train_run(data, (work / name) if seed == 0 else (work / f"seed{seed}" / name), sets)

@@ -17,8 +17,9 @@ fifth of its steps gained under 0.01) and draws the curves.
 A whole table is many CPU-hours: each finished run is written to the family's ledger
 (``bsn_accuracy_ledger.json``, ``bsn_accuracy_shared-light_ledger.json``) in ``--out`` at once
 (:mod:`benchmarks.ledger`), so the command can be stopped and run again, on any machine, and
-trains only what is missing; seeds are the outer loop, so a partial table holds whole seeds. The
-report is written from the ledger after every run.
+trains only what is missing (a run stopped part-way goes on from its last tenth); seeds are the
+outer loop, so a partial table holds whole seeds. The report is written from the ledger after every
+run.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.bench_campaign import flattened
-from benchmarks.common import eval_run, train_run, write_result
+from benchmarks.common import eval_run, records, train_run, write_result
 from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
 from bsn_edge.cli import label as label_cli
 from bsn_edge.cli.common import parse_size
@@ -126,8 +127,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
                 runs = work / "runs" / f"seed{seed}"
                 base = runs / f"{name}_{src}"
                 train_run(train, base, [*common, *tsets, f'model.name="{name}"', f"train.steps={steps}",
-                                        f"train.checkpoint_every={steps}", f"train.seed={seed}",
-                                        f"train.eval_every={max(1, steps // CURVE_RECORDS)}",
+                                        *records(steps, CURVE_RECORDS), f"train.seed={seed}",
                                         f'data.train_styles=["{src}"]'])
                 record: dict[str, Any] = {"curve": _curve(base), "test": {}, "finetuned": {}}
                 for tgt in STYLES:
@@ -141,8 +141,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
                         continue
                     ft = runs / f"{name}_{src}_ft_{tgt}"
                     train_run(train, ft, [*common, *tsets, f'model.name="{name}"', f"train.steps={ft_steps}",
-                                          f"train.checkpoint_every={ft_steps}", f"train.seed={seed}",
-                                          f"train.eval_every={max(1, ft_steps // CURVE_RECORDS)}",
+                                          *records(ft_steps, CURVE_RECORDS), f"train.seed={seed}",
                                           f'data.train_styles=["{tgt}"]', "data.fraction=0.2",
                                           f'train.init="{base}"', f"train.lr={FINETUNE_LR}"])
                     rep = eval_run(ft, test, work / "eval" / f"seed{seed}_{ft.name}_on_{tgt}.json",

@@ -87,6 +87,13 @@ def write_result(out_dir: str | Path, name: str, result: dict[str, Any], markdow
     return out / f"{name}.json"
 
 
+def records(steps: int, n: int = 10) -> list[str]:
+    """``bsn-train`` settings for a run of ``steps`` that records its validation ``n`` times and saves
+    its state with each record: the curve has its points, and a stopped run goes on from the last one."""
+    every = max(1, steps // n)
+    return [f"train.eval_every={every}", f"train.checkpoint_every={every}"]
+
+
 def train_run(data: Path, out: Path, sets: list[str]) -> Path:
     """``bsn-train --data data --out out --set ...`` in this process; a finished run is reused, one
     stopped part-way goes on from its last saved state (``--resume``)."""
@@ -94,7 +101,7 @@ def train_run(data: Path, out: Path, sets: list[str]) -> Path:
     from bsn_edge.train.run import Run
 
     run = Run(out)
-    if run.checkpoint_path.is_file():
+    if run.finished():
         return out
     argv = ["--data", str(data), "--out", str(out), "--quiet"]
     if run.state_path.is_file() or run.teacher_state_path.is_file():

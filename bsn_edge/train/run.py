@@ -119,6 +119,16 @@ class Run:
         return any(p.exists() for p in (self.model_path, self.checkpoint_path, self.state_path,
                                         self.teacher_state_path))
 
+    def finished(self) -> bool:
+        """Whether the run's training has ended: its last checkpoint carries the decision threshold,
+        chosen once the last step is done; the checkpoints written on the way have none yet."""
+        try:
+            d = json.loads(self.checkpoint_path.read_text())
+        except (OSError, json.JSONDecodeError):
+            return False
+        card = d.get("card", d) if isinstance(d, dict) else None
+        return isinstance(card, dict) and card.get("threshold") is not None
+
     # -- reading ---------------------------------------------------------------------------------
 
     def info(self) -> dict[str, Any]:

@@ -1,6 +1,8 @@
 """The runtime benchmark's report: medians over repeated runs judged against the bars, and per-CPU-class
 report names, checked against values worked out by hand."""
 
+import json
+
 import pytest
 
 from benchmarks import common
@@ -41,8 +43,10 @@ def test_a_benchmark_run_stopped_part_way_goes_on_from_its_state(monkeypatch, tm
     new, stopped, done = (tmp_path / n for n in ("new", "stopped", "done"))
     for folder in (stopped, done):
         folder.mkdir()
-    Run(stopped).state_path.write_bytes(b"")
-    Run(done).checkpoint_path.write_text("{}")
+        Run(folder).state_path.write_bytes(b"")
+    # a checkpoint on the way has no threshold yet; the last one has the threshold chosen on validation
+    Run(stopped).checkpoint_path.write_text(json.dumps({"card": {"threshold": None}, "step": 300}))
+    Run(done).checkpoint_path.write_text(json.dumps({"card": {"threshold": 0.35}, "step": 3000}))
     for folder in (new, stopped, done):
         common.train_run(tmp_path / "data", folder, ["train.steps=10"])
     assert len(calls) == 2 and "--resume" not in calls[0] and "--resume" in calls[1]

@@ -350,8 +350,10 @@ def test_a_training_in_pieces_is_the_uninterrupted_run(data, uninterrupted, tmp_
     assert first["stopped_at"] == 1 and first["steps_run"] == 1 and first["resumed_from"] == 0
     second = train(cfg, data, run, resume=True, progress=False, stop_after=1e-9)
     assert second["resumed_from"] == 1 and second["steps_run"] == 1 and second["stopped_at"] == 2
+    assert Run(run).checkpoint_path.is_file() and not Run(run).finished()   # a checkpoint, not the end
     last = train(cfg, data, run, resume=True, progress=False)
     assert last["resumed_from"] == 2 and last["steps_run"] == 4 and "stopped_at" not in last
+    assert Run(run).finished()
     assert [r["step"] for r in Run(run).history() if r["phase"] == "train"] == [1, 2, 3, 4, 5, 6]
     assert_same_weights(run, uninterrupted)
 
