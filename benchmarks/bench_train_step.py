@@ -1,17 +1,20 @@
 """Training throughput, before and after each lever, side by side in one run.
 
-    python -m benchmarks.bench_train_step --data DIR [--clips 8] [--steps 6] [--rounds 3]
+    python -m benchmarks.bench_train_step --data DIR [--clips 8] [--steps 6] [--rounds 3] [--size 256x512]
 
 A step is what ``bsn-train`` does per step (``bsn_edge.train.trainer``: the batch from the data
-stream, D + B forward and backward, the teacher's distillation, Adam), batch 8 at 256x512, on the
-labelled clips under DIR. The levers are added one at a time, each a ``bsn-train`` setting:
+stream, D + B forward and backward, the teacher's distillation, the Adam update and its schedule),
+batch 8 at ``--size`` (the runtime's 256x512 by default), on the labelled clips under DIR. The
+levers are added one at a time:
 
 1. before: every sample decoded and warped from its PNGs every step (``data.cache=off``), the
    teacher run every step, fp32, contiguous layout
 2. + the sample cache (``data.cache``): decoded and warped once, the batch augmented as tensors
 3. + the teacher's features computed once per frame (plain and flipped) and read from the cache
 4. + channels-last layout (``train.channels_last``)
-5. + bf16 autocast (``train.precision``), only on a CPU with native bf16 (AMX or AVX-512 BF16)
+5. + torch's fused Adam (one kernel for every parameter's update), and the same without
+   channels-last
+6. + bf16 autocast (``train.precision``), only on a CPU with native bf16 (AMX or AVX-512 BF16)
 
 The configurations take turns for ``--rounds`` rounds of ``--steps`` steps (after a warm-up
 each), and each reports its median step. One-off costs (building the cache, the teacher's
@@ -29,12 +32,13 @@ from typing import Any
 import torch
 
 from benchmarks.common import write_result
+from bsn_edge.cli.common import parse_size
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.data.cache import SampleCache
 from bsn_edge.models import create_model, create_teacher
 from bsn_edge.train.config import load_config
+from bsn_edge.train.optim import Optimizer
 from bsn_edge.train.trainer import (
-    _adam,
     _layout,
     autocast_dtype,
     cpu_has_native_bf16,
@@ -43,12 +47,16 @@ from bsn_edge.train.trainer import (
     training_batches,
 )
 
+_BEFORE = {"cache": False, "teacher_grid": False, "channels_last": False, "precision": "fp32", "fused": False}
 LEVERS = [
-    ("before", {"cache": False, "teacher_grid": False, "channels_last": False, "precision": "fp32"}),
-    ("+ sample cache", {"cache": True, "teacher_grid": False, "channels_last": False, "precision": "fp32"}),
-    ("+ teacher features cached", {"cache": True, "teacher_grid": True, "channels_last": False, "precision": "fp32"}),
-    ("+ channels last", {"cache": True, "teacher_grid": True, "channels_last": True, "precision": "fp32"}),
-    ("+ bf16 autocast", {"cache": True, "teacher_grid": True, "channels_last": True, "precision": "bf16"}),
+    ("before", _BEFORE),
+    ("+ sample cache", {**_BEFORE, "cache": True}),
+    ("+ teacher features cached", {**_BEFORE, "cache": True, "teacher_grid": True}),
+    ("+ channels last", {**_BEFORE, "cache": True, "teacher_grid": True, "channels_last": True}),
+    ("+ fused Adam", {**_BEFORE, "cache": True, "teacher_grid": True, "channels_last": True, "fused": True}),
+    ("cached, contiguous, fused Adam", {**_BEFORE, "cache": True, "teacher_grid": True, "fused": True}),
+    ("+ bf16 autocast", {**_BEFORE, "cache": True, "teacher_grid": True, "channels_last": True, "fused": True,
+                         "precision": "bf16"}),
 ]
 
 
@@ -69,7 +77,7 @@ class Setup:
         self.model.to(memory_format=torch.channels_last if cl else torch.contiguous_format).train()
         self.teacher = create_teacher(18, 128).eval()
         self.teacher.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
-        self.opt = _adam(self.model.parameters(), 1e-3, self.cfg)
+        self.opt = Optimizer(self.model.parameters(), 1e-3, 100_000, self.cfg.train, fused=lever["fused"])
         self.dtype = autocast_dtype(self.cfg, torch.device("cpu"))
         source = (grid_cache if lever["teacher_grid"] else cache) if lever["cache"] else None
         self.batches = training_batches(ds, source, batch, 1, 0, 0, 0)
@@ -79,9 +87,7 @@ class Setup:
         t0 = time.perf_counter()
         b = next(self.batches)
         loss, *_ = losses(self.model, b, self.teacher, self.cfg, self.dtype)
-        self.opt.zero_grad(set_to_none=True)
-        loss.backward()
-        self.opt.step()
+        self.opt.step(loss)
         if record:
             self.times.append(time.perf_counter() - t0)
 
@@ -95,10 +101,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--batch", type=int, default=8)
     p.add_argument("--model", default="small-light")
+    p.add_argument("--size", type=parse_size, default=(256, 512), metavar="HxW",
+                   help="training size (the runtime's 256x512; the research tables' 128x256)")
+    p.add_argument("--name", default="train_step", help="report name in --out")
     args = p.parse_args(argv)
     torch.set_num_threads(2)
     clips = find_clips(args.data)[: args.clips]
-    size = (256, 512)
+    size = args.size
     cam_cfg = load_config(None, [f"data.size=[{size[0]}, {size[1]}]"]).data
     camera, mounting = cam_cfg.model_camera()
     ds = BlindSpotDataset(clips, size, augment=True, camera=camera, mounting=mounting, seed=0)
@@ -142,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     if not cpu_has_native_bf16():
         lines.append("\nThis CPU has no native bf16 (AMX or AVX-512 BF16): `train.precision=auto` trains in fp32 here.")
     md = "\n".join(lines)
-    write_result(args.out, "train_step", res, md)
+    write_result(args.out, args.name, res, md)
     print(md)
     return 0
 

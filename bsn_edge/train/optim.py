@@ -14,8 +14,12 @@ class Optimizer:
     """Adam with the training's betas, eps and weight decay, its learning rate decayed as
     ``(1 - step / steps) ** poly_power`` over ``steps`` (the whole training, whatever its pieces)."""
 
-    def __init__(self, params: Iterable[torch.nn.Parameter], lr: float, steps: int, t: TrainConfig) -> None:
-        self.opt = torch.optim.Adam(params, lr=lr, betas=t.betas, eps=t.eps, weight_decay=t.weight_decay)
+    def __init__(self, params: Iterable[torch.nn.Parameter], lr: float, steps: int, t: TrainConfig,
+                 fused: bool = False) -> None:
+        """``fused``: torch's one-kernel Adam (the same update; the state is interchangeable with the
+        per-tensor one's)."""
+        self.opt = torch.optim.Adam(params, lr=lr, betas=t.betas, eps=t.eps, weight_decay=t.weight_decay,
+                                    fused=fused or None)
         power = t.poly_power
         self.sched = torch.optim.lr_scheduler.LambdaLR(self.opt, lambda s: max(1.0 - s / steps, 0.0) ** power)
 

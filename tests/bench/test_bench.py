@@ -42,3 +42,16 @@ def test_floor_counts_each_kind_of_convolution_from_the_graph(tmp_path):
     px = 16 * 32
     assert got == sorted([("dense 7x7", 16 * 3 * 49 * px), ("depthwise", 16 * 9 * px), ("1x1", 32 * 16 * px),
                           ("dense 3x3", 32 * 32 * 9 * px)])
+
+
+def test_every_benchmark_module_imports():
+    """A benchmark no test runs still has to load: a helper renamed in the package must not break it."""
+    import importlib
+    import pkgutil
+
+    import benchmarks
+
+    names = [m.name for m in pkgutil.iter_modules(benchmarks.__path__) if m.name.startswith("bench_")]
+    assert "bench_train_step" in names
+    for name in names:
+        importlib.import_module(f"benchmarks.{name}")
