@@ -45,7 +45,8 @@ def flattened(records: list[dict[str, Any]], key: str = "val_iou", share: float 
 def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> None:
     # only the panels with records: a leg that starts from a trained teacher has no teacher curve
     panels = (["teacher"] if teacher else []) + (["validation", "losses"] if student else [])
-    fig, axes = plt.subplots(1, max(len(panels), 1), figsize=(5 * max(len(panels), 1), 4), squeeze=False)
+    n = max(len(panels), 1)
+    fig, axes = plt.subplots(1, n, figsize=(5 * n, 4), squeeze=False)
     ax = dict(zip(panels, axes[0], strict=False))
     if teacher:
         x = [r["samples"] for r in teacher]
