@@ -1,6 +1,6 @@
 """Online calibration: frames to convergence, the estimate, and the estimator's share of a core.
 
-    python -m benchmarks.bench_calibration --model models/bsn_small_light_int8.onnx \\
+    python -m benchmarks.bench_calibration [--model MODEL.onnx] \\
         --clip ../shared/data/real/udacity_test_video.mp4 --clip ../shared/data/real/dashcam_highway.mp4 \\
         --synthetic 5 --out benchmarks/results
 
@@ -30,6 +30,7 @@ import cv2
 from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.mount_fit import MountFitConfig
+from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.runtime.calibrator import ONLINE_FIT
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
@@ -96,7 +97,8 @@ def _median(values: list[float]) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", default="models/bsn_small_light_int8.onnx", help="whose card gives the model camera")
+    p.add_argument("--model", default=str(DEFAULT_MODEL),
+                   help="whose card gives the model camera (default: the shipped one)")
     p.add_argument("--clip", action="append", default=[], help="a video (real: no truth)")
     p.add_argument("--synthetic", type=int, default=len(SYNTH_SEEDS),
                    help="synthetic clips with known mountings (0: none)")

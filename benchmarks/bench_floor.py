@@ -1,6 +1,6 @@
 """The shipped model's latency as a multiple of this machine's int8 floor.
 
-    python -m benchmarks.bench_floor [--model models/bsn_small_light_int8.onnx] --out benchmarks/results
+    python -m benchmarks.bench_floor [--model MODEL.onnx] --out benchmarks/results
 
 The floor is how fast the model could run if every multiply-accumulate went at the best int8
 rate onnxruntime reaches on this machine on the kernels the runtime gives this model: a stack of

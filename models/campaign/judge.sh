@@ -21,6 +21,7 @@ if [ -e "$OUT" ] && [ -z "${FORCE:-}" ]; then
 fi
 mkdir -p "$OUT"
 MODEL=$OUT/model_int8.onnx
+SHIPPED=$("$B/python" -c "from bsn_edge.cli.demo import DEFAULT_MODEL; print(DEFAULT_MODEL)")
 "$B/bsn-export" --checkpoint "$RUN" --out "$MODEL" --int8 --reduce-range --calib calib
 cp "$REPO/benchmarks/results/cameras.json" "$OUT/"
 cd "$REPO"
@@ -29,9 +30,9 @@ cd "$REPO"
   --set "slow traffic=$HERE/heldout/queue" --set "earlier world=$HERE/heldout/earlier" \
   --model "$LABEL=$MODEL"
 "$B/python" -m benchmarks.bench_realcam --out "$OUT/realcam" --model "$MODEL"
-"$B/python" -m benchmarks.bench_realview --out "$OUT/realview" --model "default=$REPO/models/bsn_small_light_int8.onnx" \
+"$B/python" -m benchmarks.bench_realview --out "$OUT/realview" --model "default=$SHIPPED" \
   --model "$LABEL=$MODEL"
 DEFAULT_LABEL=${DEFAULT_LABEL:-"leg 3, 7-bit weights (shipped)"}   # the default's name in cameras.md
 "$B/python" -m benchmarks.bench_tradeoff --cameras "$OUT/cameras.json" --out "$OUT" \
-  --model "$DEFAULT_LABEL=$REPO/models/bsn_small_light_int8.onnx" --model "$LABEL=$MODEL"
+  --model "$DEFAULT_LABEL=$SHIPPED" --model "$LABEL=$MODEL"
 echo "judged $RUN: $OUT (cameras.md, realcam/, realview/, tradeoff*.md)"
