@@ -2,16 +2,21 @@
 
 import json
 
+import onnxruntime as ort
 import pytest
 
+from bsn_edge.card import ModelCard
 from bsn_edge.cli import demo
+
+SHIPPED_RUN = demo.DEFAULT_MODEL.parent / "default"
 
 
 @pytest.mark.skipif(not demo.DEFAULT_MODEL.is_file(), reason="the shipped model is not in this checkout")
 def test_demo_runs_the_shipped_model(tmp_path):
     assert demo.main(["--out", str(tmp_path), "--frames", "12"]) == 0
     s = json.loads((tmp_path / "summary.json").read_text())
-    assert s["frames"] == s["valid_frames"] == 12 and s["model"]["variant"] == "small-light"
+    card = json.loads((SHIPPED_RUN / "checkpoint.json").read_text())["card"]
+    assert s["frames"] == s["valid_frames"] == 12 and s["model"]["variant"] == card["variant"]
     for name in ("overlay.mp4", "alerts.jsonl", "alerts.log", "contact_sheet.png"):
         assert (tmp_path / name).stat().st_size > 0, name
 
@@ -19,3 +24,16 @@ def test_demo_runs_the_shipped_model(tmp_path):
 def test_demo_without_a_model_says_how_to_make_one(tmp_path, capsys):
     assert demo.main(["--out", str(tmp_path), "--model", str(tmp_path / "none.onnx")]) == 2
     assert "bsn-train and bsn-export" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not (demo.DEFAULT_MODEL.is_file() and (SHIPPED_RUN / "checkpoint.json").is_file()),
+                    reason="the shipped model or its run is not in this checkout")
+def test_the_shipped_run_is_what_the_shipped_model_was_exported_from():
+    """Both halves of a release: the ONNX model users run and the run they fine-tune and adapt."""
+    props = ort.InferenceSession(str(demo.DEFAULT_MODEL), providers=["CPUExecutionProvider"]) \
+        .get_modelmeta().custom_metadata_map
+    onnx = ModelCard.from_metadata(props, str(demo.DEFAULT_MODEL))
+    run = ModelCard.from_dict(json.loads((SHIPPED_RUN / "checkpoint.json").read_text())["card"], str(SHIPPED_RUN))
+    assert onnx.sealed and onnx.seven_bit_weights
+    for field in ("variant", "spec", "input_size", "threshold", "camera", "mounting", "training", "config_digest"):
+        assert getattr(onnx, field) == getattr(run, field), field
