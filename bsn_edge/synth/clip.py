@@ -125,7 +125,8 @@ def render_frames(clip: Clip, renderer: Renderer | None = None, workers: int = 1
             yield pipe.frame(i)
         return
     starts = list(range(0, n, CHUNK))
-    ctx = multiprocessing.get_context("fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn")
+    # spawned, never forked: a fork copies OpenCV's thread pool mid-lock if this process has used it
+    ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker, initargs=(clip,)) as pool:
         for frames in pool.map(_render_range, starts, [min(a + CHUNK, n) for a in starts]):
             yield from frames

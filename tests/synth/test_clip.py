@@ -85,6 +85,18 @@ def test_same_seed_same_frames_other_seed_other_frames():
     assert not np.array_equal(a[0], c[0])
 
 
+
+def test_frames_rendered_in_worker_processes_are_the_frames_rendered_here():
+    """The parent has used OpenCV's thread pool before its workers start (a forked worker could
+    inherit that pool mid-lock and hang): they are spawned, and render exactly what one process does."""
+    clip = make_clip(SynthConfig(frames=20, height=48, width=96, seed=13))
+    here = list(render_frames(clip))
+    workers = list(render_frames(clip, workers=2))
+    assert len(workers) == len(here) == 20
+    for a, b in zip(here, workers, strict=True):
+        assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth)
+        assert np.array_equal(a.semantic, b.semantic) and np.array_equal(a.bsgt, b.bsgt)
+
 @pytest.mark.parametrize("bad", [
     {"frames": 0}, {"style": "desert"}, {"fps": 0.0}, {"height": 8}, {"far": 400.0},
     {"bs_range": 300.0}, {"traffic": -1.0},
