@@ -177,15 +177,18 @@ def test_a_folder_where_no_frame_decodes_is_an_error(setup, tmp_path, capsys):
 def test_a_signal_at_any_moment_of_start_up_ends_with_unavailable_and_no_traceback(setup, tmp_path, sig, code):
     model, clip = setup
     env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
-    t0 = time.monotonic()
-    subprocess.run([sys.executable, "-c", "import bsn_edge.cli.run"], env=env, check=True)
-    imported = time.monotonic() - t0              # signals before main() runs are Python's, not the runtime's
-    for delay in (0.05, 0.4, 1.5):                # opening the outputs, loading the model, running
+    # signals before main() runs are Python's, not the runtime's: each is sent a given time after the
+    # CAN log appears (main() watches signals before it opens any output), however loaded the machine
+    for delay in (0.0, 0.4, 1.5):                 # opening the outputs, loading the model, running
         log = tmp_path / f"{sig.name}_{delay}.log"
         proc = subprocess.Popen([sys.executable, "-m", "bsn_edge.cli.run", "--model", str(model), "--source",
                                  str(clip / "video.mp4"), "--pace", "--can-log", str(log)],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
-        time.sleep(imported + delay)
+        deadline = time.monotonic() + 60
+        while not log.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert log.exists(), f"bsn-run never opened its CAN log (exit {proc.poll()})"
+        time.sleep(delay)
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
         assert "Traceback" not in err, err
