@@ -13,7 +13,7 @@ from bsn_edge.runtime import Engine
 from bsn_edge.synth.style import STYLES
 
 PROG = "bsn-demo"
-DEFAULT_MODEL = CHECKOUT / "models" / "bsn_small_light_int8.onnx"
+DEFAULT_MODEL = CHECKOUT / "models" / "bsn_shared_light_int8.onnx"
 PROJECT_KEY = CHECKOUT / "models" / "bsn-edge-project.pub"   # the shipped default is signed with its pair
 
 

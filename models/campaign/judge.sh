@@ -32,7 +32,7 @@ cd "$REPO"
 "$B/python" -m benchmarks.bench_realcam --out "$OUT/realcam" --model "$MODEL"
 "$B/python" -m benchmarks.bench_realview --out "$OUT/realview" --model "default=$SHIPPED" \
   --model "$LABEL=$MODEL"
-DEFAULT_LABEL=${DEFAULT_LABEL:-"leg 3, 7-bit weights (shipped)"}   # the default's name in cameras.md
+DEFAULT_LABEL=${DEFAULT_LABEL:-"shared-light S3 (shipped)"}   # the default's name in cameras.md
 "$B/python" -m benchmarks.bench_tradeoff --cameras "$OUT/cameras.json" --out "$OUT" \
   --model "$DEFAULT_LABEL=$SHIPPED" --model "$LABEL=$MODEL"
 echo "judged $RUN: $OUT (cameras.md, realcam/, realview/, tradeoff*.md)"
