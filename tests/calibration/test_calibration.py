@@ -1,5 +1,6 @@
 """bsn-calibrate on rendered chessboards with known intrinsics and distortion, and on real photos."""
 
+import functools
 import json
 
 import cv2
@@ -18,13 +19,19 @@ DIST_TRUE = np.array([-0.28, 0.09, 0.0005, -0.0003, 0.0])
 W, H = 640, 480
 
 
-def render_board(rvec, tvec, cols=9, rows=6, square=0.03, ss=3) -> np.ndarray:
-    """A distorted view of a (cols+1)x(rows+1)-square board, 3x3 supersampled."""
+@functools.cache
+def _rays(ss: int) -> np.ndarray:
+    """Every supersampled pixel's ray through the true, distorted camera (the same for every view)."""
     u, v = np.meshgrid((np.arange(W * ss) + 0.5) / ss - 0.5, (np.arange(H * ss) + 0.5) / ss - 0.5)
     pts = np.stack([u.ravel(), v.ravel()], 1).astype(np.float64)[:, None, :]
     und = cv2.undistortPoints(pts, K_TRUE, DIST_TRUE,
                               criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-9)).reshape(-1, 2)
-    rays = np.concatenate([und, np.ones((len(und), 1))], 1)
+    return np.concatenate([und, np.ones((len(und), 1))], 1)
+
+
+def render_board(rvec, tvec, cols=9, rows=6, square=0.03, ss=3) -> np.ndarray:
+    """A distorted view of a (cols+1)x(rows+1)-square board, 3x3 supersampled."""
+    rays = _rays(ss)
     R, _ = cv2.Rodrigues(np.asarray(rvec, float))
     n, p0 = R[:, 2], np.asarray(tvec, float)
     t = (p0 @ n) / (rays @ n)
