@@ -1,6 +1,6 @@
 """The shipped model's latency as a multiple of this machine's int8 floor.
 
-    python -m benchmarks.bench_floor [--model MODEL.onnx] --out benchmarks/results
+    python -m benchmarks.bench_floor [--model MODEL.onnx] [--baseline OLD.onnx] --out benchmarks/results
 
 The floor is how fast the model could run if every multiply-accumulate went at the best int8
 rate onnxruntime reaches on this machine on the kernels the runtime gives this model: a stack of
@@ -15,9 +15,12 @@ with the model, and its rate there is the machine's int8 peak. Then:
     floor   = the model's GMACs / peak rate
     multiple = the model's median latency / floor      (1 / multiple = share of peak)
 
-Everything with 2 intra-op threads, in one run of this script, so the multiple compares like
-with like on whatever machine runs it. An onnxruntime profile of the model says where the rest
-goes, by operator.
+The alternation is repeated in fresh sessions (``--repeats``) and the multiple is the median of
+the repeats, with their range: on a shared cloud machine one alternation can differ from the next
+by a tenth. ``--baseline`` times another model of the same family in the same rounds (before and
+after an export change). Everything with 2 intra-op threads, in one run of this script, so the
+multiple compares like with like on whatever machine runs it. An onnxruntime profile of the model
+says where the rest goes, by operator.
 """
 
 from __future__ import annotations
@@ -94,20 +97,24 @@ def side_by_side(a: tuple[Path, np.ndarray], b: tuple[Path, np.ndarray], runs: i
                  exact_x64: bool = True) -> tuple[float, float]:
     """Median seconds per run of two models timed in alternation (one run of each per round), so
     that the machine's drift during the measurement falls on both alike."""
+    ta, tb = alternation([a, b], runs, exact_x64)
+    return ta, tb
+
+
+def alternation(models: list[tuple[Path, np.ndarray]], runs: int, exact_x64: bool = True) -> list[float]:
+    """Median seconds per run of each model, one run of each per round, in fresh sessions."""
     # no spinning: an idle session's spinning threads would take the cores from the running one
-    sa, sb = (session(m[0], threads=2, spinning=False, exact_x64=exact_x64) for m in (a, b))
-    ta, tb = [], []
+    sessions = [session(m[0], threads=2, spinning=False, exact_x64=exact_x64) for m in models]
+    times: list[list[float]] = [[] for _ in models]
     for _ in range(5):
-        sa.run(None, {"frame": a[1]})
-        sb.run(None, {"frame": b[1]})
+        for s, (_, x) in zip(sessions, models, strict=True):
+            s.run(None, {"frame": x})
     for _ in range(runs):
-        t0 = time.perf_counter()
-        sa.run(None, {"frame": a[1]})
-        t1 = time.perf_counter()
-        sb.run(None, {"frame": b[1]})
-        ta.append(t1 - t0)
-        tb.append(time.perf_counter() - t1)
-    return float(np.median(ta)), float(np.median(tb))
+        for s, (_, x), t in zip(sessions, models, times, strict=True):
+            t0 = time.perf_counter()
+            s.run(None, {"frame": x})
+            t.append(time.perf_counter() - t0)
+    return [float(np.median(t)) for t in times]
 
 
 def conv_kinds(path: Path) -> dict[str, tuple[str, float]]:
@@ -162,10 +169,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--model", default=str(DEFAULT_MODEL), help="an int8 model exported by bsn-export")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--runs", type=int, default=60)
+    p.add_argument("--repeats", type=int, default=5, help="alternations in fresh sessions (default 5); "
+                   "the multiple is their median")
+    p.add_argument("--baseline", help="another int8 model of the same variant and size, timed in the same rounds")
     p.add_argument("--name", help="the report's name in --out (default: floor with VNNI, floor_avx2 without)")
     args = p.parse_args(argv)
     card = read_card(args.model)
     h, w = card.input_size
+    if args.baseline:
+        other = read_card(args.baseline)
+        if (other.variant, tuple(other.input_size)) != (card.variant, (h, w)):
+            p.error(f"--baseline {args.baseline} is {other.variant} at {other.input_size[0]}x{other.input_size[1]}; "
+                    f"the model is {card.variant} at {h}x{w}: the floor is the same only for the same network")
     cfg = QuantConfig(reduce_range=card.seven_bit_weights)
     kernels = kernel_class(machine()["isa"], card.seven_bit_weights)
     torch.manual_seed(0)
@@ -174,14 +189,20 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         stacks = [stack_rate(c, (h // s, w // s), cfg, args.runs, Path(tmp)) for c, s in STACKS]
         best = max(stacks, key=lambda r: r["tmacs_per_s"])
-        # the model and the fastest stack again, alternating: the multiple is a ratio of these two
-        t_model, t_best = side_by_side((Path(args.model), frame), (best["path"], best["input"]), 3 * args.runs,
-                                        exact_x64=not cfg.reduce_range)
+        # the model (and the baseline) and the fastest stack again, alternating: the multiple is a
+        # ratio of these, taken in each repeat
+        timed = [(Path(args.model), frame)] + ([(Path(args.baseline), frame)] if args.baseline else [])
+        rounds = [alternation([*timed, (best["path"], best["input"])], 3 * args.runs, exact_x64=not cfg.reduce_range)
+                  for _ in range(max(1, args.repeats))]
         for r in stacks:
             del r["path"], r["input"]
-    peak = best["gmacs"] * 1e9 / t_best / 1e12
+    peaks = [best["gmacs"] * 1e9 / r[-1] / 1e12 for r in rounds]
+    multiples = [[r[i] * peak * 1e12 / (gmacs * 1e9) for r, peak in zip(rounds, peaks, strict=True)]
+                 for i in range(len(timed))]
+    pick = int(np.argsort(multiples[0])[len(rounds) // 2])        # the repeat with the median multiple
+    peak, t_model = peaks[pick], rounds[pick][0]
     floor_s = gmacs * 1e9 / (peak * 1e12)
-    multiple = t_model / floor_s
+    multiple = multiples[0][pick]
     ops, convs = op_shares(Path(args.model), frame, 20)
     total = sum(ops.values())
     model = Path(args.model).resolve()
@@ -189,7 +210,11 @@ def main(argv: list[str] | None = None) -> int:
     result = {"model": str(shown), "variant": card.variant, "size": [h, w], "scheme": cfg.scheme(), "kernels": kernels,
               "stacks": stacks, "peak_tmacs_per_s": peak, "model_gmacs": gmacs, "model_median_ms": 1e3 * t_model,
               "floor_ms": 1e3 * floor_s, "multiple": multiple, "share_of_peak": 1 / multiple,
-              "goal_multiple": GOAL_MULTIPLE, "op_ms": ops, "conv_kinds": convs}
+              "goal_multiple": GOAL_MULTIPLE, "repeats": len(rounds), "multiples": multiples[0],
+              "op_ms": ops, "conv_kinds": convs}
+    if args.baseline:
+        result["baseline"] = {"model": Path(args.baseline).name, "multiples": multiples[1],
+                              "median_ms": [1e3 * r[1] for r in rounds]}
     lines = ["# The shipped model against this machine's int8 floor", "",
              f"Kernels on this CPU for this model: **{kernels}**.", "",
              f"Dense 3x3 stacks ({DEPTH} convolutions + ReLU each), quantized as the model was "
@@ -198,11 +223,19 @@ def main(argv: list[str] | None = None) -> int:
     lines += [f"| {r['channels']} | {r['size'][0]}x{r['size'][1]} | {r['gmacs']:.2f} | {r['median_ms']:.2f} | "
               f"{r['tmacs_per_s']:.3f} |" for r in stacks]
     lines += ["", f"Peak int8 rate here: **{peak:.3f} TMAC/s** (the fastest stack, {best['channels']} channels, "
-              f"timed again in alternation with the model, {3 * args.runs} runs each).", "",
+              f"timed again in alternation with the model, {3 * args.runs} runs each, in the repeat with the "
+              f"median multiple).", "",
               f"`{card.variant}` at {h}x{w}: {gmacs:.2f} GMACs, median {1e3 * t_model:.2f} ms; floor "
               f"{1e3 * floor_s:.2f} ms. **Latency = {multiple:.2f}x its int8 floor ({100 / multiple:.0f} % of "
-              f"peak)**; goal <= {GOAL_MULTIPLE:g}x ({'met' if multiple <= GOAL_MULTIPLE else 'not met'}).", "",
-              "Where the model's time goes (onnxruntime profile, 20 runs; shares of the profiled kernel time):", "",
+              f"peak)**; goal <= {GOAL_MULTIPLE:g}x ({'met' if multiple <= GOAL_MULTIPLE else 'not met'}). "
+              f"Median of {len(rounds)} alternations in fresh sessions; their multiples range "
+              f"{min(multiples[0]):.2f}x-{max(multiples[0]):.2f}x.", ""]
+    if args.baseline:
+        b = sorted(multiples[1])[len(rounds) // 2]
+        lines += [f"Baseline `{Path(args.baseline).name}`, timed in the same rounds: **{b:.2f}x** (range "
+                  f"{min(multiples[1]):.2f}x-{max(multiples[1]):.2f}x); the model took "
+                  f"{np.median([r[0] / r[1] for r in rounds]):.2f} of its time (median of the repeats).", ""]
+    lines += ["Where the model's time goes (onnxruntime profile, 20 runs; shares of the profiled kernel time):", "",
               "| operator | ms per run | share |", "|---|---|---|"]
     lines += [f"| {op} | {v:.2f} | {100 * v / total:.0f} % |" for op, v in list(ops.items())[:10]]
     lines += ["", "The convolutions by kind (profiled time, their MACs, the rate they reach against the peak "

@@ -41,7 +41,7 @@ def latency(path: Path, frame: np.ndarray, runs: int, exact_x64: bool = True) ->
 
 
 BLOCKS = (("stem", "/stem/"), ("encoder", "/encoder/"), ("decoder", "/decoder/"),
-          ("heads and upsampling", ("/head/", "/upsample", "/Sigmoid", "/depth_net/")))
+          ("heads and upsampling", ("/head/", "/upsample", "/to_frame", "/Sigmoid", "/Exp", "/depth_net/")))
 
 
 def block_of(node: str) -> str:

@@ -19,7 +19,8 @@ from torch import Tensor, nn
 from bsn_edge.card import ModelCard
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
 from bsn_edge.export.seal import seal, set_metadata
-from bsn_edge.export.upsample import with_shuffle_upsampling
+from bsn_edge.export.space_to_depth import SpaceToDepthInput, block_conv, fits
+from bsn_edge.export.upsample import ShuffleUpsample, with_shuffle_upsampling
 from bsn_edge.runtime.model_file import session
 
 OPSET = 17
@@ -48,23 +49,51 @@ class FusedModel(nn.Module):
 
     The same numbers as the torch model (to float rounding), in the ops a CPU runs fastest:
     bilinear upsampling as convolution + depth-to-space (``export.upsample``), and the
-    normalisation as one fixed 1x1 convolution.
+    normalisation as one fixed 1x1 convolution. A model with ``predict_coarse`` (the shared
+    encoder's) is brought from its decoders' stride to the frame's size in one upsampling per head
+    and, built for a frame ``size`` that divides evenly, reads the frame in 2 x 2 blocks: its
+    ``frame_encoder``'s stem on a space-to-depth input (``export.space_to_depth``) made by one
+    fixed convolution of the frame. Such a model takes frames of that size only.
     """
 
-    def __init__(self, model: nn.Module) -> None:
+    def __init__(self, model: nn.Module, size: tuple[int, int] | None = None) -> None:
         super().__init__()
         self.model = with_shuffle_upsampling(model.eval())
         setattr(self, NORMALISE, normalisation(IMAGENET_MEAN, IMAGENET_STD))
+        scale = getattr(model, "input_scale", 1.0)
+        up = getattr(model, "upsample", None)
+        self.to_frame = None
+        if hasattr(model, "predict_coarse") and (up is not None or scale == 1.0):
+            self.to_frame = ShuffleUpsample(model.coarse_stride, *((up.factor,) if up is not None else ()))
+        self.size = tuple(size) if size is not None else None
+        encoder = getattr(self.model, "frame_encoder", None)
+        self.blocks = (self.size is not None and self.to_frame is not None and encoder is not None
+                       and fits(encoder.stem[0]) and all(s % self.to_frame.factor == 0 for s in self.size))
+        if self.blocks:
+            stem = encoder.stem[0]
+            setattr(self, NORMALISE, SpaceToDepthInput(IMAGENET_MEAN, IMAGENET_STD, round(1.0 / scale),
+                                                       stem.kernel_size[0]))
+            encoder.stem[0] = block_conv(stem)
 
     def forward(self, frame: Tensor) -> tuple[Tensor, Tensor]:
         x = frame.permute(0, 3, 1, 2).to(torch.float32)
-        size = x.shape[2:]
+        size = tuple(x.shape[2:])
+        if self.blocks:
+            if size != self.size:
+                raise ValueError(f"this fused model reads {self.size[0]}x{self.size[1]} frames, "
+                                 f"got {size[0]}x{size[1]}")
+            logits, log_depth, _ = self.model.predict_coarse(getattr(self, NORMALISE)(x))
+            return torch.sigmoid(self.to_frame(logits)), self.to_frame(log_depth).exp()
         scale = getattr(self.model, "input_scale", 1.0)
         if scale != 1.0:
             # bilinear resizing commutes with the per-channel affine normalisation and the channel
             # flip, so shrink first and normalise a quarter of the pixels
             x = F.interpolate(x, scale_factor=scale, mode="bilinear", align_corners=False, antialias=False)
-        logits, depth, _ = self.model.forward_scaled(getattr(self, NORMALISE)(x), size)
+        x = getattr(self, NORMALISE)(x)
+        if self.to_frame is not None and all(int(s) % self.to_frame.factor == 0 for s in size):
+            logits, log_depth, _ = self.model.predict_coarse(x)
+            return torch.sigmoid(self.to_frame(logits)), self.to_frame(log_depth).exp()
+        logits, depth, _ = self.model.forward_scaled(x, size)
         return torch.sigmoid(logits), depth
 
 
@@ -72,8 +101,8 @@ def to_onnx(model: nn.Module, out: str | Path, card: ModelCard) -> ModelCard:
     """Export ``model`` (a BlindSpotNet) fused at ``card.input_size``, sealed with ``card``;
     returns the sealed card."""
     out = Path(out)
-    fused = FusedModel(model.eval()).eval()
     h, w = card.input_size
+    fused = FusedModel(model.eval(), (h, w)).eval()
     dummy = torch.zeros(1, h, w, 3, dtype=torch.uint8)
     tmp = out.with_suffix(".tmp.onnx")
     try:

@@ -5,7 +5,9 @@ from the 3 x 3 input neighbourhood of the pixel it falls in, with weights that d
 its position inside the ``f x f`` block; the frame's edge clamps like edge padding. So it is a
 3 x 3 convolution to ``f * f`` channels followed by ``DepthToSpace``: the same numbers, but on
 a CPU onnxruntime runs it several times faster than ``Resize`` on a one-channel map (which its
-blocked layout pads to 8 or 16 channels).
+blocked layout pads to 8 or 16 channels). Bilinear upsamplings in a row (``x4`` then ``x2``) are
+one linear map of the same 3 x 3 reach (each step stays within a coarse pixel's neighbours), so
+they too are one convolution and one shuffle, at the cost of the last step's shuffle alone.
 """
 
 from __future__ import annotations
@@ -32,6 +34,28 @@ def bilinear_taps(factor: int) -> np.ndarray:
     return taps
 
 
+def chained_taps(*factors: int) -> np.ndarray:
+    """``[prod(factors), 3]``: :func:`bilinear_taps` of bilinear upsamplings by ``factors`` in turn
+    (edges clamped at every step), read off the product of their 1-D matrices."""
+    n = 5                    # coarse pixels: the middle one's block is clear of the edges
+    total = np.eye(n)
+    for f in factors:
+        if int(f) != f or f < 1:
+            raise ValueError(f"upsampling factors must be positive integers, got {factors}")
+        m = total.shape[0]
+        step = np.zeros((m * f, m))
+        for i, row in enumerate(bilinear_taps(f)):
+            for b in range(m):
+                for k, w in zip((-1, 0, 1), row, strict=True):
+                    step[b * f + i, min(max(b + k, 0), m - 1)] += w
+        total = step @ total
+    f = int(np.prod(factors))
+    block = total[(n // 2) * f:(n // 2 + 1) * f]
+    if np.abs(np.delete(block, [n // 2 - 1, n // 2, n // 2 + 1], axis=1)).max() > 1e-12:
+        raise AssertionError("chained bilinear upsampling reached beyond a coarse pixel's neighbours")
+    return block[:, n // 2 - 1:n // 2 + 2]
+
+
 def edge_pad(x: Tensor) -> Tensor:
     """``x`` padded by one pixel repeating its edges; as slices and concatenations it exports to a
     static ONNX graph (``F.pad``'s replicate mode exports a chain of shape arithmetic)."""
@@ -40,13 +64,15 @@ def edge_pad(x: Tensor) -> Tensor:
 
 
 class ShuffleUpsample(nn.Module):
-    """Bilinear ``x factor`` upsampling (``align_corners=False``) of any number of channels."""
+    """Bilinear ``x factor`` upsampling (``align_corners=False``) of any number of channels;
+    ``ShuffleUpsample(4, 2)``: ``x4`` then ``x2``, in one step."""
 
-    def __init__(self, factor: int) -> None:
+    def __init__(self, *factors: int) -> None:
         super().__init__()
+        factor = int(np.prod(factors)) if factors else 0
         if factor < 2:
-            raise ValueError(f"ShuffleUpsample needs a factor >= 2, got {factor}")
-        t = bilinear_taps(factor)
+            raise ValueError(f"ShuffleUpsample needs factors whose product is >= 2, got {factors}")
+        t = chained_taps(*factors)
         kernel = np.einsum("ra,sb->rsab", t, t).reshape(factor * factor, 1, 3, 3)
         self.register_buffer("kernel", torch.from_numpy(kernel.astype(np.float32)))
         self.factor = factor

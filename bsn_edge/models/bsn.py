@@ -80,18 +80,23 @@ class BlindSpotNet(nn.Module):
         return logits, depth, feats
 
     def forward_scaled(self, x: Tensor, size) -> tuple[Tensor, Tensor, Tensor]:
-        """``forward`` for an input already resized by ``input_scale``; outputs at ``size``."""
+        """``forward`` for an input already resized by ``input_scale``; outputs at ``size``.
+
+        Depth is resized as log-depth, the quantity D predicts: one interpolation of D's output
+        whatever the scale (an exporter composes the steps into one), and within D's range."""
         logits, depth, feats = self.predict(x)
         if self.input_scale != 1.0:
+            log_depth = depth.log()
             # a constant scale factor, not the input's traced shape: exported graphs stay static,
             # which OpenCV's DNN module needs
             if self.upsample is not None:
-                logits, depth = self.upsample(logits), self.upsample(depth)
+                logits, log_depth = self.upsample(logits), self.upsample(log_depth)
             else:
                 up = 1.0 / self.input_scale
                 logits = F.interpolate(logits, scale_factor=up, mode="bilinear", align_corners=False)
-                depth = F.interpolate(depth, scale_factor=up, mode="bilinear", align_corners=False)
+                log_depth = F.interpolate(log_depth, scale_factor=up, mode="bilinear", align_corners=False)
             if tuple(logits.shape[2:]) != tuple(size):   # sizes not divisible by 1 / input_scale
                 logits = F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
-                depth = F.interpolate(depth, size=size, mode="bilinear", align_corners=False)
+                log_depth = F.interpolate(log_depth, size=size, mode="bilinear", align_corners=False)
+            depth = log_depth.exp()
         return logits, depth, feats

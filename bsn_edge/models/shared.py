@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from bsn_edge.models.bsn import BlindSpotNet, depth_feature, metres_from_log
+from bsn_edge.models.bsn import LOG_MAX_DEPTH, LOG_MIN_DEPTH, BlindSpotNet, depth_feature
 from bsn_edge.models.deeplab import DeepLabV3PlusDecoder, SegmentationHead, aspp_rates, conv_bn_relu
 from bsn_edge.models.resnet import ResNetEncoder
 
@@ -23,7 +23,9 @@ DEPTH_CHANNELS = 16     # B's learnt view of the depth feature, so int8 concaten
 class SharedDepth(nn.Module):
     """D of the shared model: the encoder both networks read, a light decoder and a log-depth head.
 
-    ``forward(x)`` is depth in metres at the size of ``x``, as :class:`~bsn_edge.models.DepthNet`."""
+    ``forward(x)`` is depth in metres at the size of ``x``, as :class:`~bsn_edge.models.DepthNet`.
+    Log-depth is held to D's range at the decoder's stride and then interpolated, which keeps it
+    in range, so every resizing after that is linear in log-depth."""
 
     def __init__(self, encoder: ResNetEncoder, width: int, separable: bool = True) -> None:
         super().__init__()
@@ -33,18 +35,19 @@ class SharedDepth(nn.Module):
         self.head = SegmentationHead(self.decoder.out_channels, 1, encoder.strides[0])
 
     def coarse(self, feats: list[Tensor]) -> Tensor:
-        """Log-depth at the decoder's stride (the encoder's first), unclamped."""
-        return self.head.conv(self.decoder(feats))
+        """Log-depth at the decoder's stride (the encoder's first), within D's range."""
+        return self.head.conv(self.decoder(feats)).clamp(LOG_MIN_DEPTH, LOG_MAX_DEPTH)
 
     def forward(self, x: Tensor) -> Tensor:
-        return metres_from_log(self.head.up(self.coarse(self.encoder(x))))
+        return self.head.up(self.coarse(self.encoder(x))).exp()
 
 
 class DepthAwareDecoder(nn.Module):
     """B of the shared model: a DeepLabV3+ decoder on the shared encoder's features, with D's depth
     (``depth_feature``, through a small learnt convolution) concatenated to the shallowest features
     and, pooled, to the deepest. Without depth (``use_depth=False``, the paper's BSN-D) it is a
-    plain decoder on the shared features. ``forward(feats, depth) -> (logits, decoder features)``."""
+    plain decoder on the shared features. ``forward(feats, depth) -> (logits, decoder features)``;
+    :meth:`coarse` gives the logits at the decoder's stride."""
 
     def __init__(self, encoder_channels: tuple[int, ...], strides: tuple[int, ...], width: int,
                  separable: bool = True, use_depth: bool = True) -> None:
@@ -57,6 +60,11 @@ class DepthAwareDecoder(nn.Module):
         self.head = SegmentationHead(self.decoder.out_channels, 1, strides[0])
 
     def forward(self, feats: list[Tensor], depth: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        logits, x = self.coarse(feats, depth)
+        return self.head.up(logits), x
+
+    def coarse(self, feats: list[Tensor], depth: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """Logits at the decoder's stride (before the head's upsampling) and the decoder's features."""
         if self.depth_in is not None:
             if depth is None:
                 raise ValueError("this decoder was built to read depth; none given")
@@ -64,7 +72,7 @@ class DepthAwareDecoder(nn.Module):
             feats = [torch.cat([feats[0], d], 1), *feats[1:-1],
                      torch.cat([feats[-1], F.avg_pool2d(d, self.pool)], 1)]
         x = self.decoder(feats)
-        return self.head(x), x
+        return self.head.conv(x), x
 
 
 class SharedEncoderBSN(BlindSpotNet):
@@ -80,10 +88,25 @@ class SharedEncoderBSN(BlindSpotNet):
         b = DepthAwareDecoder(encoder.out_channels, encoder.strides, decoder_width, separable, use_depth)
         super().__init__(b, d, use_depth, input_scale)
 
-    def predict(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    @property
+    def frame_encoder(self) -> ResNetEncoder:
+        """The one module that reads the network's input (B reads only its features)."""
+        return self.depth_net.encoder
+
+    @property
+    def coarse_stride(self) -> int:
+        """How much smaller than the network's input :meth:`predict_coarse`'s outputs are."""
+        return self.depth_net.encoder.strides[0]
+
+    def predict_coarse(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Blind-spot logits and log-depth at :attr:`coarse_stride`, and B's decoder features:
+        :meth:`predict` before its bilinear upsampling, which an exporter can fuse with the frame's."""
         feats = self.depth_net.encoder(x)
         log_coarse = self.depth_net.coarse(feats)
-        depth = metres_from_log(self.depth_net.head.up(log_coarse))
-        seen = depth_feature(metres_from_log(log_coarse).detach()) if self.use_depth else None
-        logits, b_feats = self.blindspot(feats, seen)
-        return logits, depth, b_feats
+        seen = depth_feature(log_coarse.detach().exp()) if self.use_depth else None
+        logits, b_feats = self.blindspot.coarse(feats, seen)
+        return logits, log_coarse, b_feats
+
+    def predict(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        logits, log_coarse, b_feats = self.predict_coarse(x)
+        return self.blindspot.head.up(logits), self.depth_net.head.up(log_coarse).exp(), b_feats

@@ -77,6 +77,7 @@ class Run:
     """One run folder: where each file is, and the only code that reads or writes them."""
 
     MODEL, CHECKPOINT, STATE, CONFIG, TEACHER = "model.pt", "checkpoint.json", "state.pt", "config.json", "teacher"
+    INIT_RECORD = "init_training"     # checkpoint key: the start's record as it was (``init_record``)
     HISTORY = "history.jsonl"
 
     def __init__(self, path: str | Path) -> None:
@@ -173,16 +174,30 @@ class Run:
         samples, hours = float(trained["samples"]), trained["seconds"] / 3600
         init = str(cfg.get("train", {}).get("init", ""))
         start = _last_parts(init)
-        init_card = Run(init).card() if init and (Path(init) / self.CHECKPOINT).is_file() else None
-        before = init_card.training if init_card is not None else None
-        if before is not None:
+        # the start as it was when this run began (runs from before that record: as it is now)
+        frozen = info.get(self.INIT_RECORD) or self.init_record(init)
+        if frozen is not None:
+            before = TrainingRecord.from_dict(frozen["training"])
             steps, samples, hours = steps + before.steps, samples + before.samples, hours + before.hours
             # a shared-encoder model takes only D from a two-network run (models.start_from)
-            d_only = init_card.variant != cfg.get("model", {}).get("name", init_card.variant)
+            d_only = frozen["variant"] != cfg.get("model", {}).get("name", frozen["variant"])
             start += f" ({'its D, ' if d_only else ''}after {before.steps} steps)"
         return TrainingRecord(steps=steps, samples=round(samples), hours=round(hours, 2),
                               train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),
                               init=start, teacher=teacher)
+
+    @classmethod
+    def init_record(cls, init: str | Path) -> dict[str, Any] | None:
+        """What a run starting from ``init`` (``train.init``) starts from: its variant and training
+        record, or None (no start, or a start with no record). A run keeps this with its checkpoint
+        (``INIT_RECORD``) from its first save: the folder ``init`` names may later hold another run
+        (``models/default`` does after every release)."""
+        if not init or not (Path(init) / cls.CHECKPOINT).is_file():
+            return None
+        card = Run(init).card()
+        if card.training is None:
+            return None
+        return {"variant": card.variant, "training": dataclasses.asdict(card.training)}
 
     def card(self) -> ModelCard:
         return self.info()["card"]

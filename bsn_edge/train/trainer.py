@@ -551,6 +551,8 @@ def _save(run: Run, model, cfg: Config, data: Datasets, step: int, threshold: fl
     }
     if (trained := trained or prev.get("trained")) is not None:
         info["trained"] = trained
+    if (start := prev.get(Run.INIT_RECORD, run.init_record(cfg.train.init))) is not None:
+        info[Run.INIT_RECORD] = start
     if history:
         info["loss_first_last"] = [history[0], history[-1]]
     return run.save(model, card_fields, info, resume_state)

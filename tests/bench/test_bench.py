@@ -22,6 +22,7 @@ def test_quant_profile_blocks_follow_node_names():
     assert block_of("/blindspot/decoder/fuse/fuse.0/fuse.0.3/Relu_kernel_time") == "decoder"
     assert block_of("/depth_net/net/head/up/DepthToSpace_kernel_time") == "heads and upsampling"
     assert block_of("/upsample/Conv_kernel_time") == "heads and upsampling"
+    assert block_of("/to_frame_1/DepthToSpace_kernel_time") == "heads and upsampling"
     assert block_of("/depth_net/Exp_kernel_time") == "heads and upsampling"
     assert block_of("/normalise/Conv_kernel_time") == "input and layout"
     assert block_of("ReorderOutput_token_36_kernel_time") == "input and layout"

@@ -1,12 +1,13 @@
 """Bilinear upsampling rewritten as convolution + depth-to-space: same numbers, exported cleanly."""
 
+import numpy as np
 import onnx
 import pytest
 import torch
 import torch.nn.functional as F
 
 from bsn_edge.export import to_onnx
-from bsn_edge.export.upsample import ShuffleUpsample, bilinear_taps, with_shuffle_upsampling
+from bsn_edge.export.upsample import ShuffleUpsample, bilinear_taps, chained_taps, with_shuffle_upsampling
 from bsn_edge.models import create_model
 from bsn_edge.models.upsample import Upsample
 from tests.cards import card_for
@@ -31,6 +32,8 @@ def test_factor_validation():
         Upsample(1.5)
     with pytest.raises(ValueError, match=">= 2"):
         ShuffleUpsample(1)
+    with pytest.raises(ValueError, match=">= 2"):
+        ShuffleUpsample()
 
 
 def test_model_copy_swaps_every_upsampler_and_keeps_outputs():
@@ -54,3 +57,20 @@ def test_exported_graph_upsamples_without_resize(tmp_path):
     assert "Pad" not in ops and "ConstantOfShape" not in [n.op_type for n in g.graph.node if "up" in n.name]
     resized = [n.name for n in g.graph.node if n.op_type == "Resize" and "/decoder/" not in n.name]
     assert resized == ["/Resize"], f"only the frame is resized, got {resized}"
+
+
+@pytest.mark.parametrize("factors", [(4, 2), (2, 2), (2, 4), (2, 2, 2), (3, 2)])
+@pytest.mark.parametrize("shape", [(1, 1, 8, 16), (2, 3, 5, 7), (1, 1, 1, 2)])
+def test_chained_upsampling_is_one_shuffle_edges_included(factors, shape):
+    x = torch.randn(*shape)
+    ref = x
+    for f in factors:
+        ref = F.interpolate(ref, scale_factor=f, mode="bilinear", align_corners=False)
+    up = ShuffleUpsample(*factors)
+    assert up.factor == int(np.prod(factors))
+    torch.testing.assert_close(up(x), ref, atol=1e-5, rtol=0)
+
+
+def test_a_chain_of_one_is_the_plain_taps():
+    for f in (2, 3, 4, 8):
+        np.testing.assert_array_equal(chained_taps(f), bilinear_taps(f))

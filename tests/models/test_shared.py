@@ -2,6 +2,7 @@
 whole from a two-network run, and an exported graph that agrees with torch."""
 
 import numpy as np
+import onnx
 import pytest
 import torch
 
@@ -65,17 +66,55 @@ def test_a_shared_model_takes_d_whole_from_a_two_network_run():
         start_from(model, "shared-light", create_model("small"), "small")
 
 
-def test_the_exported_graph_agrees_with_torch(tmp_path):
+def _plain(model, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The torch model itself on a uint8 BGR frame: F.interpolate, the stem as trained."""
+    from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
+    x = torch.from_numpy(frame).permute(0, 3, 1, 2).float()[:, [2, 1, 0]] / 255.0
+    x = (x - torch.tensor(IMAGENET_MEAN).float()[:, None, None]) / torch.tensor(IMAGENET_STD).float()[:, None, None]
+    with torch.no_grad():
+        logits, depth, _ = model(x)
+    return torch.sigmoid(logits).numpy(), depth.numpy()
+
+
+def test_the_exported_graph_agrees_with_the_torch_model(tmp_path):
     torch.manual_seed(0)
     model = create_model("shared-light").eval()
     out = tmp_path / "m.onnx"
     to_onnx(model, out, card_for((64, 128), variant="shared-light"))
     frame = np.random.default_rng(0).integers(0, 256, (1, 64, 128, 3), dtype=np.uint8)
     p, d = session(out).run(None, {"frame": frame})
+    pt, dt = _plain(model, frame)
+    np.testing.assert_allclose(p, pt, atol=1e-4)
+    np.testing.assert_allclose(d, dt, rtol=1e-3)
+
+
+def test_the_exported_graph_reads_blocks_and_upsamples_once_per_head(tmp_path):
+    torch.manual_seed(0)
+    out = tmp_path / "m.onnx"
+    to_onnx(create_model("shared-light").eval(), out, card_for((64, 128), variant="shared-light"))
+    g = onnx.load(str(out)).graph
+    ops = [n.op_type for n in g.node]
+    assert ops.count("DepthToSpace") == 2, "one x8 shuffle per head"
+    assert [n.name for n in g.node if n.op_type == "Resize" and "/decoder" not in n.name] == [], "no frame resize"
+    weights = {t.name: tuple(t.dims) for t in g.initializer}
+    stem = next(n for n in g.node if n.op_type == "Conv" and "/stem/" in n.name)
+    assert weights[stem.input[1]] == (64, 12, 4, 4), "the 7x7 stride-2 stem on 2x2 blocks"
+
+
+@pytest.mark.parametrize("size", [(64, 128), (128, 192)])
+def test_the_fused_model_with_blocks_is_the_torch_model(size):
+    torch.manual_seed(0)
+    model = create_model("shared-light").eval()
+    fused = FusedModel(model, size).eval()
+    assert fused.blocks
+    frame = np.random.default_rng(1).integers(0, 256, (1, *size, 3), dtype=np.uint8)
     with torch.no_grad():
-        pt, dt = FusedModel(model)(torch.from_numpy(frame))
-    np.testing.assert_allclose(p, pt.numpy(), atol=1e-4)
-    np.testing.assert_allclose(d, dt.numpy(), rtol=1e-3)
+        p, d = (t.numpy() for t in fused(torch.from_numpy(frame)))
+    pt, dt = _plain(model, frame)
+    np.testing.assert_allclose(p, pt, atol=1e-5)
+    np.testing.assert_allclose(d, dt, rtol=1e-5)
+    with pytest.raises(ValueError, match=f"reads {size[0]}x{size[1]} frames"):
+        fused(torch.zeros(1, size[0] + 64, size[1], 3, dtype=torch.uint8))
 
 
 def test_d_and_b_split_the_parameters_so_adapt_can_freeze_d():

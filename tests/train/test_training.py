@@ -419,6 +419,9 @@ def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tm
     before = Run(shipped).teacher_path.read_bytes()
     ft.ship(shipped, force=True)
     assert Run(shipped).teacher_path.read_bytes() == before and Run(shipped).config()["teacher"]["checkpoint"] == ""
+    # its start's folder now holds it: its record still counts the start as it was (a release
+    # replacing models/default must not change what the runs trained from it say)
+    assert Run(tmp_path / "ft").card().training.steps == 3 and Run(shipped).card().training.steps == 3
     assert eval_cli.main(["--run", str(shipped), "--data", str(data), "--clips", "all", "--out",
                           str(tmp_path / "e.json"), "--no-baselines"]) == 0
     assert export_cli.main(["--checkpoint", str(shipped), "--out", str(tmp_path / "again.onnx")]) == 0
