@@ -7,7 +7,7 @@ from bsn_edge.synth import STYLES
 
 
 def test_bench_runs_a_benchmark_and_writes_the_report(tmp_path):
-    assert bench.main(["--only", "synth", "--out", str(tmp_path), "--synth-frames", "20"]) == 0
+    assert bench.main(["--only", "synth", "--out", str(tmp_path), "--synth-frames", "4"]) == 0
     res = json.loads((tmp_path / "synth.json").read_text())
     assert {r["style"] for r in res["rows"]} == set(STYLES) and res["machine"]["cores"]
     report = (tmp_path / "REPORT.md").read_text()

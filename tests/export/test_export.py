@@ -303,32 +303,38 @@ def _activation_quantizers(path) -> dict[str, tuple[float, np.ndarray]]:
             if n.op_type == "QuantizeLinear" and n.input[0] not in inits}
 
 
+@pytest.mark.slow     # options other than the default's; five quantizations
 def test_the_calibration_method_and_activation_type_reach_the_graph(run, spread, tmp_path):
     """--activations int8: signed, symmetric activation zero points (the default: uint8);
     --method percentile: activation ranges with the outliers cut, never wider than min-max's. The
     signed model loads (onnxruntime without its exact x86 kernels, with a warning) and runs; its error
     is measured with 7-bit weights, which every x86 CPU multiplies exactly (with 8-bit ones a CPU
-    without VNNI saturates, and the error would be the CPU's, not the quantization's)."""
+    without VNNI saturates, and the error would be the CPU's, not the quantization's). The schemes
+    are compared on one fp32 export; the command line takes both options to the graph and the card."""
     _, clip, _ = run
-    path = spread[0]
-    base = ["--checkpoint", str(path), "--size", "64x128", "--int8", "--calib", str(clip), "--calib-frames", "4"]
+    fp32 = tmp_path / "fp32.onnx"
+    to_onnx(spread[1], fp32, card_for(SIZE, threshold=0.5))
+    frames = load_frames(clip, SIZE, 4)
     q = {}
-    for name, extra in (("minmax", []), ("signed", ["--activations", "int8"]), ("pct", ["--method", "percentile"])):
-        if name == "signed":      # onnxruntime's exact x86 kernels refuse signed activations: said, not hidden
-            with pytest.warns(RuntimeWarning, match="--reduce-range"):
-                assert export_main([*base, "--out", str(tmp_path / f"{name}.onnx"), *extra]) == 0
-        else:
-            assert export_main([*base, "--out", str(tmp_path / f"{name}.onnx"), *extra]) == 0
+    for name, cfg in (("minmax", QuantConfig()), ("signed", QuantConfig(activations="int8")),
+                      ("pct", QuantConfig(method="percentile")),
+                      ("signed7", QuantConfig(activations="int8", reduce_range=True))):
+        quantize(fp32, tmp_path / f"{name}.onnx", frames, cfg)
         q[name] = _activation_quantizers(tmp_path / f"{name}.onnx")
     assert {zp.dtype for _, zp in q["minmax"].values()} == {np.dtype(np.uint8)}
     assert {zp.dtype for _, zp in q["signed"].values()} == {np.dtype(np.int8)}
     assert all(int(zp) == 0 for _, zp in q["signed"].values())
-    assert "activations int8" in read_card(tmp_path / "signed.onnx").quantization
-    assert export_main([*base, "--out", str(tmp_path / "signed7.onnx"), "--activations", "int8", "--reduce-range"]) == 0
     prob_err, _ = int8_error(spread[1], tmp_path / "signed7.onnx", spread[2])
     assert prob_err < 0.1     # symmetric: half the steps of uint8 for what follows a ReLU, so coarser
     shared = q["minmax"].keys() & q["pct"].keys()
     assert len(shared) > 10
     assert all(q["pct"][k][0] <= q["minmax"][k][0] * 1.0001 for k in shared)
     assert min(q["pct"][k][0] / q["minmax"][k][0] for k in shared) < 0.99
-    assert "percentile calibration" in read_card(tmp_path / "pct.onnx").quantization
+    out = tmp_path / "cli.onnx"
+    with pytest.warns(RuntimeWarning, match="--reduce-range"):   # said, not hidden
+        assert export_main(["--checkpoint", str(spread[0]), "--size", "64x128", "--int8", "--calib", str(clip),
+                            "--calib-frames", "2", "--out", str(out), "--activations", "int8",
+                            "--method", "percentile"]) == 0
+    assert {zp.dtype for _, zp in _activation_quantizers(out).values()} == {np.dtype(np.int8)}
+    scheme = read_card(out).quantization
+    assert "activations int8" in scheme and "percentile calibration" in scheme

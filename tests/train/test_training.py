@@ -204,6 +204,7 @@ NO_DROPOUT = "import sys, torch\ntorch.nn.Dropout.forward = lambda self, x: x\n"
              "from bsn_edge.cli.train import main\nsys.exit(main(sys.argv[1:]))\n"
 
 
+@pytest.mark.slow     # two torchrun processes on the CI's two cores
 def test_distributed_training_with_two_processes(data, tmp_path, monkeypatch):
     """torchrun, 2 CPU processes, gloo: the run equals one process doing what the two ranks do
     (each rank's half of the global batch, gradients averaged); rank 0 writes it. Dropout is off
