@@ -218,32 +218,40 @@ def test_a_folder_of_clips_is_sampled_across_them_each_warped_by_its_own_camera(
     assert np.abs(got[3].astype(int) - resized).mean() > 5, "the clip's frames were resized, not warped"
 
 
-def test_quantize_directly_reports_its_scheme(run, spread, tmp_path):
+@pytest.fixture(scope="module")
+def spread_int8(run, spread, tmp_path_factory):
+    """The spread model exported fp32 once and quantized by the library on 4 frames, with 8-bit and
+    with 7-bit weights: ``(fp32 path, {reduce_range: (int8 path, quantize's info)})``."""
     _, clip, _ = run
+    root = tmp_path_factory.mktemp("spread_int8")
+    fp32 = root / "m.onnx"
+    to_onnx(spread[1], fp32, card_for(SIZE))
+    frames = load_frames(clip, SIZE, 4)
+    out = {}
+    for reduce in (False, True):
+        q = root / f"q{int(reduce)}.onnx"
+        out[reduce] = (q, quantize(fp32, q, frames, QuantConfig(reduce_range=reduce)))
+    return fp32, out
+
+
+def test_quantize_directly_reports_its_scheme(spread, spread_int8):
     _, model, unseen = spread
-    p = tmp_path / "m.onnx"
-    to_onnx(model, p, card_for(SIZE))
-    info = quantize(p, tmp_path / "q.onnx", load_frames(clip, SIZE, 4))
+    p, quantized = spread_int8
+    q, info = quantized[False]
     assert info["scheme"].startswith("static QDQ") and info["calibration_frames"] == 4
     assert info["card"].quantization == info["scheme"] and info["card"].sealed
     check_parity(model, p, unseen[:1])
-    prob_err, depth_err = int8_error(model, tmp_path / "q.onnx", unseen)
+    prob_err, depth_err = int8_error(model, q, unseen)
     assert prob_err < 0.08 and depth_err < 0.15, (prob_err, depth_err)
     with pytest.raises(ValueError, match="disagrees"):   # fp32 tolerances: the int8 file is not the fp32 model
-        check_parity(model, tmp_path / "q.onnx", unseen[:1])
+        check_parity(model, q, unseen[:1])
 
 
-def test_reduced_range_keeps_every_weight_within_seven_bits(run, tmp_path):
+def test_reduced_range_keeps_every_weight_within_seven_bits(spread_int8):
     """--reduce-range: int8 weights in [-64, 64], so uint8 x int8 pairs stay inside int16 on x86
     CPUs without VNNI (255 * 64 * 2 = 32640); the default uses the whole int8 range."""
-    _, clip, model = run
-    p = tmp_path / "m.onnx"
-    to_onnx(model, p, card_for(SIZE))
-    frames = load_frames(clip, SIZE, 4)
     spans = {}
-    for reduce in (False, True):
-        out = tmp_path / f"q{int(reduce)}.onnx"
-        info = quantize(p, out, frames, QuantConfig(reduce_range=reduce))
+    for reduce, (out, info) in spread_int8[1].items():
         weights = [numpy_helper.to_array(i) for i in onnx.load(str(out)).graph.initializer
                    if i.data_type == onnx.TensorProto.INT8 and i.dims and len(i.dims) == 4]
         spans[reduce] = (min(int(w.min()) for w in weights), max(int(w.max()) for w in weights))

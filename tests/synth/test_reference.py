@@ -47,7 +47,7 @@ def test_fast_renderer_matches_brute_force(style):
     clip = make_clip(cfg)
     r = Renderer(clip.intrinsics, far=cfg.far, bs_range=cfg.bs_range)
     checked_bs = 0
-    for i in (0, 13, 27, 39):
+    for i in (0, 20, 39):
         fr = r.render(clip.scenario.world, clip.poses[i], float(clip.times[i]), i)
         b = fr.boxes
         # only boxes whose nearest point could be in view (``far`` bounds the z-depth, so a box seen
