@@ -78,14 +78,11 @@ class FusedModel(nn.Module):
     def forward(self, frame: Tensor) -> tuple[Tensor, Tensor]:
         x = frame.permute(0, 3, 1, 2).to(torch.float32)
         size = tuple(x.shape[2:])
-        if self.blocks:
-            if size != self.size:
-                raise ValueError(f"this fused model reads {self.size[0]}x{self.size[1]} frames, "
-                                 f"got {size[0]}x{size[1]}")
-            logits, log_depth, _ = self.model.predict_coarse(getattr(self, NORMALISE)(x))
-            return torch.sigmoid(self.to_frame(logits)), self.to_frame(log_depth).exp()
+        if self.blocks and size != self.size:
+            raise ValueError(f"this fused model reads {self.size[0]}x{self.size[1]} frames, "
+                             f"got {size[0]}x{size[1]}")
         scale = getattr(self.model, "input_scale", 1.0)
-        if scale != 1.0:
+        if scale != 1.0 and not self.blocks:
             # bilinear resizing commutes with the per-channel affine normalisation and the channel
             # flip, so shrink first and normalise a quarter of the pixels
             x = F.interpolate(x, scale_factor=scale, mode="bilinear", align_corners=False, antialias=False)

@@ -551,7 +551,7 @@ def _save(run: Run, model, cfg: Config, data: Datasets, step: int, threshold: fl
     }
     if (trained := trained or prev.get("trained")) is not None:
         info["trained"] = trained
-    if (start := prev.get(Run.INIT_RECORD, run.init_record(cfg.train.init))) is not None:
+    if (start := prev.get(Run.INIT_RECORD) or run.init_record(cfg.train.init)) is not None:
         info[Run.INIT_RECORD] = start
     if history:
         info["loss_first_last"] = [history[0], history[-1]]
