@@ -40,6 +40,18 @@ def model_camera(size: tuple[int, int], hfov_deg: float = MODEL_HFOV_DEG, height
     return Intrinsics.from_fov(w, h, hfov_deg), Mounting(height_m, pitch_deg)
 
 
+def mirrored_inside(coord: np.ndarray, n: int) -> np.ndarray:
+    """Source coordinates (pixel centres at 0 .. ``n`` - 1) mirrored into the picture as
+    ``cv2.BORDER_REFLECT`` mirrors pixels (``fedcba|abcdef``, about -0.5 and ``n`` - 0.5), then held
+    within 0 .. ``n`` - 1. A bilinear remap of these reads what a remap of ``coord`` with
+    ``BORDER_REFLECT`` reads; but every tap falls inside the picture, so OpenCV takes its fast path
+    instead of testing and reflecting each tap."""
+    period = 2 * n
+    m = np.mod(coord + 0.5, period) - 0.5
+    m = np.where(m > n - 0.5, period - 1 - m, m)
+    return np.clip(m, 0, n - 1).astype(np.float32)
+
+
 class ModelFrame:
     """The warp between one raw camera at one frame size and the model camera.
 
@@ -66,12 +78,10 @@ class ModelFrame:
         factor = min(raw.fx / model.fx, raw.fy / model.fy)
         self.shrink = math.floor(factor) if factor >= 2 else 1
         self.prefilter = factor > SHRINK_ABOVE
-        if self.shrink > 1:
-            k = self.shrink
-            # block (i, j) averages raw pixels k*i .. k*i + k - 1: its centre is raw k*i + (k - 1) / 2
-            self._fwd = cv2.convertMaps((mx - (k - 1) / 2) / k, (my - (k - 1) / 2) / k, cv2.CV_16SC2)
-        else:
-            self._fwd = cv2.convertMaps(mx, my, cv2.CV_16SC2)   # fixed point: the fast path of remap
+        sx, sy = self.picture_maps()
+        h, w = self.picture_size
+        # fixed point, mirrored inside: the fast path of remap
+        self._fwd = cv2.convertMaps(mirrored_inside(sx, w), mirrored_inside(sy, h), cv2.CV_16SC2)
         ix, iy = inverse_maps(raw, self.dist, mounting, model, model_mounting)
         self._inv = (ix, iy)
         self.height_ratio = mounting.height_m / model_mounting.height_m
@@ -97,20 +107,45 @@ class ModelFrame:
 
     # -- raw -> model --------------------------------------------------------------------------
 
+    @property
+    def picture_size(self) -> tuple[int, int]:
+        """(H, W) of the picture the remap reads: the raw frame, or its k x k blocks."""
+        return self.raw.height // self.shrink, self.raw.width // self.shrink
+
+    def picture_maps(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where each model pixel samples the picture the remap reads (:meth:`low_passed`), before
+        mirroring: raw coordinates, or block coordinates after a shrink by k."""
+        k = self.shrink
+        mx, my = self._fwd_float
+        # block (i, j) averages raw pixels k*i .. k*i + k - 1: its centre is raw k*i + (k - 1) / 2
+        return (mx - (k - 1) / 2) / k, (my - (k - 1) / 2) / k
+
+    @property
+    def fixed_maps(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`picture_maps` mirrored into the picture (every bilinear tap inside it) in OpenCV's
+        fixed point: what :meth:`to_model` remaps with."""
+        return self._fwd
+
+    def low_passed(self, frame: np.ndarray) -> np.ndarray:
+        """The picture the remap reads: the raw frame area-shrunk by k and low-passed as the model
+        camera needs (itself when it needs neither)."""
+        self._check(frame)
+        k = self.shrink
+        if k > 1:
+            # the frame cut to a multiple of k (the last < k rows and columns go)
+            h, w = self.picture_size
+            frame = cv2.resize(frame[:h * k, :w * k], (w, h), interpolation=cv2.INTER_AREA)
+        if self.prefilter:
+            frame = cv2.GaussianBlur(frame, (3, 3), 0)
+        return frame
+
     def to_model(self, frame: np.ndarray, dst: np.ndarray | None = None,
                  interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
         """A raw frame (any channels) in the model camera. Where the raw camera sees nothing the
         picture is mirrored from its edge (training and the runtime alike; ``seen`` says where):
         a frame in a black border is a look no model has learned."""
-        self._check(frame)
-        k = self.shrink
-        if k > 1:
-            # the frame cut to a multiple of k (the last < k rows and columns go)
-            h, w = self.raw.height // k, self.raw.width // k
-            frame = cv2.resize(frame[:h * k, :w * k], (w, h), interpolation=cv2.INTER_AREA)
-        if self.prefilter:
-            frame = cv2.GaussianBlur(frame, (3, 3), 0)
-        return cv2.remap(frame, *self._fwd, interpolation, dst=dst, borderMode=cv2.BORDER_REFLECT)
+        return cv2.remap(self.low_passed(frame), *self.fixed_maps, interpolation, dst=dst,
+                         borderMode=cv2.BORDER_REPLICATE)
 
     def labels_to_model(self, labels: np.ndarray) -> np.ndarray:
         """Masks and class ids: nearest neighbour, 0 where the raw camera sees nothing."""

@@ -8,7 +8,7 @@ import pytest
 
 from bsn_edge.camera import Intrinsics
 from bsn_edge.model_frame import ModelFrame
-from bsn_edge.mounting import Mounting
+from bsn_edge.mounting import Mounting, warp_maps
 
 RAW = Intrinsics(1000.0, 1000.0, 640.0, 360.0, 1280, 720)
 DIST = (-0.2, 0.04, 0.0, 0.0, 0.0)
@@ -139,3 +139,31 @@ def test_stripes_finer_than_the_model_can_show_come_out_grey_not_aliased(factor)
     stripes = np.tile((np.arange(w) % 2 * 255).astype(np.uint8), (h, 1))
     out = mf.to_model(stripes)[8:-8, 8:-8].astype(float)
     assert abs(out.mean() - 127.5) < 3 and out.std() < 5
+
+
+@pytest.mark.parametrize("scale", [1, 3])
+def test_where_the_raw_camera_sees_nothing_the_picture_is_mirrored_as_opencv_mirrors_it(scale):
+    """A raw camera narrower than the model camera (50 degrees across against 80), turned and rolled:
+    the model frame's sides are unseen. The picture there is OpenCV's own BORDER_REFLECT remap of the
+    raw frame (after the same block shrink and low-pass, on the same fixed-point maps), and no tap of
+    the maps falls outside it."""
+    raw = Intrinsics.from_fov(MODEL.width * scale, MODEL.height * scale, 50.0)
+    mf = ModelFrame(raw, (), USER, MODEL, REF)
+    assert 0.2 < 1 - mf.seen.mean() < 0.8
+    frame = np.random.default_rng(scale).integers(0, 256, (raw.height, raw.width, 3), dtype=np.uint8)
+    mx, my = warp_maps(raw, (), USER, MODEL, REF)
+    k = mf.shrink
+    src = frame
+    if k > 1:
+        w, h = raw.width // k, raw.height // k
+        src = cv2.resize(frame[:h * k, :w * k], (w, h), interpolation=cv2.INTER_AREA)
+        mx, my = (mx - (k - 1) / 2) / k, (my - (k - 1) / 2) / k
+    if mf.prefilter:
+        src = cv2.GaussianBlur(src, (3, 3), 0)
+    fixed = cv2.convertMaps(mx.astype(np.float32), my.astype(np.float32), cv2.CV_16SC2)
+    want = cv2.remap(src, *fixed, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    # the same up to one grey level where a coordinate sits on a rounding tie of the fixed point
+    assert np.abs(mf.to_model(frame).astype(int) - want).max() <= 1
+    taps = mf.fixed_maps[0]
+    assert taps[..., 0].min() >= 0 and taps[..., 0].max() <= src.shape[1] - 1
+    assert taps[..., 1].min() >= 0 and taps[..., 1].max() <= src.shape[0] - 1
