@@ -93,14 +93,6 @@ def stack_rate(channels: int, hw: tuple[int, int], cfg: QuantConfig, runs: int, 
             "tmacs_per_s": macs / t / 1e12, "path": q, "input": x.numpy()}
 
 
-def side_by_side(a: tuple[Path, np.ndarray], b: tuple[Path, np.ndarray], runs: int,
-                 exact_x64: bool = True) -> tuple[float, float]:
-    """Median seconds per run of two models timed in alternation (one run of each per round), so
-    that the machine's drift during the measurement falls on both alike."""
-    ta, tb = alternation([a, b], runs, exact_x64)
-    return ta, tb
-
-
 def alternation(models: list[tuple[Path, np.ndarray]], runs: int, exact_x64: bool = True) -> list[float]:
     """Median seconds per run of each model, one run of each per round, in fresh sessions."""
     # no spinning: an idle session's spinning threads would take the cores from the running one

@@ -20,7 +20,7 @@ import torch
 from torch import nn
 
 from benchmarks.bench_arch import count_gmacs
-from benchmarks.bench_floor import side_by_side, stack_rate
+from benchmarks.bench_floor import alternation, stack_rate
 from bsn_edge.camera import Intrinsics
 from bsn_edge.export import QuantConfig, quantize, to_onnx
 from bsn_edge.models import registry
@@ -73,7 +73,7 @@ def main() -> int:
                 quantize(fp32, int8, calib, QuantConfig(keep_heads_float=heads_float))
             finally:
                 del registry.MODELS[PROBE]
-            t_model, t_stack = side_by_side((int8, calib[:1]), (stack["path"], stack["input"]), 120)
+            t_model, t_stack = alternation([(int8, calib[:1]), (stack["path"], stack["input"])], 120)
             peak = stack["gmacs"] * 1e9 / t_stack
             multiple = t_model * peak / (gmacs * 1e9)
             print(f"| {label} | {gmacs:.2f} | {1e3 * t_model:.2f} | {multiple:.2f}x |", flush=True)

@@ -22,7 +22,8 @@ ORDER = ("synth", "labels", "train_step", "train_step_avx2_research", "train_ste
          "bsn_accuracy", "bsn_accuracy_shared-light", "bsn_arch", "bsn_arch_light",
          "quant", "floor", "floor_avx2", "int8_cpu",
          "runtime", "runtime_avx2", "runtime_avx2_decode", "runtime_avx2_flight", "runtime_avx2_shared",
-         "runtime_avx2_s3", "runtime_avx2_s3fast", "runtime_avx2_s3warp", "runtime_avx2_s3flight", "runtime_avx2_budget", "tradeoff", "tradeoff_avx2",
+         "runtime_avx2_s3", "runtime_avx2_s3fast", "runtime_avx2_s3warp", "runtime_avx2_s3flight",
+         "runtime_avx2_budget", "tradeoff", "tradeoff_avx2",
          "calibration", "footprint", "realcam", "realview", "cameras", "remap", "remap_mirror", "warp")
 
 

@@ -71,7 +71,7 @@ class FusedModel(nn.Module):
                        and fits(encoder.stem[0]) and all(s % self.to_frame.factor == 0 for s in self.size))
         if self.blocks:
             stem = encoder.stem[0]
-            setattr(self, NORMALISE, SpaceToDepthInput(IMAGENET_MEAN, IMAGENET_STD, round(1.0 / scale),
+            setattr(self, NORMALISE, SpaceToDepthInput(getattr(self, NORMALISE), round(1.0 / scale),
                                                        stem.kernel_size[0]))
             encoder.stem[0] = block_conv(stem)
 

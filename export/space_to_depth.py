@@ -12,7 +12,6 @@ the normalisation and the block layout, followed by the zero padding the stem ha
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
@@ -61,23 +60,26 @@ def block_conv(conv: nn.Conv2d) -> nn.Conv2d:
 
 class SpaceToDepthInput(nn.Module):
     """uint8-valued BGR NCHW frame (as float) -> the stem's padded block input: shrunk by
-    ``shrink`` (an integer box average), flipped to RGB, ``(x / 255 - mean) / std``, laid out as
-    ``pixel_unshuffle(., 2)`` and zero-padded for a stem of ``kernel``. One fixed convolution and a pad."""
+    ``shrink`` (an integer box average), put through ``normalise`` (a fixed 1x1 convolution: the
+    channel flip and ``(x / 255 - mean) / std``), laid out as ``pixel_unshuffle(., 2)`` and
+    zero-padded for a stem of ``kernel``. One fixed convolution and a pad."""
 
-    def __init__(self, mean: np.ndarray, std: np.ndarray, shrink: int, kernel: int) -> None:
+    def __init__(self, normalise: nn.Conv2d, shrink: int, kernel: int) -> None:
         super().__init__()
         if int(shrink) != shrink or shrink < 1:
             raise ValueError(f"shrink must be a positive integer, got {shrink}")
+        if normalise.kernel_size != (1, 1) or normalise.in_channels != 3 or normalise.out_channels != 3:
+            raise ValueError(f"normalise must be a 1x1 convolution from 3 channels to 3, got {normalise}")
         side = BLOCK * shrink
+        gain = normalise.weight.detach()[:, :, 0, 0] / (shrink * shrink)      # [out channel, in channel]
         w = torch.zeros(3 * BLOCK * BLOCK, 3, side, side)
         b = torch.zeros(3 * BLOCK * BLOCK)
-        for rgb in range(3):
+        for c in range(3):
             for dy in range(BLOCK):
                 for dx in range(BLOCK):
-                    ch = (rgb * BLOCK + dy) * BLOCK + dx       # pixel_unshuffle's channel order
-                    w[ch, 2 - rgb, dy * shrink:(dy + 1) * shrink, dx * shrink:(dx + 1) * shrink] = \
-                        1.0 / (shrink * shrink * 255.0 * float(std[rgb]))
-                    b[ch] = -float(mean[rgb] / std[rgb])
+                    ch = (c * BLOCK + dy) * BLOCK + dx       # pixel_unshuffle's channel order
+                    w[ch, :, dy * shrink:(dy + 1) * shrink, dx * shrink:(dx + 1) * shrink] = gain[c][:, None, None]
+                    b[ch] = normalise.bias.detach()[c]
         self.conv = nn.Conv2d(3, 3 * BLOCK * BLOCK, side, side)
         self.conv.weight.data.copy_(w)
         self.conv.bias.data.copy_(b)

@@ -8,6 +8,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
+from bsn_edge.export.fused import normalisation
 from bsn_edge.export.space_to_depth import SpaceToDepthInput, block_conv, block_padding, fits
 
 
@@ -42,7 +43,7 @@ def test_the_input_convolution_is_resize_flip_normalise_and_blocks(shrink):
     std = torch.tensor(IMAGENET_STD, dtype=torch.float32)[:, None, None]
     want = F.pad(F.pixel_unshuffle((rgb - mean) / std, 2), (2, 1, 2, 1))
     with torch.no_grad():
-        got = SpaceToDepthInput(IMAGENET_MEAN, IMAGENET_STD, shrink, 7)(frame)
+        got = SpaceToDepthInput(normalisation(IMAGENET_MEAN, IMAGENET_STD), shrink, 7)(frame)
     torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-5)
     with pytest.raises(ValueError, match="positive integer"):
-        SpaceToDepthInput(IMAGENET_MEAN, IMAGENET_STD, 1.5, 7)
+        SpaceToDepthInput(normalisation(IMAGENET_MEAN, IMAGENET_STD), 1.5, 7)
