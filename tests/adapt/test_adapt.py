@@ -44,7 +44,7 @@ def user_clip(tmp_path_factory):
     are kept elsewhere (``hidden``) for the stand-in label models, then removed from the clip."""
     root = tmp_path_factory.mktemp("adapt_clip")
     seq, hidden = root / "drive", root / "hidden"
-    write_clip(SynthConfig(frames=40, height=256, width=512, fps=10.0, camera="fixed", seed=5), seq, video=False)
+    write_clip(SynthConfig(frames=40, height=128, width=256, fps=10.0, camera="fixed", seed=5), seq, video=False)
     (hidden / "rel").mkdir(parents=True)
     shutil.copytree(seq / "semantic", hidden / "semantic")
     for i in range(40):
@@ -152,7 +152,7 @@ def test_a_clip_the_depth_head_does_not_fit_is_labelled_from_the_road_plane(run,
     noise.mkdir()
     rng = np.random.default_rng(3)
     for i in range(40):
-        np.save(noise / f"{i:06d}.npy", rng.uniform(0.05, 1.0, (256, 512)).astype(np.float32))
+        np.save(noise / f"{i:06d}.npy", rng.uniform(0.05, 1.0, (128, 256)).astype(np.float32))
     monkeypatch.setattr(pipeline, "prepare_labeller",
                         lambda src, depth, teacher: {"depth": f"rel:{noise}:inverse", "seg": "hidden"})
     out = tmp_path / "adapted"
