@@ -91,7 +91,7 @@ class MountFit:
             k = self.intrinsics.scaled(round(w * self._scale), round(h * self._scale))
             self._K = k.K
         if self._scale < 1.0:
-            gray = cv2.resize(gray, (round(w * self._scale), round(h * self._scale)), interpolation=cv2.INTER_AREA)
+            gray = shrink(gray, (round(w * self._scale), round(h * self._scale)))
         if self._prev and self._prev[-1].shape != gray.shape:
             self._prev.clear()
         self._prev.append(gray)
@@ -168,6 +168,20 @@ class MountFit:
                       road_plane_pairs=len(self.down),
                       converged=bool(used >= self.cfg.min_pairs and max(se) <= self.cfg.max_spread_deg))
         return m, report
+
+
+def shrink(gray: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``gray`` at ``size`` (W, H), smaller: averaged over whole k x k blocks first (OpenCV's area
+    resize is fast for whole factors only, and many times slower at any other), then bilinear for
+    what is left (under 2x, where bilinear hardly aliases)."""
+    w, h = size
+    k = min(gray.shape[1] // w, gray.shape[0] // h)
+    if k >= 2:
+        bw, bh = gray.shape[1] // k, gray.shape[0] // k
+        gray = cv2.resize(gray[:bh * k, :bw * k], (bw, bh), interpolation=cv2.INTER_AREA)
+    if (gray.shape[1], gray.shape[0]) == (w, h):
+        return gray
+    return cv2.resize(gray, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -1,11 +1,12 @@
 """The mounting step against synthetic drives whose camera is known exactly (the clip's rig)."""
 
 import cv2
+import numpy as np
 import pytest
 
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.lane_height import LaneHeight
-from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
+from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig, shrink
 from bsn_edge.calibration.mounting_step import MountingRefusedError, calibrate_mounting
 from bsn_edge.cli import calibrate as calib_cli
 from bsn_edge.synth import SynthConfig, write_clip
@@ -216,3 +217,20 @@ def test_road_normal_of_exact_correspondences_is_the_plane_down_direction():
     nd = _road_normal(n0, n1, R, t / np.linalg.norm(t), forward)
     assert nd is not None
     assert np.degrees(np.arccos(np.clip(nd @ down, -1, 1))) < 0.05
+
+
+@pytest.mark.parametrize("raw, size", [((1280, 720), (480, 270)), ((1920, 1080), (480, 270)), ((960, 540), (480, 270)),
+                                       ((512, 256), (480, 240))])
+def test_frames_are_shrunk_to_the_working_width_without_moving_anything(raw, size):
+    """Each pixel of the shrunk frame holds what the whole frame scaled to its size has there: a ramp
+    of each pixel's own column (and row) reads (x + 0.5) * W / w - 0.5, the pixel-centre mapping the
+    scaled intrinsics assume."""
+    (W, H), (w, h) = raw, size
+    cols = np.tile(np.arange(W, dtype=np.float32), (H, 1))
+    rows = np.tile(np.arange(H, dtype=np.float32)[:, None], (1, W))
+    got_c, got_r = shrink(cols, size), shrink(rows, size)
+    assert got_c.shape == got_r.shape == (h, w)
+    want_c = (np.arange(w) + 0.5) * W / w - 0.5
+    want_r = (np.arange(h) + 0.5) * H / h - 0.5
+    assert np.abs(got_c - want_c[None, :])[:, 1:-1].max() < 1e-3
+    assert np.abs(got_r - want_r[:, None])[1:-1].max() < 1e-3
