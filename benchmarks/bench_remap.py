@@ -5,6 +5,7 @@
 
 ``--ref-camera``: the reference is a build with the model camera too (a change to the warp), so it
 reads the same camera files and calibrates online the same way; ``--name`` names the report.
+``--overlay``: every run also writes the overlay video (``bsn-run --overlay``).
 
 ``--ref-python`` is an interpreter whose ``bsn_edge`` is the reference (e.g. the release before
 the model camera, installed in its own environment). Both run the same model on the same real
@@ -49,10 +50,10 @@ def loop_video(src: Path, out: Path, times: int) -> Path:
     return out
 
 
-def fps(python: str, model: Path, source: Path, work: Path, extra: list[str]) -> float:
+def fps(python: str, model: Path, source: Path, work: Path, extra: list[str], overlay: bool = False) -> float:
     summary = work / "s.json"
     cmd = [python, "-m", "bsn_edge.cli.run", "--model", str(model), "--source", str(source), "--summary",
-           str(summary), *extra]
+           str(summary), *extra, *(("--overlay", str(work / "overlay.mp4"), "--force") if overlay else ())]
     subprocess.run(cmd, check=True, capture_output=True, cwd=work)
     return float(json.loads(summary.read_text())["fps"])
 
@@ -66,6 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--ref-camera", action="store_true",
                    help="the reference has the model camera too: it runs with the same camera files")
     p.add_argument("--name", default="remap", help="the report's name in --out")
+    p.add_argument("--overlay", action="store_true", help="every run also writes the overlay video")
     args = p.parse_args(argv)
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to measure")
@@ -93,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
             got: dict[str, list[float]] = {k: [] for k in runs}
             for _ in range(args.repeats):
                 for k, (python, more) in runs.items():
-                    got[k].append(fps(python, Path(args.model), src, work, more))
+                    got[k].append(fps(python, Path(args.model), src, work, more, args.overlay))
             med = {k: statistics.median(v) for k, v in got.items()}
             r, c, o = med["reference_fps"], med["model_camera_fps"], med["calibrating_fps"]
             result[name] = {**got, "ratio": c / r}
@@ -117,7 +119,8 @@ def main(argv: list[str] | None = None) -> int:
         goal = f"Goal: the model camera within 5 % of the resize: {'met' if ok else 'not met'}."
     md = "\n".join([title, "",
                     f"Median of {args.repeats} alternating runs each, frames/s through `bsn-run` (decode, warp, model, "
-                    "sectors, senders), the shipped int8 model, 2 threads.", "",
+                    f"sectors, senders{', the overlay video' if args.overlay else ''}), the shipped int8 model, "
+                    "2 threads.", "",
                     *head, *rows, "", goal])
     write_result(args.out, args.name, result, md)
     print(md)

@@ -265,6 +265,9 @@ def main(argv: list[str] | None = None) -> int:
             f = sink["failure"]
             print(f"{PROG}: warning: the {name} output failed at frame {f['frame']} ({f['error']}); the alerts went "
                   "on, DEGRADED", file=sys.stderr)
+        if sink.get("dropped"):
+            print(f"{PROG}: note: {sink['dropped']} frames left out of the {name} output, which fell behind the "
+                  "camera (the alerts had them)", file=sys.stderr)
     for s in senders:
         if s.stats.errors:
             print(f"{PROG}: warning: {s.name} failed {s.stats.errors} times ({s.stats.last_error})", file=sys.stderr)

@@ -120,8 +120,11 @@ class FramePipeline:
     depth -> smoothed levels -> the alert published to the send cycle), :meth:`emit` (cycles due by
     the frame's time, for files) and :meth:`write` (the outputs beside the bus, each a
     :class:`GuardedSink`). Only :meth:`warp` runs on the feeder's thread: health, the alert state and
-    the outputs belong to the caller's.
+    the outputs belong to the caller's; the overlay and the maps are drawn and encoded on threads of
+    their own, at most ``SINK_BEHIND`` frames behind.
     """
+
+    SINK_BEHIND = 4     # frames an overlay or maps output may fall behind the loop
 
     def __init__(self, engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig,
                  camera: CameraState, outputs: Outputs, clock: Callable[[], float]) -> None:
@@ -225,9 +228,9 @@ class FramePipeline:
         """The overlay and the maps of one frame, in the raw frame's pixels."""
         overlay, maps = self.sinks.get("overlay"), self.sinks.get("maps")
         if overlay is not None and overlay.ok:
-            overlay.write(cap.index, draw(cap.frame, mf, mask, alert, self.geometry))
+            overlay.write(cap.index, cap.frame, mf, mask, alert)
         if maps is not None and maps.ok:
-            maps.write(cap.index, cap.name or frame_name(cap.index, ""), mf.to_raw(prob), mf.depth_to_raw(depth))
+            maps.write(cap.index, cap.name or frame_name(cap.index, ""), mf, prob, depth)
 
     # -- the run ---------------------------------------------------------------------------------
 
@@ -242,16 +245,27 @@ class FramePipeline:
         def fault(_: SinkFailure) -> None:
             self.health.fault(Fault.SINK_ERRORS)
 
+        # drawing and encoding the overlay, and encoding the maps, on threads of their own
+        behind = {"behind": self.SINK_BEHIND, "newest_wins": self.source.live}
         if out.overlay is not None:
             writer = OverlayWriter(out.overlay, self.source.fps)
-            self.sinks["overlay"] = GuardedSink("overlay", writer.write, writer.close, fault)
+
+            def overlay(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame) -> None:
+                writer.write(draw(frame, mf, mask, alert, self.geometry))
+
+            self.sinks["overlay"] = GuardedSink("overlay", overlay, writer.close, fault, **behind)
         if out.log is not None:
             Path(out.log).parent.mkdir(parents=True, exist_ok=True)
             # line-buffered: readable while it runs, and every line whole after a kill
             logf = open(out.log, "w", buffering=1)  # noqa: SIM115 - closed by its sink
             self.sinks["log"] = GuardedSink("log", lambda rec: logf.write(json.dumps(rec) + "\n"), logf.close, fault)
         if out.maps is not None:
-            self.sinks["maps"] = GuardedSink("maps", out.maps.write, None, fault)
+            maps = out.maps
+
+            def write_maps(name: str, mf: ModelFrame, prob: np.ndarray, depth: np.ndarray) -> None:
+                maps.write(name, mf.to_raw(prob), mf.depth_to_raw(depth))
+
+            self.sinks["maps"] = GuardedSink("maps", write_maps, None, fault, **behind)
 
     def step(self, item: Prepared, inflight: Future | None = None) -> None:
         """One prepared frame through the remaining stages, timed; ``inflight``: its inference, already
@@ -372,8 +386,8 @@ class FramePipeline:
                 "source_failure": self.source.failure, "stopped": bool(stop is not None and stop.is_set()),
                 "heartbeat_error": self.heartbeat.last_error if self.heartbeat is not None else "",
                 "camera": self.camera.summary(), "maps_written": 0 if maps is None else maps.written,
-                "sinks": {name: {"written": k.written, "failure": None if k.ok else vars(k.failure)}
-                          for name, k in self.sinks.items()},
+                "sinks": {name: {"written": k.written, "dropped": k.dropped,
+                                 "failure": None if k.ok else vars(k.failure)} for name, k in self.sinks.items()},
                 "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
                           "quantization": card.quantization, "kernels": self.engine.kernels,
                           "self_test": self.engine.self_test,

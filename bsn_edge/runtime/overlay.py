@@ -13,7 +13,8 @@ from bsn_edge.alerts.state_machine import Level
 from bsn_edge.model_frame import ModelFrame
 
 LEVEL_BGR = {Level.NONE: (80, 160, 80), Level.CAUTION: (0, 190, 255), Level.WARNING: (0, 0, 255)}
-TINT = np.array([40, 40, 255], np.float32)
+TINT = (40, 40, 255)      # BGR of blind spots, blended in at TINT_WEIGHT
+TINT_WEIGHT = 0.55
 
 
 def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
@@ -21,9 +22,14 @@ def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
     """The raw ``frame`` with the model's mask brought back onto it and tinted, and a bar per
     sector (sector edges are bearings in the model camera, drawn where they fall in this frame)."""
     img = frame.copy()
-    raw_mask = mf.to_raw(mask.astype(np.uint8), cv2.INTER_NEAREST) > 0
-    if raw_mask.any():
-        img[raw_mask] = (img[raw_mask] * 0.45 + TINT * 0.55).astype(np.uint8)
+    raw_mask = mf.to_raw(mask.astype(np.uint8), cv2.INTER_NEAREST)
+    rows = np.flatnonzero(raw_mask.any(axis=1))
+    if len(rows):
+        # the rows the mask reaches blended whole and copied where it is: OpenCV's vector code, where
+        # numpy's masked indexing took half the drawing's time
+        band = img[rows[0]:rows[-1] + 1]
+        tinted = cv2.add(cv2.convertScaleAbs(band, alpha=1.0 - TINT_WEIGHT), tuple(TINT_WEIGHT * c for c in TINT))
+        cv2.copyTo(tinted, raw_mask[rows[0]:rows[-1] + 1], band)
     h = img.shape[0]
     cols = mf.raw_column_sector(geometry.column_sector)
     for s, sector in enumerate(alert.sectors):

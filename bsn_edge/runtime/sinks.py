@@ -5,10 +5,18 @@ stop the loop. The first failure of a sink is a fault: it is counted (``sink_err
 the status DEGRADED), the sink writes nothing more, and the run's summary says which sink failed,
 at which frame and why. Which outputs are essential is decided at start-up: a sink that cannot be
 opened refuses the run (the user asked for it); one that fails later degrades it.
+
+An output that costs a frame's time (drawing and encoding the overlay, encoding the maps) is
+written on a thread of its own, ``behind`` frames at most behind the loop. From a file every frame
+is written (the loop waits when the sink is that far behind); from a camera the loop never waits:
+a frame the sink has no room for is left out of that output and counted (``dropped``), which is not
+a fault: the alerts had it.
 """
 
 from __future__ import annotations
 
+import queue
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -26,45 +34,104 @@ class SinkFailure:
 class GuardedSink:
     """Wraps one output's ``write`` and ``close``; after the first exception it only counts.
 
-    ``on_fault`` is called once, at the first failure (the loop counts it into the health)."""
+    ``on_fault`` is called once, at the first failure (the loop counts it into the health), on the
+    thread that wrote. ``behind`` > 0: writes run on a thread of the sink's own, at most that many
+    frames behind; ``newest_wins``: then a frame with no room is dropped instead of waited for."""
 
     def __init__(self, name: str, write: Callable[..., Any], close: Callable[[], Any] | None = None,
-                 on_fault: Callable[[SinkFailure], None] | None = None) -> None:
+                 on_fault: Callable[[SinkFailure], None] | None = None, behind: int = 0,
+                 newest_wins: bool = False) -> None:
+        if behind < 0:
+            raise ValueError(f"behind must be >= 0, got {behind}")
         self.name, self._write, self._close, self.on_fault = name, write, close, on_fault
-        self.failure: SinkFailure | None = None
-        self.written = 0
+        self.newest_wins = newest_wins
+        self._lock = threading.Lock()          # failure, written and dropped: the loop's thread and the sink's
+        self._failure: SinkFailure | None = None
+        self._written = 0
+        self._dropped = 0
         self._closed = False
+        self._queue: queue.Queue | None = None
+        self._thread: threading.Thread | None = None
+        if behind:
+            self._queue = queue.Queue(maxsize=behind)
+            self._thread = threading.Thread(target=self._work, name=f"bsn-sink-{name}", daemon=True)
+            self._thread.start()
 
     @property
     def ok(self) -> bool:
-        return self.failure is None
+        with self._lock:
+            return self._failure is None
+
+    @property
+    def failure(self) -> SinkFailure | None:
+        with self._lock:
+            return self._failure
+
+    @property
+    def written(self) -> int:
+        with self._lock:
+            return self._written
+
+    @property
+    def dropped(self) -> int:
+        """Frames left out of this output because it was behind (a camera's frames only)."""
+        with self._lock:
+            return self._dropped
 
     def write(self, frame: int, *args: Any) -> bool:
-        """Write one frame's output; False (and, the first time, a fault) when it cannot."""
-        if self.failure is not None or self._closed:
+        """Write one frame's output (or hand it to the sink's thread); False (and, the first time, a
+        fault) when it cannot, or when a camera's frame found no room."""
+        if not self.ok or self._closed:
             return False
+        if self._queue is None:
+            return self._do(frame, args)
+        if not self.newest_wins:
+            self._queue.put((frame, args))
+            return True
         try:
-            self._write(*args)
-        except Exception as e:  # a full or read-only disk, an encoder error: the alerts go on
-            self._fail(frame, e)
+            self._queue.put_nowait((frame, args))
+        except queue.Full:
+            with self._lock:
+                self._dropped += 1
             return False
-        self.written += 1
         return True
 
     def close(self, frame: int = -1) -> None:
-        """Finish the output (idempotent); a failure to finish it is reported like a write's."""
+        """Write what is queued and finish the output (idempotent); a failure to finish it is reported
+        like a write's."""
         if self._closed:
             return
         self._closed = True
+        if self._queue is not None and self._thread is not None:
+            self._queue.put(None)
+            self._thread.join()
         if self._close is None:
             return
         try:
             self._close()
         except Exception as e:
-            if self.failure is None:
+            if self.ok:
                 self._fail(frame, e)
 
+    def _do(self, frame: int, args: tuple) -> bool:
+        try:
+            self._write(*args)
+        except Exception as e:  # a full or read-only disk, an encoder error: the alerts go on
+            self._fail(frame, e)
+            return False
+        with self._lock:
+            self._written += 1
+        return True
+
+    def _work(self) -> None:
+        assert self._queue is not None
+        while (item := self._queue.get()) is not None:
+            if self.ok:
+                self._do(*item)
+
     def _fail(self, frame: int, e: Exception) -> None:
-        self.failure = SinkFailure(self.name, frame, f"{type(e).__name__}: {e}")
+        failure = SinkFailure(self.name, frame, f"{type(e).__name__}: {e}")
+        with self._lock:
+            self._failure = failure
         if self.on_fault is not None:
-            self.on_fault(self.failure)
+            self.on_fault(failure)

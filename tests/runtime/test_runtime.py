@@ -323,3 +323,31 @@ def test_the_bus_and_overlay_carry_the_rate_achieved_not_the_files(setup, tmp_pa
     # the clip is 10 frames/s; this engine manages 4 on its clock: the bus says 4, and DEGRADED (floor 8)
     assert all(3.5 <= s["Frame_Rate"] <= 4.5 for s in running[3:]), [s["Frame_Rate"] for s in running]
     assert all(s["System_State"] == SystemState.DEGRADED for s in running[3:])
+
+
+def test_the_overlay_tints_the_blind_spots_and_nothing_else():
+    """Drawn over a frame of the model camera's own size (the warp then maps pixels to themselves):
+    inside the mask each pixel is 0.45 of itself and 0.55 of the tint (to rounding), outside it is
+    the frame's, under the bars and the text."""
+    from bsn_edge.alerts.frame import AlertFrame, SectorAlert
+    from bsn_edge.alerts.sectors import SectorGeometry
+    from bsn_edge.alerts.state_machine import Level
+    from bsn_edge.model_frame import ModelFrame, model_camera
+    from bsn_edge.runtime.overlay import TINT, TINT_WEIGHT, draw
+    cam, mount = model_camera((128, 256))
+    mf = ModelFrame.resize_only(cam, mount, 256, 128)
+    frame = np.random.default_rng(0).integers(0, 256, (128, 256, 3), dtype=np.uint8)
+    mask = np.zeros((128, 256), bool)
+    mask[60:90, 30:120] = True
+    none = SectorAlert(0.0, Level.NONE, None)
+    geometry = SectorGeometry(cam, RuntimeConfig().sectors)
+    img = draw(frame, mf, mask, AlertFrame(0.0, none, none, none, SystemState.OK, 25.0), geometry)
+    # the picture between the bars on top and the text below, off the sector edges' lines
+    away = np.zeros_like(mask)
+    away[24:110] = True
+    cols = mf.raw_column_sector(geometry.column_sector)
+    for edge in np.flatnonzero(np.diff(cols)):
+        away[:, max(0, edge - 1):edge + 3] = False
+    want = frame * (1 - TINT_WEIGHT) + np.array(TINT) * TINT_WEIGHT
+    assert np.abs(img[mask & away].astype(float) - want[mask & away]).max() <= 1.0
+    assert np.array_equal(img[away & ~mask], frame[away & ~mask])

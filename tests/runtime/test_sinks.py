@@ -383,3 +383,44 @@ def test_two_frames_in_flight_run_on_one_thread_each(setup, tmp_path):
                                            str(clip / "calibration.json"), "--in-flight", "2", "--summary", str(summ)])
     s = json.loads(summ.read_text())
     assert code == 0 and s["in_flight"] == 2 and s["frames"] == s["valid_frames"] == 15
+
+
+def test_an_output_on_its_own_thread_writes_every_frame_of_a_file_in_order():
+    from bsn_edge.runtime.sinks import GuardedSink
+    got = []
+    sink = GuardedSink("slow", lambda i: (time.sleep(0.002), got.append(i)), behind=2)
+    assert all(sink.write(i, i) for i in range(20))
+    sink.close()
+    assert got == list(range(20)) and sink.written == 20 and sink.dropped == 0
+
+
+def test_an_output_behind_a_camera_drops_frames_and_never_holds_the_loop():
+    import threading
+
+    from bsn_edge.runtime.sinks import GuardedSink
+    gate, got = threading.Event(), []
+    sink = GuardedSink("stuck", lambda i: (gate.wait(5), got.append(i)), behind=2, newest_wins=True)
+    t0 = time.monotonic()
+    taken = [sink.write(i, i) for i in range(10)]
+    assert time.monotonic() - t0 < 1.0, "the loop waited for its output"
+    gate.set()
+    sink.close()
+    # one frame on the sink's thread, two queued, the rest dropped and counted, none of it a fault
+    assert sum(taken) == len(got) == sink.written and sink.dropped == 10 - sink.written
+    assert 2 <= sink.written <= 3 and sink.ok
+
+
+def test_an_output_failing_on_its_own_thread_is_a_fault_once_at_the_frame_it_failed():
+    from bsn_edge.runtime.sinks import GuardedSink
+    faults = []
+
+    def write(i):
+        if i >= 3:
+            raise OSError(28, "No space left on device")
+
+    sink = GuardedSink("disk", write, on_fault=faults.append, behind=2)
+    for i in range(8):
+        sink.write(i, i)
+    sink.close()
+    assert sink.written == 3 and len(faults) == 1 and faults[0].frame == 3 and not sink.ok
+    assert not sink.write(9, 9)
