@@ -218,7 +218,10 @@ def plot_curves(ledger: Ledger, path: Path) -> None:
                         alpha=0.8, label=f"{src} {seed}")
         ax.set_title(f"{label}: validation IoU (own style)")
         ax.set_xlabel("step")
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+        else:
+            ax.text(0.5, 0.5, "not run yet", ha="center", va="center", transform=ax.transAxes)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
