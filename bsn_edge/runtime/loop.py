@@ -246,7 +246,7 @@ class FramePipeline:
             self.health.fault(Fault.SINK_ERRORS)
 
         # drawing and encoding the overlay, and encoding the maps, on threads of their own
-        behind = {"behind": self.SINK_BEHIND, "newest_wins": self.source.live}
+        behind = {"behind": self.SINK_BEHIND, "drop_when_full": self.source.live}
         if out.overlay is not None:
             writer = OverlayWriter(out.overlay, self.source.fps)
 

@@ -15,6 +15,7 @@ a fault: the alerts had it.
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import threading
 from collections.abc import Callable
@@ -36,15 +37,19 @@ class GuardedSink:
 
     ``on_fault`` is called once, at the first failure (the loop counts it into the health), on the
     thread that wrote. ``behind`` > 0: writes run on a thread of the sink's own, at most that many
-    frames behind; ``newest_wins``: then a frame with no room is dropped instead of waited for."""
+    frames behind; ``drop_when_full``: then a frame with no room is dropped instead of waited for.
+    Closing waits at most ``CLOSE_WAIT_S`` for that thread: an output stuck in a write (a hung disk)
+    is a failure, and the run still ends (its last word on the bus is not held up)."""
+
+    CLOSE_WAIT_S = 10.0
 
     def __init__(self, name: str, write: Callable[..., Any], close: Callable[[], Any] | None = None,
                  on_fault: Callable[[SinkFailure], None] | None = None, behind: int = 0,
-                 newest_wins: bool = False) -> None:
+                 drop_when_full: bool = False) -> None:
         if behind < 0:
             raise ValueError(f"behind must be >= 0, got {behind}")
         self.name, self._write, self._close, self.on_fault = name, write, close, on_fault
-        self.newest_wins = newest_wins
+        self.drop_when_full = drop_when_full
         self._lock = threading.Lock()          # failure, written and dropped: the loop's thread and the sink's
         self._failure: SinkFailure | None = None
         self._written = 0
@@ -85,7 +90,7 @@ class GuardedSink:
             return False
         if self._queue is None:
             return self._do(frame, args)
-        if not self.newest_wins:
+        if not self.drop_when_full:
             self._queue.put((frame, args))
             return True
         try:
@@ -103,8 +108,13 @@ class GuardedSink:
             return
         self._closed = True
         if self._queue is not None and self._thread is not None:
-            self._queue.put(None)
-            self._thread.join()
+            with contextlib.suppress(queue.Full):
+                self._queue.put(None, timeout=self.CLOSE_WAIT_S)
+            self._thread.join(timeout=self.CLOSE_WAIT_S)
+            if self._thread.is_alive():
+                if self.ok:
+                    self._fail(frame, TimeoutError(f"still writing after {self.CLOSE_WAIT_S:g} s; given up"))
+                return
         if self._close is None:
             return
         try:

@@ -399,7 +399,7 @@ def test_an_output_behind_a_camera_drops_frames_and_never_holds_the_loop():
 
     from bsn_edge.runtime.sinks import GuardedSink
     gate, got = threading.Event(), []
-    sink = GuardedSink("stuck", lambda i: (gate.wait(5), got.append(i)), behind=2, newest_wins=True)
+    sink = GuardedSink("stuck", lambda i: (gate.wait(5), got.append(i)), behind=2, drop_when_full=True)
     t0 = time.monotonic()
     taken = [sink.write(i, i) for i in range(10)]
     assert time.monotonic() - t0 < 1.0, "the loop waited for its output"
@@ -424,3 +424,21 @@ def test_an_output_failing_on_its_own_thread_is_a_fault_once_at_the_frame_it_fai
     sink.close()
     assert sink.written == 3 and len(faults) == 1 and faults[0].frame == 3 and not sink.ok
     assert not sink.write(9, 9)
+
+
+def test_an_output_stuck_in_a_write_does_not_hold_up_the_end_of_the_run(monkeypatch):
+    import threading
+
+    from bsn_edge.runtime.sinks import GuardedSink
+    monkeypatch.setattr(GuardedSink, "CLOSE_WAIT_S", 0.2)
+    hung, faults, closed = threading.Event(), [], []
+    sink = GuardedSink("hung", lambda i: hung.wait(30), close=lambda: closed.append(True), on_fault=faults.append,
+                       behind=1)
+    sink.write(0, 0)            # taken by the sink's thread, which hangs in it
+    time.sleep(0.05)
+    sink.write(1, 1)            # queued: the queue is now full
+    t0 = time.monotonic()
+    sink.close(frame=3)
+    assert time.monotonic() - t0 < 2.0
+    assert not sink.ok and "given up" in sink.failure.error and len(faults) == 1 and not closed
+    hung.set()
