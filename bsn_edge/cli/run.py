@@ -43,7 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="log every CAN frame sent: .log (candump format, readable by python -m cantools decode), "
                         ".asc or .blf; without --can, frames go to a virtual bus")
     p.add_argument("--serial", metavar="URL", help="send on this serial port (pyserial URL, e.g. /dev/ttyUSB0)")
-    p.add_argument("--overlay", metavar="OUT.mp4", help="write a video with blind spots and sector levels")
+    p.add_argument("--overlay", metavar="OUT.mp4",
+                   help="write a video with blind spots and sector levels (drawn on a thread of its own: from a "
+                        "camera, frames it falls behind on are left out of it and counted, never the alerts)")
     p.add_argument("--log", metavar="OUT.jsonl", help="one JSON line per frame")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="stop after this many frames")
     p.add_argument("--threads", type=int, default=None,
