@@ -8,7 +8,7 @@ thread, as ``bsn-run``'s feeder runs it: the area shrink, the low-pass, and the 
 the same picture and the same fixed-point maps: with every tap mirrored into the picture beforehand
 (``ModelFrame``'s maps) and with OpenCV testing and mirroring each tap (``BORDER_REFLECT``), which
 costs where the raw camera sees only part of the model frame. The two remaps alternate, ``--rounds``
-times; each stage's figure is the median over the rounds of its milliseconds per frame. Their
+times; each stage's figure is the median over the rounds of its median milliseconds per frame. Their
 pictures must agree within one grey level.
 """
 
@@ -16,14 +16,13 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
 from collections.abc import Callable
 
 import cv2
 import numpy as np
 
 from benchmarks.bench_realcam import REAL, udacity_camera
-from benchmarks.common import write_result
+from benchmarks.common import time_calls, write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.model_frame import ModelFrame
@@ -32,13 +31,8 @@ from bsn_edge.sequence.media import read_video
 
 
 def ms_per_call(fn: Callable[[int], object], n: int) -> float:
-    """Milliseconds per call of ``fn(i)``, ``i`` from 0 to ``n`` - 1, after 5 warm-up calls."""
-    for i in range(5):
-        fn(i)
-    t0 = time.perf_counter()
-    for i in range(n):
-        fn(i)
-    return 1e3 * (time.perf_counter() - t0) / n
+    """Median milliseconds of a call of ``fn(i)``, ``i`` from 0 to ``n`` - 1, after 5 warm-up calls."""
+    return 1e3 * statistics.median(time_calls(fn, n, warmup=5))
 
 
 def stages(mf: ModelFrame, frames: list[np.ndarray], n: int, rounds: int) -> dict[str, float]:
