@@ -42,6 +42,8 @@ class Calibration:
     square_m: float = 0.025
     mounting: Mounting | None = None
     mounting_report: dict[str, Any] = field(default_factory=dict)
+    # how fx fy cx cy were found: "chessboard", "field of view: 60 degrees across"; "" when given
+    intrinsics_method: str = ""
 
     def __post_init__(self) -> None:
         self.intrinsics  # noqa: B018 - validates

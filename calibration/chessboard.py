@@ -79,4 +79,4 @@ def calibrate(source: str | os.PathLike, board: tuple[int, int] = (9, 6), square
     rms, K, dist, _, _ = cv2.calibrateCamera(obj, img, size, None, None)
     return Calibration(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), int(size[0]), int(size[1]),
                        tuple(float(d) for d in dist.ravel()[:5]), float(rms), tuple(used), tuple(skipped),
-                       board, square_m)
+                       board, square_m, intrinsics_method="chessboard")

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 from pathlib import Path
 
 from tqdm import tqdm
 
 from bsn_edge.calibration import Calibration, calibrate
+from bsn_edge.calibration.field_of_view import WIDE_DEG, from_field_of_view
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.calibration.mounting_step import MountingRefusedError, calibrate_mounting, check_arguments
 from bsn_edge.cli.common import fail
@@ -32,12 +34,18 @@ def build_parser() -> argparse.ArgumentParser:
                                 "of expansion, roll from the road plane, the height measured (--height) or from a "
                                 "known lane width (--lane-width); each with its spread, or a refusal with reasons "
                                 "(turning, standing still, too short). Both write the camera file that bsn-run "
-                                "--calib and bsn-label --calib read.")
+                                "--calib and bsn-label --calib read. No chessboard: --hfov gives step 1 from the "
+                                "camera's horizontal field of view (its specification), without lens distortion.")
     p.add_argument("source", metavar="IMAGES_OR_VIDEO",
-                   help="folder of chessboard images or a video of a chessboard; with --mount, a driving video")
+                   help="folder of chessboard images or a video of a chessboard; with --hfov, any video of the "
+                        "camera (or a folder of its frames); with --mount, a driving video")
     p.add_argument("--board", type=_board, default=(9, 6), help="inner corners, COLSxROWS (default 9x6)")
     p.add_argument("--square", type=float, default=0.025, help="square size in metres (default 0.025)")
     p.add_argument("--every", type=int, default=10, help="for a video: use every Nth frame (default 10)")
+    p.add_argument("--hfov", type=float, metavar="DEG",
+                   help="no chessboard: the camera's horizontal field of view in degrees (from its data sheet); "
+                        "writes a pinhole camera at the frames' size, without lens distortion (rough above "
+                        f"{WIDE_DEG:g} degrees)")
     p.add_argument("--out", required=True, help="output CALIB.json (refused if it exists, unless --force)")
     p.add_argument("--force", action="store_true", help="overwrite --out")
     m = p.add_argument_group("mounting (--mount)")
@@ -89,12 +97,32 @@ def mount(args) -> int:
     return 0
 
 
+def field_of_view(args) -> int:
+    try:
+        cal = from_field_of_view(args.source, args.hfov)
+    except (FileNotFoundError, ValueError) as e:
+        return fail(PROG, str(e))
+    cal.write(args.out)
+    print(f"fx {cal.fx:.1f}  fy {cal.fy:.1f}  cx {cal.cx:.1f}  cy {cal.cy:.1f}  at {cal.width}x{cal.height} "
+          f"(width x height), from {args.hfov:g} degrees across; no lens distortion")
+    if args.hfov > WIDE_DEG:
+        print(f"{PROG}: note: a lens {args.hfov:g} degrees across bends straight lines towards its edges, which a "
+              "field of view cannot say; the chessboard step measures it", file=sys.stderr)
+    print(f"wrote {args.out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if Path(args.out).exists() and not args.force:
         return fail(PROG, f"{args.out} exists; pass --force to overwrite it")
     if args.mount:
+        if args.hfov is not None:
+            return fail(PROG, "--hfov is step 1 (the intrinsics) and --mount step 2: write the camera file with "
+                              "--hfov first, then pass it to --mount with --calib")
         return mount(args)
+    if args.hfov is not None:
+        return field_of_view(args)
     if args.square <= 0 or args.every < 1:
         return fail(PROG, "--square must be positive and --every >= 1")
     try:

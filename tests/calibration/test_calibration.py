@@ -97,3 +97,35 @@ def test_real_chessboard_photos_under_one_pixel():
     assert cal.rms_px < 1.0, f"RMS {cal.rms_px:.3f} px"
     assert len(cal.used) >= 10 and len(cal.skipped) >= 1
     assert all(s["reason"] for s in cal.skipped)
+
+
+def test_a_camera_known_by_its_field_of_view_sees_its_edges_at_half_that_angle(tmp_path, capsys):
+    """``bsn-calibrate --hfov``: a pinhole at the video's frame size whose outermost pixel edges lie
+    at half the field of view either side of the axis (pixel edges at 0 and W), centred, square."""
+    import math
+
+    from tests.conftest import noise_video
+    video = noise_video(tmp_path / "drive.mp4", 3, 320, 176)
+    out = tmp_path / "cam.json"
+    assert calib_cli.main([str(video), "--hfov", "70", "--out", str(out)]) == 0
+    cam = Calibration.read(out)
+    assert (cam.width, cam.height, cam.dist) == (320, 176, ())
+    assert math.degrees(math.atan2(cam.width - cam.cx, cam.fx) + math.atan2(cam.cx, cam.fx)) == pytest.approx(70.0)
+    assert cam.fx == cam.fy and cam.cy == pytest.approx(88.0) and cam.intrinsics_method.startswith("field of view")
+    assert "70 degrees across" in capsys.readouterr().out
+    # a folder of the camera's frames gives the same camera
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    cv2.imwrite(str(frames / "000000.png"), np.zeros((176, 320, 3), np.uint8))
+    assert calib_cli.main([str(frames), "--hfov", "70", "--out", str(tmp_path / "f.json")]) == 0
+    assert Calibration.read(tmp_path / "f.json").fx == pytest.approx(cam.fx)
+    # refused: the user's file without --force, a field of view no forward camera has, --hfov with --mount
+    assert calib_cli.main([str(video), "--hfov", "70", "--out", str(out)]) == 2
+    assert calib_cli.main([str(video), "--hfov", "700", "--out", str(tmp_path / "x.json")]) == 2
+    assert calib_cli.main([str(video), "--hfov", "70", "--mount", "--out", str(tmp_path / "y.json")]) == 2
+    err = capsys.readouterr().err
+    assert "exists" in err and "20-150 degrees" in err and "--mount" in err
+    assert not (tmp_path / "x.json").exists() and not (tmp_path / "y.json").exists()
+    # wide: written, with a word on the distortion it cannot know
+    assert calib_cli.main([str(video), "--hfov", "130", "--out", str(tmp_path / "wide.json")]) == 0
+    assert "bends straight lines" in capsys.readouterr().err
