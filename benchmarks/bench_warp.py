@@ -25,7 +25,7 @@ from benchmarks.bench_realcam import REAL, udacity_camera
 from benchmarks.common import time_calls, write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.cli.demo import DEFAULT_MODEL
-from bsn_edge.model_frame import ModelFrame
+from bsn_edge.model_frame import ModelFrame, block_mean
 from bsn_edge.runtime import Engine
 from bsn_edge.sequence.media import read_video
 
@@ -38,7 +38,7 @@ def ms_per_call(fn: Callable[[int], object], n: int) -> float:
 def stages(mf: ModelFrame, frames: list[np.ndarray], n: int, rounds: int) -> dict[str, float]:
     """Median milliseconds per frame of each stage of ``mf``'s warp, the two remaps alternating."""
     pictures = [mf.low_passed(f) for f in frames]
-    k, (h, w) = mf.shrink, mf.picture_size
+    k = mf.shrink
     out = np.empty((mf.model.height, mf.model.width, 3), np.uint8)
     sx, sy = mf.picture_maps()
     opencv_maps = cv2.convertMaps(sx.astype(np.float32), sy.astype(np.float32), cv2.CV_16SC2)
@@ -53,13 +53,12 @@ def stages(mf: ModelFrame, frames: list[np.ndarray], n: int, rounds: int) -> dic
     a = cv2.remap(pictures[0], *mf.fixed_maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     b = cv2.remap(pictures[0], *opencv_maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
     diff = int(np.abs(a.astype(int) - b).max())
-    small = [cv2.resize(f[:h * k, :w * k], (w, h), interpolation=cv2.INTER_AREA) for f in frames] if k > 1 else frames
+    small = [block_mean(f, k) for f in frames] if k > 1 else frames
     runs: dict[str, list[float]] = {"shrink": [], "low_pass": [], "remap_mirrored": [], "remap_opencv": [],
                                     "to_model": []}
     for _ in range(rounds):
         if k > 1:
-            runs["shrink"].append(ms_per_call(lambda i: cv2.resize(frames[i % m][:h * k, :w * k], (w, h),
-                                                                   interpolation=cv2.INTER_AREA), n))
+            runs["shrink"].append(ms_per_call(lambda i: block_mean(frames[i % m], k), n))
         if mf.prefilter:
             runs["low_pass"].append(ms_per_call(lambda i: cv2.GaussianBlur(small[i % m], (3, 3), 0), n))
         runs["remap_mirrored"].append(ms_per_call(mirrored, n))

@@ -40,6 +40,14 @@ def model_camera(size: tuple[int, int], hfov_deg: float = MODEL_HFOV_DEG, height
     return Intrinsics.from_fov(w, h, hfov_deg), Mounting(height_m, pitch_deg)
 
 
+def block_mean(frame: np.ndarray, k: int) -> np.ndarray:
+    """``frame`` averaged over whole ``k`` x ``k`` blocks, the last < ``k`` rows and columns left out:
+    OpenCV's area resize at a whole factor (its fast path; at any other factor it is many times
+    slower). Block (i, j) averages pixels k*i .. k*i + k - 1: its centre is k*i + (k - 1) / 2."""
+    h, w = frame.shape[0] // k, frame.shape[1] // k
+    return cv2.resize(frame[:h * k, :w * k], (w, h), interpolation=cv2.INTER_AREA)
+
+
 def mirrored_inside(coord: np.ndarray, n: int) -> np.ndarray:
     """Source coordinates (pixel centres at 0 .. ``n`` - 1) mirrored into the picture as
     ``cv2.BORDER_REFLECT`` mirrors pixels (``fedcba|abcdef``, about -0.5 and ``n`` - 0.5), then held
@@ -117,7 +125,7 @@ class ModelFrame:
         mirroring: raw coordinates, or block coordinates after a shrink by k."""
         k = self.shrink
         mx, my = self._fwd_float
-        # block (i, j) averages raw pixels k*i .. k*i + k - 1: its centre is raw k*i + (k - 1) / 2
+        # a block's centre is raw k*i + (k - 1) / 2 (block_mean)
         return (mx - (k - 1) / 2) / k, (my - (k - 1) / 2) / k
 
     @property
@@ -130,11 +138,8 @@ class ModelFrame:
         """The picture the remap reads: the raw frame area-shrunk by k and low-passed as the model
         camera needs (itself when it needs neither)."""
         self._check(frame)
-        k = self.shrink
-        if k > 1:
-            # the frame cut to a multiple of k (the last < k rows and columns go)
-            h, w = self.picture_size
-            frame = cv2.resize(frame[:h * k, :w * k], (w, h), interpolation=cv2.INTER_AREA)
+        if self.shrink > 1:
+            frame = block_mean(frame, self.shrink)
         if self.prefilter:
             frame = cv2.GaussianBlur(frame, (3, 3), 0)
         return frame

@@ -16,7 +16,7 @@ import cv2
 
 from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.camera import Intrinsics
-from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS
+from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS, is_image, is_video, read_video
 
 HFOV_RANGE_DEG = (20.0, 150.0)   # a forward camera's field of view, outside it a typing error is likelier
 WIDE_DEG = 100.0                  # above this a lens without distortion is a rough stand-in
@@ -26,7 +26,7 @@ def frame_size(source: str | os.PathLike) -> tuple[int, int]:
     """(width, height) of the first frame of a video, or of the first image of a folder."""
     p = Path(source)
     if p.is_dir():
-        first = next((q for q in sorted(p.iterdir()) if q.suffix.lower() in IMAGE_EXTS), None)
+        first = next((q for q in sorted(p.iterdir()) if is_image(q)), None)
         if first is None:
             raise ValueError(f"{p}: no image in this folder ({', '.join(IMAGE_EXTS)})")
         img = cv2.imread(str(first), cv2.IMREAD_UNCHANGED)
@@ -35,14 +35,12 @@ def frame_size(source: str | os.PathLike) -> tuple[int, int]:
         return img.shape[1], img.shape[0]
     if not p.exists():
         raise FileNotFoundError(f"{p} not found")
-    if p.suffix.lower() not in VIDEO_EXTS:
+    if not is_video(p):
         raise ValueError(f"{p}: give a video ({', '.join(VIDEO_EXTS)}) or a folder of its frames")
-    cap = cv2.VideoCapture(str(p))
-    ok, frame = cap.read() if cap.isOpened() else (False, None)
-    cap.release()
-    if not ok:
+    frames = read_video(p, max_frames=1)
+    if not frames:
         raise ValueError(f"{p}: OpenCV cannot read a frame of this video")
-    return frame.shape[1], frame.shape[0]
+    return frames[0].shape[1], frames[0].shape[0]
 
 
 def from_field_of_view(source: str | os.PathLike, hfov_deg: float) -> Calibration:

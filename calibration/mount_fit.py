@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.model_frame import block_mean
 from bsn_edge.mounting import Mounting, angles_of
 from bsn_edge.tracks import MAX_CORNERS, WINDOW_PX, detect, track
 
@@ -171,14 +172,12 @@ class MountFit:
 
 
 def shrink(gray: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """``gray`` at ``size`` (W, H), smaller: averaged over whole k x k blocks first (OpenCV's area
-    resize is fast for whole factors only, and many times slower at any other), then bilinear for
-    what is left (under 2x, where bilinear hardly aliases)."""
+    """``gray`` at ``size`` (W, H), smaller: averaged over whole k x k blocks first (``block_mean``),
+    then bilinear for what is left (under 2x, where bilinear hardly aliases)."""
     w, h = size
     k = min(gray.shape[1] // w, gray.shape[0] // h)
     if k >= 2:
-        bw, bh = gray.shape[1] // k, gray.shape[0] // k
-        gray = cv2.resize(gray[:bh * k, :bw * k], (bw, bh), interpolation=cv2.INTER_AREA)
+        gray = block_mean(gray, k)
     if (gray.shape[1], gray.shape[0]) == (w, h):
         return gray
     return cv2.resize(gray, (w, h), interpolation=cv2.INTER_LINEAR)
