@@ -14,6 +14,7 @@ from torch.utils.data import Dataset
 from bsn_edge import semantics as sm
 from bsn_edge.calibration.camera_file import clip_camera
 from bsn_edge.camera import Intrinsics
+from bsn_edge.data.repaint import draw_repaint, repaint
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.model_frame import ModelFrame, model_camera
 from bsn_edge.mounting import Mounting
@@ -115,12 +116,16 @@ class BlindSpotDataset(Dataset):
     ``mounting``, :class:`ModelFrame`: frames with their lens, masks nearest, depth converted to
     the model camera at its reference height); outside the clip's view and on the car's hood
     the visibility mask is 0. ``augment`` flips horizontally (everything together, so left stays
-    left of right in image, labels, depth and semantics alike) and jitters brightness/contrast.
+    left of right in image, labels, depth and semantics alike), jitters brightness/contrast and
+    repaints the vehicles and people of a share ``object_repaint`` of the samples
+    (:mod:`~bsn_edge.data.repaint`).
     """
 
     def __init__(self, clips: list[Clip], size: tuple[int, int], augment: bool = False,
                  label_name: str = "T5s", seed: int = 0, camera: Intrinsics | None = None,
-                 mounting: Mounting | None = None) -> None:
+                 mounting: Mounting | None = None, object_repaint: float = 0.0) -> None:
+        if not 0.0 <= object_repaint <= 1.0:
+            raise ValueError(f"object_repaint is a share of samples in [0, 1], got {object_repaint}")
         self.items = [(c, f) for c in clips for f in c.frames]
         if not self.items:
             raise ValueError("dataset is empty")
@@ -132,6 +137,7 @@ class BlindSpotDataset(Dataset):
             raise ValueError(f"model camera is {self.camera.height}x{self.camera.width}, the size {size[0]}x{size[1]}")
         self._warps: dict[Path, ClipWarps] = {}
         self.augment = augment
+        self.object_repaint = object_repaint
         self.label_name = label_name
         self.seed = seed
 
@@ -181,6 +187,11 @@ class BlindSpotDataset(Dataset):
                 a = {name: v[:, ::-1] for name, v in a.items()}
                 rgb = rgb[:, ::-1]
             rgb = np.clip(rgb * rng.uniform(0.8, 1.2) + rng.uniform(-0.08, 0.08), 0, 1)
+            paint = draw_repaint(rng, self.object_repaint, rgb.shape[:2])
+            if paint is not None:
+                x = torch.from_numpy(np.ascontiguousarray(rgb.transpose(2, 0, 1)))[None]
+                sem_t = torch.from_numpy(np.ascontiguousarray(a["semantic"]))[None]
+                rgb = repaint(x, sem_t, [paint])[0].numpy().transpose(1, 2, 0)
         img = (rgb - IMAGENET_MEAN) / IMAGENET_STD
         sem = a["semantic"].astype(np.int64)
         return {

@@ -6,7 +6,7 @@ import io
 import json
 import multiprocessing
 import shutil
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,23 +112,27 @@ def _init_worker(clip: Clip) -> None:
     _WORKER = _Pipeline(clip)
 
 
-def _render_range(a: int, b: int) -> list[Frame]:
-    return [_WORKER.frame(i) for i in range(a, b)]
+def _render_list(indices: list[int]) -> list[Frame]:
+    return [_WORKER.frame(i) for i in indices]
 
 
-def render_frames(clip: Clip, renderer: Renderer | None = None, workers: int = 1) -> Iterator[Frame]:
-    """Render the clip's frames in order, in ``workers`` processes (frames are independent)."""
-    n = clip.config.frames
-    if workers <= 1 or n < 2 * CHUNK:
+def render_frames(clip: Clip, renderer: Renderer | None = None, workers: int = 1,
+                  indices: Sequence[int] | None = None) -> Iterator[Frame]:
+    """Render the clip's frames (all, or ``indices``) in order, in ``workers`` processes (frames are
+    independent: a frame is the same bytes whether rendered alone or in the whole clip)."""
+    todo = list(range(clip.config.frames)) if indices is None else [int(i) for i in indices]
+    if any(not 0 <= i < clip.config.frames for i in todo):
+        raise ValueError(f"frame indices must lie in [0, {clip.config.frames}), got {todo}")
+    if workers <= 1 or len(todo) < 2 * CHUNK:
         pipe = _Pipeline(clip, renderer)
-        for i in range(n):
+        for i in todo:
             yield pipe.frame(i)
         return
-    starts = list(range(0, n, CHUNK))
+    chunks = [todo[a:a + CHUNK] for a in range(0, len(todo), CHUNK)]
     # spawned, never forked: a fork copies OpenCV's thread pool mid-lock if this process has used it
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker, initargs=(clip,)) as pool:
-        for frames in pool.map(_render_range, starts, [min(a + CHUNK, n) for a in starts]):
+        for frames in pool.map(_render_list, chunks):
             yield from frames
 
 

@@ -42,8 +42,12 @@ class DataConfig:
     camera_hfov_deg: float = MODEL_HFOV_DEG
     camera_height_m: float = REFERENCE_HEIGHT_M
     camera_pitch_deg: float = MODEL_PITCH_DEG
+    # share of training samples whose vehicles and people are repainted (bsn_edge.data.repaint)
+    object_repaint: float = 0.0
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.object_repaint <= 1.0:
+            raise ValueError(f"data.object_repaint is a share of samples in [0, 1], got {self.object_repaint}")
         if len(self.size) != 2 or min(self.size) < 32 or any(s % 32 for s in self.size):
             raise ValueError(f"data.size must be two multiples of 32 (H, W), got {self.size}")
         if not 0 < self.fraction <= 1:

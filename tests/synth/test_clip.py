@@ -96,6 +96,14 @@ def test_frames_rendered_in_worker_processes_are_the_frames_rendered_here():
     for a, b in zip(here, workers, strict=True):
         assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth)
         assert np.array_equal(a.semantic, b.semantic) and np.array_equal(a.bsgt, b.bsgt)
+    # a chosen few, alone or in workers, are those frames of the whole clip
+    pick = [0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 19]
+    for alone in (list(render_frames(clip, indices=pick)), list(render_frames(clip, workers=2, indices=pick))):
+        assert len(alone) == len(pick)
+        for i, fr in zip(pick, alone, strict=True):
+            assert np.array_equal(fr.rgb, here[i].rgb) and np.array_equal(fr.depth, here[i].depth)
+    with pytest.raises(ValueError, match="frame indices"):
+        list(render_frames(clip, indices=[20]))
 
 @pytest.mark.parametrize("bad", [
     {"frames": 0}, {"style": "desert"}, {"fps": 0.0}, {"height": 8}, {"far": 400.0},

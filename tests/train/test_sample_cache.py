@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import torch
 
+from bsn_edge import semantics as sm
 from bsn_edge.cli import label as label_cli
 from bsn_edge.cli import synth as synth_cli
 from bsn_edge.data import BlindSpotDataset, find_clips
@@ -39,6 +40,25 @@ def test_cached_batches_are_the_datasets_samples_with_the_same_augmentation(clip
             assert torch.equal(got[name][r], want[name]), name
     assert got["image"].shape == (len(picks), 3, 64, 128)
     assert 0 < flips < len(picks) or len(picks) < 4, "the draws flip some samples and not others"
+
+
+def test_repainted_batches_are_the_datasets_and_touch_only_vehicles_and_people(clips):
+    ds = BlindSpotDataset(clips, (64, 128), augment=True, label_name="T1s", seed=7, object_repaint=1.0)
+    plain_ds = BlindSpotDataset(clips, (64, 128), augment=True, label_name="T1s", seed=7)
+    cache = SampleCache.for_dataset(ds, None)
+    picks = [(k, 500 + k) for k in range(0, len(ds), max(1, len(ds) // 6))]
+    got = cache.batch(picks, augment=True, seed=7, object_repaint=1.0)
+    plain = cache.batch(picks, augment=True, seed=7)
+    touched = 0
+    for r, (k, draw) in enumerate(picks):
+        torch.testing.assert_close(got["image"][r], ds[(k, draw)]["image"], atol=1e-5, rtol=0)
+        torch.testing.assert_close(plain["image"][r], plain_ds[(k, draw)]["image"], atol=1e-5, rtol=0)
+        obj = torch.isin(got["semantic"][r], torch.tensor(sm.VEHICLES + sm.VULNERABLE))
+        assert torch.equal(got["image"][r][:, ~obj], plain["image"][r][:, ~obj])
+        touched += int((got["image"][r][:, obj] != plain["image"][r][:, obj]).any())
+        for name in ("depth", "semantic", "blindspot", "visibility"):
+            assert torch.equal(got[name][r], plain[name][r]), name
+    assert touched >= 2, "the synthetic clips have cars: some of them must be repainted"
 
 
 def test_a_disk_cache_is_reused_and_a_relabelled_clip_makes_a_new_one(clips, tmp_path):
