@@ -55,15 +55,6 @@ SODIUM = np.array([0.45, 0.78, 1.0], np.float32)       # street-light colour, BG
 LAMP_GLOW = np.array([2.2, 2.3, 2.4], np.float32)      # emitted radiance of lit headlamps
 TAIL_GLOW = np.array([0.15, 0.15, 1.2], np.float32)
 WINDOW_GLOW = np.array([0.35, 0.65, 0.9], np.float32)
-# Shading normals of vehicles (added to the box face's unit normal, then renormalised): how far body
-# sides roll under and over at sill and shoulder, corners round off, side glass leans in, and the
-# windscreen and rear window rake back (about 55 and 40 degrees from vertical).
-BODY_ROLL = 0.45
-CORNER_ROUND = 0.8
-GLASS_LEAN = 0.35
-WINDSCREEN_RAKE = 1.4
-REAR_RAKE = 0.85
-HORIZON_SOFT = 0.03    # half-width, in reflected-ray height, of the mirrored horizon line
 
 
 def periodic_noise(rng: np.random.Generator, size: int, cutoff: float) -> np.ndarray:
@@ -216,6 +207,7 @@ class Shader:
         nx = np.where(on_x, np.sign(rx), np.float32(0.0))
         ny = np.where(on_y, np.sign(ry), np.float32(0.0))
         nz = (~side_face).astype(np.float32)
+        ndotl = nx * sun[0] + ny * sun[1] + nz * sun[2]
         u = np.where(on_x, py - lo_b[:, 1][bi], px - lo_b[:, 0][bi])     # across the face, metres
         ulen = np.where(on_x, size_b[:, 1][bi], size_b[:, 0][bi])
         kind = boxes.kind[bi]
@@ -232,7 +224,7 @@ class Shader:
                            glow, spec)
         if kind_of[KIND_VEHICLE] or kind_of[KIND_CABIN]:
             k = np.flatnonzero((kind == KIND_VEHICLE) | (kind == KIND_CABIN))
-            self._vehicle(boxes, bi[k], kind[k], on_x[k], on_y[k], nx, ny, nz, u[k], ulen[k], z[k], height[k],
+            self._vehicle(boxes, bi[k], kind[k], on_x[k], on_y[k], nx[k], ny[k], u[k], ulen[k], z[k], height[k],
                           track[k], k, col, glow, spec, look)
         if kind_of[KIND_WHEEL]:
             k = np.flatnonzero(kind == KIND_WHEEL)
@@ -258,7 +250,6 @@ class Shader:
         if look.night and kind_of[KIND_POLE]:
             glow[(kind == KIND_POLE) & (z > height - 0.35)] = SODIUM * 3.0
 
-        ndotl = nx * sun[0] + ny * sun[1] + nz * sun[2]
         shade = 1.0 + 0.04 * tex
         lit = maps.object_lit(px, py, pz, track) if look.sun_strength > 0.15 else np.float32(1.0)
         sky_part = np.float32(look.ambient) * (0.7 + 0.3 * nz)
@@ -274,7 +265,7 @@ class Shader:
             nxk, nyk, nzk = nx[k], ny[k], nz[k]
             dn = (nxk * dk[0] + nyk * dk[1] + nzk * dk[2]) / n_
             fres = spec[k] * (0.06 + 0.94 * (1.0 - np.abs(dn)) ** 5)
-            env = self._environment(look, dk[2] / n_ - 2 * dn * nzk)
+            env = np.asarray(look.sky_horizon, np.float32) * np.float32(0.6 + 0.4 * (look.ambient > 0.3))
             add = (fres + 0.08 * spec[k])[:, None] * env
             if look.sun_strength > 0.15:
                 # sun glint: the mirror direction of the view ray about the face normal
@@ -314,12 +305,10 @@ class Shader:
         wall = ~glass
         col[k[wall]] *= (1.0 + 0.08 * tex[wall])[:, None]
 
-    def _vehicle(self, boxes, bi, kind, on_x, on_y, nx_all, ny_all, nz_all, u, ulen, z, height, track, k, col,
-                 glow, spec, look) -> None:
-        """Paint, glass, lamps, plates and bumpers of the vehicle pixels ``k``, and the normals of their
-        rounded panels and raked glass (in place; ``nx_all``, ``ny_all``, ``nz_all`` are over every object
-        pixel, the other arguments are already taken at ``k``)."""
-        nx, ny = nx_all[k], ny_all[k]
+    def _vehicle(self, boxes, bi, kind, on_x, on_y, nx, ny, u, ulen, z, height, track, k, col, glow, spec,
+                 look) -> None:
+        """Paint, glass, lamps, plates and bumpers of the vehicle pixels ``k`` (in place; the other
+        arguments are already taken at ``k``)."""
         facing = boxes.facing[bi]
         axis = np.full(len(bi), -1)
         sign = np.zeros(len(bi), np.float32)
@@ -361,32 +350,3 @@ class Shader:
             if look.night:
                 glow[k[lamp & front]] = LAMP_GLOW
                 glow[k[lamp & rear]] = TAIL_GLOW
-        car = boxes.cls[bi] == sm.CAR
-        self._bend(on_x, on_y, front, rear, cabin, sides & car, u, ulen, z / height, k, nx_all, ny_all, nz_all)
-
-    @staticmethod
-    def _bend(on_x, on_y, front, rear, cabin, sides, u, ulen, zr, k, nx, ny, nz) -> None:
-        """Curve the flat faces of car pixels ``k`` (``sides``) in their shading normals only: body sides roll
-        under at the sill and over at the shoulder, corners round off, glass leans in and windscreens
-        rake back. The boxes, and so depth, semantics and blind spots, stay exact."""
-        across = 2.0 * u / np.maximum(ulen, 1e-3) - 1.0               # -1 .. 1 along the face
-        corner = np.float32(CORNER_ROUND) * across ** 5 * sides
-        lean = np.where(cabin, np.where(front, WINDSCREEN_RAKE, np.where(rear, REAR_RAKE, GLASS_LEAN)),
-                        BODY_ROLL * (2.0 * zr - 1.0) ** 3) * sides
-        nxk = nx[k] + np.where(on_y, corner, 0.0)
-        nyk = ny[k] + np.where(on_x, corner, 0.0)
-        nzk = nz[k] + lean
-        norm = np.sqrt(nxk ** 2 + nyk ** 2 + nzk ** 2)
-        nx[k], ny[k], nz[k] = nxk / norm, nyk / norm, nzk / norm
-
-    @staticmethod
-    def _environment(look, rz: np.ndarray) -> np.ndarray:
-        """What a glossy surface mirrors along reflected rays of height ``rz`` (per unit length): the
-        sky above the horizon, the lit road below it, with a thin soft line between."""
-        hor = np.asarray(look.sky_horizon, np.float32)
-        sky = hor + np.clip(rz * 2.5, 0.0, 1.0)[:, None] * (np.asarray(look.sky_zenith, np.float32) - hor)
-        sky *= np.float32(0.6 + 0.4 * (look.ambient > 0.3))
-        ground_light = look.ambient + look.sun_strength * max(float(look.sun[2]), 0.0)
-        ground = np.asarray(look.road, np.float32) * np.float32(ground_light)
-        up = np.clip(0.5 + rz / (2 * HORIZON_SOFT), 0.0, 1.0)[:, None]
-        return (ground + up * (sky - ground)).astype(np.float32)

@@ -9,9 +9,7 @@ from bsn_edge.synth.boxes import KIND_CABIN, KIND_WHEEL, Boxes
 from bsn_edge.synth.light import GroundMaps
 from bsn_edge.synth.people import person_parts
 from bsn_edge.synth.sensor import Sensor, SensorModel
-from bsn_edge.synth.shading import WINDSCREEN_RAKE, Shader
 from bsn_edge.synth.vehicles import TYPES, Placed, draw_size, vehicle_parts
-from bsn_edge.synth.world import Look
 
 
 @pytest.mark.parametrize("name", sorted(TYPES))
@@ -84,33 +82,3 @@ def test_new_styles_render_their_character(style):
     else:
         n_people = len(np.unique(w.agents.boxes.track[w.agents.boxes.cls == sm.PERSON]))
         assert n_people > 50
-
-
-def test_car_panels_round_off_in_their_normals_and_windscreens_rake_back():
-    # four pixels on the +x flank of a car's body (sill, middle, shoulder, a corner) and one on its windscreen
-    on_x = np.array([True, True, True, True, False])
-    on_y = ~on_x
-    front = np.array([False, False, False, False, True])
-    cabin = front.copy()
-    u = np.array([2.0, 2.0, 2.0, 4.0, 0.8], np.float32)
-    ulen = np.array([4.0, 4.0, 4.0, 4.0, 1.6], np.float32)
-    zr = np.array([0.0, 0.5, 1.0, 0.5, 0.5], np.float32)
-    nx = np.array([1, 1, 1, 1, 0], np.float32)
-    ny = np.array([0, 0, 0, 0, 1], np.float32)
-    nz = np.zeros(5, np.float32)
-    Shader._bend(on_x, on_y, front, rear=np.zeros(5, bool), cabin=cabin, sides=np.ones(5, bool), u=u,
-                 ulen=ulen, zr=zr, k=np.arange(5), nx=nx, ny=ny, nz=nz)
-    np.testing.assert_allclose(nx**2 + ny**2 + nz**2, 1.0, atol=1e-6)
-    assert nz[0] < 0 < nz[2] and nz[1] == 0                          # sill rolls under, shoulder over
-    np.testing.assert_allclose(nz[0], -nz[2], atol=1e-6)
-    assert ny[3] > 0.5 and nz[3] == 0                                # the corner turns to the next face
-    rake = np.degrees(np.arctan2(nz[4], ny[4]))                      # from vertical
-    np.testing.assert_allclose(rake, np.degrees(np.arctan(WINDSCREEN_RAKE)), atol=1e-4)
-
-
-def test_glossy_surfaces_mirror_the_sky_above_the_horizon_and_the_road_below():
-    look = Look(sun=(0.0, 0.6, 0.8), sun_strength=0.5, ambient=0.45, road=(0.3, 0.3, 0.3))
-    env = Shader._environment(look, np.array([1.0, 0.0, -1.0], np.float32))
-    np.testing.assert_allclose(env[0], np.asarray(look.sky_zenith), rtol=1e-6)   # ambient > 0.3: unscaled
-    np.testing.assert_allclose(env[2], 0.3 * (0.45 + 0.5 * 0.8), rtol=1e-6)
-    np.testing.assert_allclose(env[1], (env[2] + np.asarray(look.sky_horizon)) / 2, rtol=1e-6)
