@@ -205,6 +205,8 @@ class SampleCache:
         b = torch.from_numpy(np.asarray(bias, np.float32))[:, None, None, None]
         x = (x * g + b).clamp_(0.0, 1.0)
         if any(p is not None for p in paints):
+            if semantic is None:
+                raise ValueError("repainting needs the samples' semantics (which pixels are objects)")
             x = repaint(x, semantic, paints)
         mean = torch.from_numpy(IMAGENET_MEAN)[None, :, None, None]
         std = torch.from_numpy(IMAGENET_STD)[None, :, None, None]
