@@ -39,6 +39,7 @@ NUM_CLASSES = len(NAMES)
 TRAVERSABLE: tuple[int, ...] = (ROAD, SIDEWALK)
 VEHICLES: tuple[int, ...] = (CAR, TRUCK, BUS, TRAIN, MOTORCYCLE, BICYCLE)
 VULNERABLE: tuple[int, ...] = (PERSON, RIDER)
+ROAD_USERS: tuple[int, ...] = VEHICLES + VULNERABLE   # what hides road and moves on it
 
 # Cityscapes colours, RGB.
 _PALETTE_RGB = np.array(

@@ -17,7 +17,6 @@ import torch
 
 from bsn_edge import semantics as sm
 
-OBJECT_CLASSES: tuple[int, ...] = sm.VEHICLES + sm.VULNERABLE
 GAIN = (0.35, 1.4)        # per-channel gain range: any hue, dark to bright
 GAMMA = (0.6, 1.7)        # tone-curve exponent range
 STAIN = 0.35              # largest amplitude of the smooth multiplicative stain
@@ -59,7 +58,7 @@ def repaint(rgb: torch.Tensor, semantic: torch.Tensor, paints: Sequence[Repaint 
         raise ValueError(f"{len(paints)} repaints for a batch of {rgb.shape[0]}")
     out = rgb.clone()
     h, w = rgb.shape[-2:]
-    ids = torch.tensor(OBJECT_CLASSES, device=semantic.device)
+    ids = torch.tensor(sm.ROAD_USERS, device=semantic.device)
     for r, p in enumerate(paints):
         if p is None:
             continue

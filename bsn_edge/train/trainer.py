@@ -195,7 +195,7 @@ def _depth_weights(semantic: torch.Tensor, object_weight: float) -> torch.Tensor
     elsewhere; None when the weight is 1 (plain mean)."""
     if object_weight == 1.0:
         return None
-    ids = torch.tensor(sm.VEHICLES + sm.VULNERABLE, device=semantic.device)
+    ids = torch.tensor(sm.ROAD_USERS, device=semantic.device)
     obj = torch.isin(semantic, ids)[:, None]
     return 1.0 + (object_weight - 1.0) * obj.to(torch.float32)
 
