@@ -8,7 +8,9 @@ Real data from ``../shared/data/real/`` (skipped, with a note, when absent):
   comes from the calibration's camera-to-vehicle extrinsics and the road plane fitted to the LiDAR
   (height above it, pitch and roll against it, yaw against the vehicle's x axis). Road points lie
   within 0.15 m of the plane; object points 0.3-2.5 m above it, within 8 m of the car's axis (on the
-  road: cars and people, the "car distance" figure).
+  road: cars and people, the "car distance" figure). Object points are also read in two bands of
+  height: 0.3-1 m (bumpers, doors, wheels: where a car meets the road) and 1-2.5 m (glass, roofs,
+  roof racks, people's upper bodies: where a real car shows the scene through or in its glass).
 - ``udacity_test_video.mp4``: intrinsics and distortion from ``camera_cal`` (the product's chessboard
   step), mounting from the product's own ``--mount`` step (lane width 3.7 m, a US highway lane);
   truth is the flat road's geometry in the ego lane (within 1.2 m of the car's axis) where no car is.
@@ -46,6 +48,7 @@ REAL = REAL_DATA
 BINS = ((5, 10), (10, 20), (20, 40), (5, 40))
 ROAD_TOL_M = 0.15
 OBJECT_M = (0.3, 2.5)
+OBJECT_BANDS = {"object 0.3-1 m": (0.3, 1.0), "object 1-2.5 m": (1.0, 2.5)}   # heights above the road
 CORRIDOR_M = 8.0
 OBJECT_CELL_M = 0.4
 OBJECT_MIN_POINTS = 15
@@ -59,12 +62,21 @@ US_LANE_M = 3.7
 
 class Sample:
     """One real frame with its camera and sparse truth: pixels ``uv``, z-depth ``z``, ``kind`` road/object,
-    and ``obj``, the object each truth point belongs to (-1 for none)."""
+    ``obj``, the object each truth point belongs to (-1 for none), and ``above``, each point's height
+    above the road plane in metres (NaN where not known)."""
 
     def __init__(self, name: str, image: np.ndarray, camera: Calibration, uv: np.ndarray, z: np.ndarray,
-                 kind: np.ndarray, obj: np.ndarray | None = None) -> None:
+                 kind: np.ndarray, obj: np.ndarray | None = None, above: np.ndarray | None = None) -> None:
         self.name, self.image, self.camera, self.uv, self.z, self.kind = name, image, camera, uv, z, kind
         self.obj = np.full(len(z), -1) if obj is None else obj
+        self.above = np.full(len(z), np.nan) if above is None else above
+
+    def points(self, reading: str) -> np.ndarray:
+        """Which truth points a per-point ``reading`` (a kind, or a band of :data:`OBJECT_BANDS`) reads."""
+        if reading in OBJECT_BANDS:
+            lo, hi = OBJECT_BANDS[reading]
+            return (self.kind == "object") & (self.above >= lo) & (self.above < hi)
+        return self.kind == reading
 
 
 # source and licence of each real source's frames (../shared/data/real/README.md)
@@ -145,7 +157,7 @@ def _ddad_sample(name: str, image: np.ndarray, K: Intrinsics, R_vc: np.ndarray, 
     sel = keep & (kind == "object")
     obj[sel] = _objects((points_v[sel] - t_vc) @ fwd, lateral[sel])
     return Sample(name, image, Calibration.of(K, (), mounting, method="extrinsics and LiDAR road plane"),
-                  uv[keep], pc[keep, 2], kind[keep], obj[keep])
+                  uv[keep], pc[keep, 2], kind[keep], obj[keep], above[keep])
 
 
 def ddad_samples(cameras: str = "front") -> list[Sample]:
@@ -284,8 +296,9 @@ def main(argv: list[str] | None = None) -> int:
     uda, uda_info = udacity_samples()
     # (key, title, samples, readings): the other DDAD cameras show the car's own body low in the
     # picture, where the roof LiDAR sees road the camera cannot, so only objects are read there
-    sets = [("ddad", "DDAD front (LiDAR)", ddad_samples("front"), ("road", "object", "car distance")),
-            ("ddad_other", "DDAD other cameras (LiDAR)", ddad_samples("other"), ("object", "car distance")),
+    bands = tuple(OBJECT_BANDS)
+    sets = [("ddad", "DDAD front (LiDAR)", ddad_samples("front"), ("road", "object", *bands, "car distance")),
+            ("ddad_other", "DDAD other cameras (LiDAR)", ddad_samples("other"), ("object", *bands, "car distance")),
             ("udacity", "Udacity (lane geometry)", uda, ("road",))]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -316,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
                         if r == "car distance":
                             pd, td = object_distances(pr, s)
                         else:
-                            pd, td = pr[s.kind == r], s.z[s.kind == r]
+                            pd, td = pr[s.points(r)], s.z[s.points(r)]
                         got[r][0].append(pd)
                         got[r][1].append(td)
                     if way == "model camera" and s is samples[0]:

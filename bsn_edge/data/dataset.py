@@ -14,7 +14,7 @@ from torch.utils.data import Dataset
 from bsn_edge import semantics as sm
 from bsn_edge.calibration.camera_file import clip_camera
 from bsn_edge.camera import Intrinsics
-from bsn_edge.data.repaint import draw_repaint, repaint
+from bsn_edge.data.repaint import draw_repaint, draw_see_through, repaint, see_through
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.model_frame import ModelFrame, model_camera
 from bsn_edge.mounting import Mounting
@@ -123,9 +123,11 @@ class BlindSpotDataset(Dataset):
 
     def __init__(self, clips: list[Clip], size: tuple[int, int], augment: bool = False,
                  label_name: str = "T5s", seed: int = 0, camera: Intrinsics | None = None,
-                 mounting: Mounting | None = None, object_repaint: float = 0.0) -> None:
-        if not 0.0 <= object_repaint <= 1.0:
-            raise ValueError(f"object_repaint is a share of samples in [0, 1], got {object_repaint}")
+                 mounting: Mounting | None = None, object_repaint: float = 0.0,
+                 object_see_through: float = 0.0) -> None:
+        for name, share in (("object_repaint", object_repaint), ("object_see_through", object_see_through)):
+            if not 0.0 <= share <= 1.0:
+                raise ValueError(f"{name} is a share of samples in [0, 1], got {share}")
         self.items = [(c, f) for c in clips for f in c.frames]
         if not self.items:
             raise ValueError("dataset is empty")
@@ -138,6 +140,7 @@ class BlindSpotDataset(Dataset):
         self._warps: dict[Path, ClipWarps] = {}
         self.augment = augment
         self.object_repaint = object_repaint
+        self.object_see_through = object_see_through
         self.label_name = label_name
         self.seed = seed
 
@@ -188,10 +191,15 @@ class BlindSpotDataset(Dataset):
                 rgb = rgb[:, ::-1]
             rgb = np.clip(rgb * rng.uniform(0.8, 1.2) + rng.uniform(-0.08, 0.08), 0, 1)
             paint = draw_repaint(rng, self.object_repaint, rgb.shape[:2])
-            if paint is not None:
+            through = draw_see_through(rng, self.object_see_through, rgb.shape[:2])
+            if paint is not None or through is not None:
                 x = torch.from_numpy(np.ascontiguousarray(rgb.transpose(2, 0, 1)))[None]
                 sem_t = torch.from_numpy(np.ascontiguousarray(a["semantic"]))[None]
-                rgb = repaint(x, sem_t, [paint])[0].numpy().transpose(1, 2, 0)
+                if paint is not None:
+                    x = repaint(x, sem_t, [paint])
+                if through is not None:
+                    x = see_through(x, sem_t, [through])
+                rgb = x[0].numpy().transpose(1, 2, 0)
         img = (rgb - IMAGENET_MEAN) / IMAGENET_STD
         sem = a["semantic"].astype(np.int64)
         return {

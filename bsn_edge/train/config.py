@@ -44,10 +44,13 @@ class DataConfig:
     camera_pitch_deg: float = MODEL_PITCH_DEG
     # share of training samples whose vehicles and people are repainted (bsn_edge.data.repaint)
     object_repaint: float = 0.0
+    # share of training samples that show the scene through their vehicles and people (glass)
+    object_see_through: float = 0.0
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.object_repaint <= 1.0:
-            raise ValueError(f"data.object_repaint is a share of samples in [0, 1], got {self.object_repaint}")
+        for name in ("object_repaint", "object_see_through"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"data.{name} is a share of samples in [0, 1], got {getattr(self, name)}")
         if len(self.size) != 2 or min(self.size) < 32 or any(s % 32 for s in self.size):
             raise ValueError(f"data.size must be two multiples of 32 (H, W), got {self.size}")
         if not 0 < self.fraction <= 1:

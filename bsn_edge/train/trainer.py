@@ -107,7 +107,8 @@ def training_batches(ds, cache: SampleCache | None, batch: int, world: int, rank
         return batch_stream(ds, batch, world, rank, seed, workers, start, device)
     stream = BatchStream(len(cache), batch, seed, start, world, rank)
     dev = device or torch.device("cpu")
-    return (_to(cache.batch(picks, ds.augment, ds.seed, ds.object_repaint), dev) for picks in stream)
+    return (_to(cache.batch(picks, ds.augment, ds.seed, ds.object_repaint, ds.object_see_through), dev)
+            for picks in stream)
 
 
 def cpu_has_native_bf16() -> bool:
@@ -185,7 +186,8 @@ def datasets(cfg: Config, data_dir: str | Path) -> Datasets:
     camera, mounting = cfg.data.model_camera()
     return Datasets(split, train, val, skipped,
                     BlindSpotDataset(train, cfg.data.size, augment=True, label_name=cfg.data.label, camera=camera,
-                                     mounting=mounting, seed=cfg.train.seed, object_repaint=cfg.data.object_repaint),
+                                     mounting=mounting, seed=cfg.train.seed, object_repaint=cfg.data.object_repaint,
+                                     object_see_through=cfg.data.object_see_through),
                     BlindSpotDataset(val, cfg.data.size, label_name=cfg.data.label, camera=camera,
                                      mounting=mounting) if val else None)
 

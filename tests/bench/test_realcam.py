@@ -59,6 +59,14 @@ def test_front_camera_mounting_kinds_and_object_distances():
     pred_d, true_d = object_distances(s.z * 1.3, s)
     assert sorted(true_d) == pytest.approx([8.0, 20.0], abs=0.1)
     assert pred_d / true_d == pytest.approx([1.3, 1.3])
+    # heights above the road: the faces span 0.5-1.5 m, the van's roof is at 1.5 m
+    obj = s.kind == "object"
+    assert s.above[obj].min() == pytest.approx(0.5, abs=1e-6) and s.above[obj].max() == pytest.approx(1.5, abs=1e-6)
+    low, high = s.points("object 0.3-1 m"), s.points("object 1-2.5 m")
+    assert not (low & high).any() and np.array_equal(low | high, obj)
+    assert np.allclose(s.above[low], np.round(s.above[low] / 0.05) * 0.05) and s.above[low].max() < 1.0
+    # the camera is 1.6 m up: a point below its height shows below the image centre row
+    assert (s.uv[low, 1] > K.cy).all() and np.array_equal(s.points("road"), s.kind == "road")
 
 
 def test_other_cameras_look_their_own_way():

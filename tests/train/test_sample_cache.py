@@ -61,6 +61,26 @@ def test_repainted_batches_are_the_datasets_and_touch_only_vehicles_and_people(c
     assert touched >= 2, "the synthetic clips have cars: some of them must be repainted"
 
 
+def test_see_through_batches_are_the_datasets_and_touch_only_vehicles_and_people(clips):
+    kw = dict(augment=True, label_name="T1s", seed=3)
+    ds = BlindSpotDataset(clips, (64, 128), object_repaint=0.5, object_see_through=1.0, **kw)
+    painted_ds = BlindSpotDataset(clips, (64, 128), object_repaint=0.5, **kw)
+    cache = SampleCache.for_dataset(ds, None)
+    picks = [(k, 700 + k) for k in range(0, len(ds), max(1, len(ds) // 6))]
+    got = cache.batch(picks, augment=True, seed=3, object_repaint=0.5, object_see_through=1.0)
+    painted = cache.batch(picks, augment=True, seed=3, object_repaint=0.5)
+    touched = 0
+    for r, (k, draw) in enumerate(picks):
+        torch.testing.assert_close(got["image"][r], ds[(k, draw)]["image"], atol=1e-5, rtol=0)
+        torch.testing.assert_close(painted["image"][r], painted_ds[(k, draw)]["image"], atol=1e-5, rtol=0)
+        obj = torch.isin(got["semantic"][r], torch.tensor(sm.ROAD_USERS))
+        assert torch.equal(got["image"][r][:, ~obj], painted["image"][r][:, ~obj])
+        touched += int((got["image"][r][:, obj] != painted["image"][r][:, obj]).any())
+        for name in ("depth", "semantic", "blindspot", "visibility"):
+            assert torch.equal(got[name][r], painted[name][r]), name
+    assert touched >= 2, "the synthetic clips have cars: the scene must show through some of them"
+
+
 def test_a_disk_cache_is_reused_and_a_relabelled_clip_makes_a_new_one(clips, tmp_path):
     ds = BlindSpotDataset(clips[:1], (64, 128), label_name="T1s")
     first = SampleCache.for_dataset(ds, tmp_path)

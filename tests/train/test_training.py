@@ -45,6 +45,9 @@ def test_config_overrides_and_errors(tmp_path):
         load_config(SMOKE, ["optim.lr=1"])
     with pytest.raises(ValueError, match="unknown model"):
         load_config(SMOKE, ["model.name=\"huge\""])
+    for name in ("object_repaint", "object_see_through"):
+        with pytest.raises(ValueError, match=f"data.{name} is a share of samples in"):
+            load_config(SMOKE, [f"data.{name}=1.5"])
 
 
 def test_split_is_by_clip_and_stable(data):
