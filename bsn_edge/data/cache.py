@@ -207,7 +207,8 @@ class SampleCache:
         b = torch.from_numpy(np.asarray(bias, np.float32))[:, None, None, None]
         x = (x * g + b).clamp_(0.0, 1.0)
         if any(p is not None for p in (*paints, *throughs)) and semantic is None:
-            raise ValueError("repainting needs the samples' semantics (which pixels are objects)")
+            raise ValueError("repainting or seeing through objects needs the samples' semantics "
+                             "(which pixels are objects)")
         if any(p is not None for p in paints):
             x = repaint(x, semantic, paints)
         if any(t is not None for t in throughs):

@@ -9,6 +9,7 @@ from bsn_edge.cli import label as label_cli
 from bsn_edge.cli import synth as synth_cli
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.data.cache import SampleCache, dataset_key
+from bsn_edge.data.repaint import SeeThrough
 from bsn_edge.models import create_teacher
 from bsn_edge.sequence.images import DEPTH_SCALE
 from bsn_edge.train.losses import pairwise_similarity
@@ -79,6 +80,9 @@ def test_see_through_batches_are_the_datasets_and_touch_only_vehicles_and_people
         for name in ("depth", "semantic", "blindspot", "visibility"):
             assert torch.equal(got[name][r], painted[name][r]), name
     assert touched >= 2, "the synthetic clips have cars: the scene must show through some of them"
+    through = SeeThrough((4, 0), 0.5, np.ones((3, 6), np.float32))
+    with pytest.raises(ValueError, match="needs the samples' semantics"):
+        cache.images(np.array([0]), np.zeros(1, bool), np.ones(1), np.zeros(1), throughs=[through])
 
 
 def test_a_disk_cache_is_reused_and_a_relabelled_clip_makes_a_new_one(clips, tmp_path):
