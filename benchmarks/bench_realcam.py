@@ -309,7 +309,9 @@ def main(argv: list[str] | None = None) -> int:
              "with the camera's calibration (`ModelFrame`), depth brought back by the height ratio. "
              f"Udacity camera from the product's own steps: {uda_info['mounting']}.", "",
              "Readings: `road` and `object` are per LiDAR point (objects: 0.3-2.5 m above the road plane, "
-             f"within {CORRIDOR_M:g} m of the camera's heading: cars, people, poles, hedges); `car distance` is "
+             f"within {CORRIDOR_M:g} m of the camera's heading: cars, people, poles, hedges; "
+             + ", ".join(f"`{r}`: those {lo:g}-{hi:g} m above it" for r, (lo, hi) in OBJECT_BANDS.items())
+             + "); `car distance` is "
              f"per object (points on touching {OBJECT_CELL_M:g} m ground cells, at least {OBJECT_MIN_POINTS} "
              f"in view), its nearest ({NEAREST_PCT}th percentile) depth, binned by the true distance: what "
              "the bus carries. Frames: " + ", ".join(f"{t} {len(s)}" for _, t, s, _ in sets) + ".", ""]
