@@ -331,7 +331,8 @@ def main(argv: list[str] | None = None) -> int:
                         if r == "car distance":
                             pd, td = object_distances(pr, s)
                         else:
-                            pd, td = pr[s.points(r)], s.z[s.points(r)]
+                            m = s.points(r)
+                            pd, td = pr[m], s.z[m]
                         got[r][0].append(pd)
                         got[r][1].append(td)
                     if way == "model camera" and s is samples[0]:
