@@ -6,6 +6,7 @@ import json
 import os
 import platform
 import statistics
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -103,14 +104,19 @@ def train_run(data: Path, out: Path, sets: list[str]) -> Path:
     run = Run(out)
     if run.finished():
         return out
-    argv = ["--data", str(data), "--out", str(out), "--quiet"]
+    # progress bars only where someone watches; a log gets one line when a run starts and one when it ends
+    argv = ["--data", str(data), "--out", str(out), *(() if sys.stderr.isatty() else ("--quiet",))]
     if run.state_path.is_file() or run.teacher_state_path.is_file():
         print(f"{out}: going on from its saved training state", flush=True)
         argv.append("--resume")
+    else:
+        print(f"{out}: training", flush=True)
     for s in sets:
         argv += ["--set", s]
+    t0 = time.perf_counter()
     if train_cli.main(argv):
         raise RuntimeError(f"training {out} failed")
+    print(f"{out}: trained in {time.perf_counter() - t0:.0f} s", flush=True)
     return out
 
 
