@@ -79,3 +79,46 @@ def test_other_cameras_look_their_own_way():
     assert side.camera.mounting.yaw_deg == pytest.approx(0.0, abs=1e-6)
     with pytest.raises(ValueError, match="yaw_deg"):
         _ddad_sample("front", img, K, _camera(60.0), t_vc, _scene())
+
+
+def test_frame_errors_sum_each_frames_points_in_the_span_and_pool_them():
+    from benchmarks.bench_realcam import FrameErrors
+    preds = [np.array([6.0, 12.0, 50.0, 0.0]), np.array([9.0])]
+    truths = [np.array([5.0, 10.0, 45.0, 8.0]), np.array([10.0])]
+    e = FrameErrors.of(preds, truths)
+    # frame 0: 0.2 + 0.2 (45 m is out of 5-40 m, a point without a prediction is left out); frame 1: 0.1
+    np.testing.assert_allclose(e.sums, [0.4, 0.1])
+    np.testing.assert_array_equal(e.counts, [2, 1])
+    assert e.abs_rel() == pytest.approx(0.5 / 3)
+    np.testing.assert_allclose(e.abs_rel(np.array([[1, 1], [0, 1]])), [0.1, 0.5 / 3])
+
+
+def test_the_interval_is_the_frames_spread_and_a_models_difference_is_paired():
+    from benchmarks.bench_realcam import FrameErrors, interval_table
+    same = FrameErrors(np.full(6, 2.0), np.full(6, 10))                 # every frame 0.2
+    spread = FrameErrors(np.array([1.0, 1.0, 1.0, 1.0, 1.0, 7.0]), np.full(6, 10))   # pooled 0.2 too
+    worse = FrameErrors(spread.sums * 1.1, spread.counts)               # 10 % worse in every frame
+    lines, out = interval_table({"flat / road": {"A": same, "B": spread},
+                                 "spread / road": {"A": spread, "B": spread}}, ["A", "B"])
+    assert len(lines) == 2 + 2
+    # identical frames leave nothing to resample
+    assert out["flat / road"]["A"]["interval"] == pytest.approx([0.2, 0.2])
+    # one frame far off: the interval holds the pooled value and reaches towards both extremes
+    lo, hi = out["flat / road"]["B"]["interval"]
+    assert out["flat / road"]["B"]["abs_rel"] == pytest.approx(0.2)
+    assert 0.1 <= lo < 0.2 < hi <= 0.7
+    # a model against itself differs by exactly 0 in every resample: not apart
+    assert out["spread / road"]["B"]["minus_first"] == {"diff": 0.0, "interval": [0.0, 0.0], "apart": False}
+    # 10 % worse in every frame: the paired difference is apart from 0 though the two intervals overlap
+    _, out = interval_table({"spread / road": {"A": spread, "C": worse}}, ["A", "C"])
+    d = out["spread / road"]["C"]["minus_first"]
+    assert d["apart"] and d["interval"][0] > 0 and d["diff"] == pytest.approx(0.02)
+    assert out["spread / road"]["C"]["interval"][0] < out["spread / road"]["A"]["interval"][1]
+
+
+def test_two_models_of_one_file_name_are_refused_before_anything_runs(tmp_path, capsys):
+    from benchmarks.bench_realcam import main
+    with pytest.raises(SystemExit) as e:
+        main(["--out", str(tmp_path / "out"), "--model", "a/model.onnx", "--model", "b/model.onnx"])
+    assert e.value.code == 2 and "named alike" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
