@@ -47,7 +47,7 @@ from bsn_edge.calibration.mounting_step import calibrate_mounting
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.cli.demo import DEFAULT_MODEL
-from bsn_edge.metrics import depth_by_bin
+from bsn_edge.metrics import bin_name, depth_by_bin
 from bsn_edge.mounting import Mounting
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.media import read_video
@@ -295,14 +295,10 @@ class FrameErrors:
 
     @classmethod
     def of(cls, preds: list[np.ndarray], truths: list[np.ndarray]) -> FrameErrors:
-        """From per-frame predictions and truths (points without a prediction, <= 0, are left out)."""
-        lo, hi = SPAN_M
-        sums, counts = [], []
-        for pred, truth in zip(preds, truths, strict=True):
-            m = (truth >= lo) & (truth < hi) & (pred > 0)
-            sums.append(float(np.abs(pred[m] / truth[m] - 1).sum()))
-            counts.append(int(m.sum()))
-        return cls(np.array(sums), np.array(counts))
+        """From per-frame predictions and truths, scored as :func:`depth_by_bin` scores them."""
+        stats = [depth_by_bin(pred, truth, (SPAN_M,)).get(bin_name(*SPAN_M), {"n": 0, "abs_rel": 0.0})
+                 for pred, truth in zip(preds, truths, strict=True)]
+        return cls(np.array([st["abs_rel"] * st["n"] for st in stats]), np.array([st["n"] for st in stats]))
 
     def abs_rel(self, frames: np.ndarray | None = None) -> np.ndarray | float:
         """AbsRel over all frames, or one value per row of ``frames`` (frame indices, with repeats); NaN
@@ -340,11 +336,12 @@ def interval_table(errors: dict[str, dict[str, FrameErrors]], models: list[str])
         cells, rec = [], {}
         for m in models:
             e = per[m]
-            lo, hi = interval(e.abs_rel(idx))
+            resampled = e.abs_rel(idx)
+            lo, hi = interval(resampled)
             rec[m] = {"abs_rel": e.abs_rel(), "interval": [lo, hi], "n": int(e.counts.sum())}
             cell = f"{e.abs_rel():.3f} [{lo:.3f}, {hi:.3f}]"
             if m != base:
-                d_lo, d_hi = interval(e.abs_rel(idx) - ref)
+                d_lo, d_hi = interval(resampled - ref)
                 d = e.abs_rel() - per[base].abs_rel()
                 apart = d_lo > 0 or d_hi < 0
                 rec[m]["minus_first"] = {"diff": d, "interval": [d_lo, d_hi], "apart": apart}

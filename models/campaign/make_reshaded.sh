@@ -2,9 +2,10 @@
 # usage (from the campaign folder): make_reshaded.sh DATA OUT; BIN points at the checkout's .venv/bin
 # The same clips as DATA rendered again by the shader of the checkout BIN belongs to. A street-world clip
 # is hard-linked whole from DATA, then the images of its labelled frames (the only ones training reads)
-# are rendered again from its own synth_config.json: same seed, so the same scene, which is checked (depth and blind spots equal
-# DATA's on every re-rendered frame); its labels are made from depth, semantics and poses only, so they
-# stay. Clips of other renderers (the earlier world) are hard-linked whole. Finished clips are skipped.
+# are rendered again from its own synth_config.json: same seed, so the same scene, which is checked
+# (depth and blind spots equal DATA's on every re-rendered frame); its labels are made from depth,
+# semantics and poses only, so they stay. Clips of other renderers (the earlier world) are hard-linked
+# whole. Finished clips are skipped.
 set -euo pipefail
 BIN=${BIN:-.venv/bin}
 SRC=${1:?the data folder to re-render}
