@@ -1,6 +1,8 @@
 """A trained run -> the sealed ONNX file the runtime reads (fp32 or int8), with its summary beside it.
 
-One function for ``bsn-export`` and for anything else that ships a run (``bsn-adapt --export``).
+One function for ``bsn-export`` and for anything else that ships a run (``bsn-adapt --export``),
+and one that brings an int8 file exported before the integer input (``export.integer_input``) up
+to date without re-exporting it.
 """
 
 from __future__ import annotations
@@ -13,11 +15,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import onnx
 
+from bsn_edge.card import ModelCard
 from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.export.fused import check_parity, to_onnx
+from bsn_edge.export.integer_input import INTEGER_INPUT, integer_input
 from bsn_edge.export.quantize import QuantConfig, quantize
-from bsn_edge.runtime.model_file import session
+from bsn_edge.export.seal import read_card, seal
+from bsn_edge.runtime import selftest
+from bsn_edge.runtime.model_file import ModelFile, session
 from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.train.run import Run
 
@@ -63,11 +70,16 @@ def export_run(checkpoint: str | Path, out: str | Path, size: tuple[int, int] | 
                            int8_vs_fp32=compare(fp32, q, frames, sealed.threshold))
             final = q
         final.replace(out)
+    write_summary(out, summary, sealed)
+    return summary
+
+
+def write_summary(out: Path, summary: dict[str, Any], sealed: ModelCard) -> None:
+    """``summary`` with ``sealed``'s card (its self-test answer elided) as ``out`` with ``.json``."""
     card_record = sealed.to_dict()
     card_record["self_test"] = dataclasses.asdict(sealed.self_test) | {"prob": "...", "depth": "..."}
     summary["card"] = card_record
-    atomic_write_bytes(out.with_suffix(".json"), (json.dumps(summary, indent=1) + "\n").encode())
-    return summary
+    atomic_write_bytes(Path(out).with_suffix(".json"), (json.dumps(summary, indent=1) + "\n").encode())
 
 
 def compare(fp32: Path, int8: Path, frames: np.ndarray, threshold: float) -> dict[str, float]:
@@ -82,3 +94,46 @@ def compare(fp32: Path, int8: Path, frames: np.ndarray, threshold: float) -> dic
         rel.append(float(np.median(np.abs(da - db) / np.maximum(da, 1e-3))))
     return {"frames": len(frames), "max_abs_prob": dp, "mask_agreement": float(np.mean(agree)),
             "depth_median_rel": float(np.median(rel))}
+
+
+def upgrade_integer_input(src: str | Path, out: str | Path, frames: int = 4) -> dict[str, Any]:
+    """Give the sealed int8 model ``src``, exported before the integer input, its integer input:
+    written resealed to ``out`` only when its outputs equal ``src``'s to the bit on the self-test
+    frame and ``frames`` random frames; the summary beside ``src`` (if any) is carried to ``out``'s
+    with the new card and what was replaced, and returned. ``ValueError`` for a damaged seal, a model
+    without the float input chain, or any output that differs."""
+    card = read_card(src)
+    if card.graph_sha256 != ModelFile.read(src).graph_sha256:
+        raise ValueError(f"{src}: the graph does not match its seal (damaged or edited); re-export it instead")
+    model = onnx.load(str(src))
+    done = integer_input(model)
+    if done is None:
+        raise ValueError(f"{src}: no float input chain to make integer (already done, fp32, or a model that "
+                         "resizes the frame before normalising it)")
+    onnx.checker.check_model(model)
+    del model.metadata_props[:]
+    data = model.SerializeToString()
+    before, after = session(src), session(data)
+    h, w = card.input_size
+    rng = np.random.default_rng(0)
+    for f in [selftest.test_frame(h, w), *(rng.integers(0, 256, (h, w, 3), dtype=np.uint8) for _ in range(frames))]:
+        for name, a, b in zip(("blindspot", "depth"), before.run(None, {"frame": f[None]}),
+                              after.run(None, {"frame": f[None]}), strict=True):
+            if not np.array_equal(a, b):
+                raise ValueError(f"{src}: with the integer input its {name} differs by up to "
+                                 f"{float(np.abs(a - b).max()):.3g}; left as it is")
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=Path(out).parent) as tmp:
+        path = Path(tmp) / "integer.onnx"
+        path.write_bytes(data)
+        sealed = seal(path, card.replace(quantization=f"{card.quantization}, {INTEGER_INPUT}", graph_sha256="",
+                                         self_test=None), out)
+    old = Path(src).with_suffix(".json")
+    summary = json.loads(old.read_text()) if old.is_file() else {}
+    quant = summary.setdefault("quantization", {})
+    for name in done.replaced:
+        quant.get("float_nodes", {}).pop(name, None)
+    quant.update(scheme=sealed.quantization, integer_input=dataclasses.asdict(done))
+    summary["upgraded_from"] = str(src)
+    write_summary(out, summary, sealed)
+    return summary

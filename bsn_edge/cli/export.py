@@ -44,6 +44,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="instead of exporting: seal a model exported before models were sealed (writes its card "
                         "with the graph's sha256 and a self-test answer to --out). Only for a file you trust: "
                         "sealing cannot tell whether it was damaged before")
+    p.add_argument("--integer-input", metavar="MODEL.onnx",
+                   help="instead of exporting: rewrite an int8 model exported before the integer input so its frame "
+                        "is normalised by an exact integer convolution on the uint8 frame (no float frame), resealed "
+                        "to --out; written only if its outputs equal the original's to the bit")
     p.add_argument("--ship-run", metavar="DIR",
                    help="also write the run itself beside the model: D and B weights and the teacher in fp16, "
                         "each with its sha256, the card, config and history (no optimizer state), so users can "
@@ -108,8 +112,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.reseal:
         code = reseal(Path(args.reseal), out)
         return code or signed(out, args.sign)
+    if args.integer_input:
+        from bsn_edge.export.pipeline import upgrade_integer_input
+        try:
+            summary = upgrade_integer_input(args.integer_input, out)
+        except (FileNotFoundError, ValueError) as e:
+            return fail(PROG, str(e))
+        replaced = summary["quantization"]["integer_input"]["replaced"]
+        print(f"wrote {out}: the frame's preparation ({', '.join(replaced)}) as one integer convolution; "
+              "outputs equal to the original's to the bit; resealed")
+        return signed(out, args.sign)
     if not args.checkpoint:
-        return fail(PROG, "--checkpoint RUN is required (or --reseal MODEL.onnx)")
+        return fail(PROG, "--checkpoint RUN is required (or --reseal / --integer-input MODEL.onnx)")
     if args.int8 and not args.calib:
         return fail(PROG, "--int8 needs --calib DIR_OR_VIDEO (frames to calibrate activation ranges on)")
     if args.ship_run and Run(args.ship_run).exists() and not args.force:
@@ -127,8 +141,8 @@ def main(argv: list[str] | None = None) -> int:
         c = summary["int8_vs_fp32"]
         print(f"int8 vs fp32 on {c['frames']} frames: max |dp| {c['max_abs_prob']:.3f}, mask agreement "
               f"{100 * c['mask_agreement']:.2f} %, depth median rel. diff {100 * c['depth_median_rel']:.2f} %; "
-              f"{len(summary['quantization']['float_nodes'])} nodes kept float (the frame's preparation and the "
-              "output heads; reasons in the summary)")
+              f"{len(summary['quantization']['float_nodes'])} nodes kept float (the output heads and what of the "
+              "frame's preparation is not integer; reasons in the summary)")
     if signed(out, args.sign):
         return 2
     if args.ship_run:
