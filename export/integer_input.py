@@ -41,8 +41,8 @@ class IntegerInput:
 
 def _integer_weights(w: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Per output channel: int8 weights, their scale and the int32 bias (input scale 1), and the
-    bias's rounding in the convolution's output units; None when a channel's weights are not all
-    integer multiples of one step with at most ``MAX_WEIGHT`` steps."""
+    bias's rounding in the convolution's output units; None when a channel's weights are all zero
+    or not all integer multiples of one step with at most ``MAX_WEIGHT`` steps."""
     q = np.zeros(w.shape, np.int8)
     scale = np.zeros(w.shape[0], np.float32)
     bias = np.zeros(w.shape[0], np.int32)
@@ -50,10 +50,8 @@ def _integer_weights(w: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarr
     for o in range(w.shape[0]):
         wo = w[o].astype(np.float64)
         top = float(np.abs(wo).max())
-        if top == 0.0:
-            scale[o], q[o], bias[o] = 1.0, 0, int(np.rint(b[o]))
-            error[o] = abs(float(b[o]) - float(bias[o]))
-            continue
+        if top == 0.0:     # a constant channel: not the fixed normalisation this is for
+            return None
         best = None
         for k in range(MAX_WEIGHT, 0, -1):
             step = top / k

@@ -91,6 +91,7 @@ def test_imagenet_normalisation_is_exact_in_integers():
 def test_weights_that_are_not_one_step_apart_leave_the_graph_alone():
     w = np.array([[[[1.0]], [[0.37]], [[0.0]]]], np.float32)   # 0.37 is no k / 63 of 1.0
     assert _integer_weights(w, np.zeros(1, np.float32)) is None
+    assert _integer_weights(np.zeros((1, 3, 1, 1), np.float32), np.full(1, 0.3, np.float32)) is None
 
 
 def test_a_graph_without_the_chain_is_untouched(quantized):
