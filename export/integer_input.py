@@ -116,7 +116,7 @@ def integer_input(model: onnx.ModelProto) -> IntegerInput | None:
     if pad is not None:
         mode = next((helper.get_attribute_value(a) for a in pad.attribute if a.name == "mode"), b"constant")
         value = pad.input[2] if len(pad.input) > 2 else ""
-        if mode != b"constant" or (value and float(numpy_helper.to_array(init[value])) != 0.0) \
+        if mode != b"constant" or (value and (value not in init or float(numpy_helper.to_array(init[value])) != 0.0)) \
                 or (len(pad.input) > 3 and pad.input[3]):
             return None
         tail = pad.output[0]
