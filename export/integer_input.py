@@ -52,7 +52,7 @@ def _integer_weights(w: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarr
         top = float(np.abs(wo).max())
         if top == 0.0:     # a constant channel: not the fixed normalisation this is for
             return None
-        best = None
+        best = None     # (off, step): the most steps per weight with an exact bias, else the nearest bias
         for k in range(MAX_WEIGHT, 0, -1):
             step = top / k
             steps = wo / step
@@ -60,13 +60,14 @@ def _integer_weights(w: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarr
                 continue
             ratio = float(b[o]) / step
             off = abs(ratio - np.rint(ratio))
-            exact = off <= EXACT + FLOAT32 * abs(ratio)
-            # the most steps among exact biases, else the nearest
-            if best is None or (exact and not best[3]) or (not best[3] and off < best[0]):
-                best = (off, k, step, exact)
+            if off <= EXACT + FLOAT32 * abs(ratio):
+                best = (off, step)
+                break
+            if best is None or off < best[0]:
+                best = (off, step)
         if best is None:
             return None
-        off, k, step, _ = best
+        off, step = best
         scale[o] = step
         q[o] = np.rint(wo / step).astype(np.int8)
         bias[o] = int(np.rint(float(b[o]) / step))

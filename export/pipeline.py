@@ -22,7 +22,7 @@ from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.export.fused import check_parity, to_onnx
 from bsn_edge.export.integer_input import INTEGER_INPUT, integer_input
 from bsn_edge.export.quantize import QuantConfig, quantize
-from bsn_edge.export.seal import read_card, seal
+from bsn_edge.export.seal import seal
 from bsn_edge.runtime import selftest
 from bsn_edge.runtime.model_file import ModelFile, session
 from bsn_edge.sequence.images import atomic_write_bytes
@@ -102,8 +102,9 @@ def upgrade_integer_input(src: str | Path, out: str | Path, frames: int = 4) -> 
     frame and ``frames`` random frames; the summary beside ``src`` (if any) is carried to ``out``'s
     with the new card and what was replaced, and returned. ``ValueError`` for a damaged seal, a model
     without the float input chain, or any output that differs."""
-    card = read_card(src)
-    if card.graph_sha256 != ModelFile.read(src).graph_sha256:
+    mf = ModelFile.read(src)
+    card = ModelCard.from_metadata(mf.metadata, str(src))
+    if card.graph_sha256 != mf.graph_sha256:
         raise ValueError(f"{src}: the graph does not match its seal (damaged or edited); re-export it instead")
     model = onnx.load(str(src))
     done = integer_input(model)
