@@ -108,7 +108,8 @@ def test_smoke_config_end_to_end(data, tmp_path, capsys):
     assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet",
                            "--set", "data.label=\"T2s\"", "--set", "data.val_fraction=0.34"]) == 0
     card = json.loads((run / "checkpoint.json").read_text())["card"]
-    assert card["variant"] == "small-light" and 0 < card["threshold"] < 1 and card["input_size"] == [64, 128]
+    assert card["variant"] == load_config(SMOKE).model.name and 0 < card["threshold"] < 1
+    assert card["input_size"] == [64, 128]
     assert json.loads((run / "config.json").read_text())["train"]["steps"] == 6
     assert (run / "teacher" / "teacher.pt").is_file()
     # reload gives identical outputs
@@ -448,7 +449,7 @@ def test_a_shared_encoder_run_starts_from_a_two_network_runs_d(data, tmp_path):
     sets = ["data.label=\"T2s\"", "data.val_fraction=0.34", "train.distill_weight=0", "train.eval_every=2",
             "train.steps=2"]
     first, second = tmp_path / "a", tmp_path / "b"
-    train(load_config(SMOKE, sets), data, first, progress=False)
+    train(load_config(SMOKE, [*sets, 'model.name="small-light"']), data, first, progress=False)
     train(load_config(SMOKE, [*sets, 'model.name="shared-light"', f"train.init=\"{first}\""]), data, second,
           progress=False)
     a = [r for r in Run(first).history() if r["phase"] == "train"]
