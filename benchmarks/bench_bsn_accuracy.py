@@ -258,6 +258,10 @@ def markdown(ledger: Ledger, tab: dict[str, Any], figure: str) -> str:
     if t and t.get("flattened"):
         lines.append(f"- teacher: validation mIoU {t['val_miou'][-1]:.3f}, last-fifth gain "
                      f"{t['flattened']['gain']:+.3f}")
+        for i, again in enumerate(t.get("retrained", []), start=1):
+            keys = sorted(k for k, rec in ledger.runs.items() if k.count("/") == 2 and rec.get("teacher") == i)
+            lines.append(f"- the teacher trained again by the same recipe (its work folder was lost), validation "
+                         f"mIoU {again[-1]:.3f}; the runs after it distil from it: {', '.join(keys) or 'none yet'}")
     lines += ["", f"![curves]({figure})"]
     return "\n".join(lines)
 

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from benchmarks.bench_bsn_accuracy import table
+from benchmarks.bench_bsn_accuracy import markdown, table
 from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
 
 EXPERIMENT = {"steps": 3000, "size": [128, 256],
@@ -67,6 +67,19 @@ def test_table_takes_each_cell_from_its_own_seeds(tmp_path):
     assert tab["rows"]["Traversable"]["suburb->town"] == [0.1]
     d = tab["ablations"]["BSN-D"]["town->town"]
     assert d["bsn_minus"] == pytest.approx(0.07) and d["beyond_spread"] is None   # one seed of BSN-D
+
+
+def test_the_report_names_the_runs_that_distil_from_a_retrained_teacher(tmp_path):
+    led = Ledger(tmp_path / "l.json", {**EXPERIMENT, "test_clips_per_style": 2, "batch_size": 8,
+                                       "finetune_steps": 600, "finetune_lr": 1e-4, "teacher_steps": 3000})
+    led.put("teacher", {"val_miou": [0.5, 0.59], "flattened": {"gain": 0.008}, "retrained": [[0.585]]})
+    rec = {"curve": {}, "test": {"town": {"iou": 0.2}}, "finetuned": {}}
+    led.put("BSN/town/seed0", {**rec, "teacher": 0})
+    led.put("BSN/suburb/seed0", {**rec, "teacher": 1})
+    text = markdown(led, table(led), "f.png")
+    assert "validation mIoU 0.590" in text
+    line = next(x for x in text.splitlines() if "trained again" in x)
+    assert "0.585" in line and line.endswith(": BSN/suburb/seed0")
 
 
 def test_the_architecture_plot_draws_a_seeded_table_and_the_earlier_single_figure_one(tmp_path):
