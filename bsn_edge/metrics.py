@@ -1,5 +1,5 @@
-"""IoU, recall and precision of blind-spot masks inside the visibility mask V; depth errors by
-distance bin."""
+"""IoU, recall and precision of blind-spot masks inside the visibility mask V, and the average
+precision of their probabilities (no threshold); depth errors by distance bin."""
 
 from __future__ import annotations
 
@@ -45,6 +45,40 @@ class ThresholdSweep:
         scores = [c.metrics() for c in self.counts]
         k = int(np.argmax([s["iou"] for s in scores]))
         return float(self.thresholds[k]), scores[k]
+
+
+class ScoreHistogram:
+    """Probabilities of the positive and the negative pixels inside V, counted in ``bins`` equal bins
+    of [0, 1], for scores that need no decision threshold. Pixels in one bin count as tied."""
+
+    def __init__(self, bins: int = 1000) -> None:
+        if bins < 2:
+            raise ValueError(f"ScoreHistogram needs at least 2 bins, got {bins}")
+        self.bins = bins
+        self.pos = np.zeros(bins, np.int64)
+        self.neg = np.zeros(bins, np.int64)
+
+    def add(self, prob: np.ndarray, label: np.ndarray, valid: np.ndarray) -> None:
+        v = valid.astype(bool)
+        k = np.clip((prob[v] * self.bins).astype(np.int64), 0, self.bins - 1)
+        t = label.astype(bool)[v]
+        self.pos += np.bincount(k[t], minlength=self.bins)
+        self.neg += np.bincount(k[~t], minlength=self.bins)
+
+    def positive_share(self) -> float | None:
+        """The share of the pixels inside V that are positive: the average precision of a ranking by
+        chance; None when nothing was added."""
+        n = int(self.pos.sum() + self.neg.sum())
+        return int(self.pos.sum()) / n if n else None
+
+    def average_precision(self) -> float | None:
+        """Area under the precision-recall curve as a step function (each threshold's precision times
+        the recall it adds), the highest scores first; None when there were no positives."""
+        tp, fp = np.cumsum(self.pos[::-1]), np.cumsum(self.neg[::-1])
+        if tp[-1] == 0:
+            return None
+        added = self.pos[::-1] / tp[-1]
+        return float(np.sum(added * tp / np.maximum(tp + fp, 1)))
 
 
 def bin_name(lo: float, hi: float) -> str:

@@ -1,4 +1,5 @@
-"""``bsn-eval``: IoU, recall and precision inside V of a trained run and the baselines."""
+"""``bsn-eval``: IoU, recall and precision inside V of a trained run and the baselines; BSN's average
+precision."""
 
 from __future__ import annotations
 
@@ -21,8 +22,10 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Evaluate a run on labelled clips: IoU, recall and precision inside the visibility "
                     "mask V, overall and per clip, for BlindSpotNet (at the threshold chosen on validation) "
-                    "and the baselines Traversable, Detection-2D and Detection-3D. Writes REPORT.json and "
-                    "an image grid REPORT.png beside it.")
+                    "and the baselines Traversable, Detection-2D and Detection-3D. For BlindSpotNet also two "
+                    "scores that need no threshold: the average precision of its probabilities, and the best "
+                    "IoU any threshold would give on these clips (an upper bound). Writes REPORT.json and an "
+                    "image grid REPORT.png beside it.")
     p.add_argument("--run", required=True, help="training run folder (bsn-train --out)")
     p.add_argument("--data", required=True, help="folder of labelled sequence folders")
     p.add_argument("--out", required=True, help="report JSON path")
@@ -75,6 +78,11 @@ def main(argv: list[str] | None = None) -> int:
           f"({len(clips)} clips, {size[0]}x{size[1]})")
     for m, r in report["overall"].items():
         print(f"{m:<14} {r['iou']:>6.3f} {r['recall']:>7.3f} {r['precision']:>9.3f}")
+    bsn = report["overall"].get("BSN", {})
+    if bsn.get("ap") is not None:
+        print(f"BSN without its threshold: average precision {bsn['ap']:.3f}; the best threshold on these clips, "
+              f"{bsn['best_threshold']:.2f}, would give IoU {bsn['best_iou']:.3f} (an upper bound: chosen on the "
+              f"clips it scores; the run's own is {report['threshold']:.2f})")
     print(f"wrote {out}")
     return 0
 

@@ -11,7 +11,7 @@ import torch
 from bsn_edge.card import ModelCard
 from bsn_edge.data import BlindSpotDataset, Clip
 from bsn_edge.evaluate.baselines import detection_2d, detection_3d, traversable_hidden
-from bsn_edge.metrics import Counts
+from bsn_edge.metrics import Counts, ScoreHistogram, ThresholdSweep
 from bsn_edge.sequence import read_kitti_poses
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth.sheet import tint
@@ -24,11 +24,14 @@ METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
 def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], label: str,
              teacher: torch.nn.Module | None, grid_frames: int = 3, teacher_scale: float = 0.5
              ) -> dict[str, Any]:
-    """Metrics inside V for BSN and the baselines, overall and per clip, plus grid rows."""
+    """Metrics inside V for BSN and the baselines, overall and per clip, plus grid rows. BSN also gets
+    scores that need no threshold: its average precision, and the best IoU any threshold of the sweep
+    would give on these clips (optimistic: chosen on the clips it scores)."""
     if card.threshold is None:
         raise ValueError("the run has no decision threshold yet (training did not finish)")
     threshold = card.threshold
     overall = {m: Counts() for m in METHODS}
+    ranked, sweep = ScoreHistogram(), ThresholdSweep()
     per_clip: dict[str, dict[str, Any]] = {}
     rows = []
     for clip in clips:
@@ -42,6 +45,7 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
             poses = poses @ ds.warps(clip).pose_fix
         has_boxes = seq.dir(seq.BOXES).is_dir() and poses is not None
         counts = {m: Counts() for m in METHODS}
+        clip_ranked = ScoreHistogram()
         picks = set(np.linspace(0, len(ds) - 1, grid_frames).round().astype(int).tolist()) \
             if grid_frames else set()
         for k in range(len(ds)):
@@ -65,6 +69,8 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
                 f = ds.items[k][1]
                 boxes = np.load(seq.boxes(f))
                 preds["Detection-3D"] = detection_3d(boxes, poses[f], intr, preds["Detection-2D"])
+            for h in (ranked, clip_ranked, sweep):
+                h.add(prob, label_m, vis)
             for m, p in preds.items():
                 counts[m].add(p, label_m, vis)
                 overall[m].add(p, label_m, vis)
@@ -73,7 +79,13 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
                 rows.append((rgb, label_m, vis, preds))
         per_clip[clip.path.name] = {"style": clip.style, "frames": len(ds),
                                     **{m: c.metrics() for m, c in counts.items() if c.tp + c.fp + c.fn}}
+        if "BSN" in per_clip[clip.path.name]:
+            per_clip[clip.path.name]["BSN"]["ap"] = clip_ranked.average_precision()
     scored = {m: c.metrics() for m, c in overall.items() if c.tp + c.fp + c.fn}
+    if "BSN" in scored:
+        best_th, best = sweep.best()
+        scored["BSN"] |= {"ap": ranked.average_precision(), "ap_by_chance": ranked.positive_share(),
+                          "best_threshold": best_th, "best_iou": best["iou"]}
     return {"threshold": threshold, "overall": scored,
             "per_clip": per_clip, "grid_rows": rows,
             "segmentation": "teacher" if teacher is not None else "ground truth (no teacher in the run)"}

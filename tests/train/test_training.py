@@ -18,6 +18,7 @@ from bsn_edge.cli import synth as synth_cli
 from bsn_edge.cli import train as train_cli
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
 from bsn_edge.export import read_card
+from bsn_edge.metrics import THRESHOLDS
 from bsn_edge.train import Run, load_config
 from bsn_edge.train.losses import masked_bce
 
@@ -124,6 +125,10 @@ def test_smoke_config_end_to_end(data, tmp_path, capsys):
     rep = json.loads(report.read_text())
     assert set(rep["overall"]) >= {"BSN", "Traversable", "Detection-2D", "Detection-3D"}
     assert set(rep["per_clip"]) == {"suburb_0", "town_0", "town_1"}
+    bsn = rep["overall"]["BSN"]
+    assert 0 <= bsn["ap"] <= 1
+    # the run's threshold is one of the sweep's, so the best on these clips is at least its IoU
+    assert bsn["best_threshold"] in THRESHOLDS and bsn["best_iou"] >= bsn["iou"]
     assert report.with_suffix(".png").is_file()
     # resume continues to more steps without starting over
     assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet", "--resume",
