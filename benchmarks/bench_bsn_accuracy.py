@@ -57,20 +57,49 @@ FINETUNE_LR = 1e-4  # a tenth of training's: at 1e-3, 20 % of the target style e
 CURVE_RECORDS = 10  # validation records per run
 
 
-def make_data(work: Path, train_clips: int, test_clips: int, frames: int, size: tuple[int, int]
-              ) -> tuple[Path, Path]:
-    """Render and label the clips (once; finished clips and labels are skipped)."""
-    train, test = work / "train", work / "test"
+def run_key(label: str, src: str, seed: int) -> str:
+    """A trained run's key in the ledger: ``BSN/town/seed0``."""
+    return f"{label}/{src}/seed{seed}"
+
+
+def trained_keys(ledger: Ledger) -> list[tuple[str, str, str, int]]:
+    """Every trained run in ``ledger`` as (key, model label, source style, seed), in key order."""
+    out = []
+    for key in sorted(ledger.runs):
+        parts = key.split("/")
+        if len(parts) == 3 and parts[2].startswith("seed"):
+            out.append((key, parts[0], parts[1], int(parts[2][4:])))
+    return out
+
+
+def source_run(work: Path, seed: int, name: str, src: str) -> Path:
+    """The folder of the run of registry model ``name`` trained on style ``src`` with ``seed``."""
+    return work / "runs" / f"seed{seed}" / f"{name}_{src}"
+
+
+def finetune_run(source: Path, tgt: str) -> Path:
+    """The folder of ``source`` fine-tuned on style ``tgt``."""
+    return source.with_name(f"{source.name}_ft_{tgt}")
+
+
+def write_clips(root: Path, numbers: range, frames: int, size: tuple[int, int]) -> Path:
+    """Render clips ``<style>_<n>`` of both styles (world seed ``1000 + n``) into ``root`` and label
+    them; finished clips and labels are skipped."""
     for style in STYLES:
-        for i in range(train_clips + test_clips):
-            root = train if i < train_clips else test
+        for i in numbers:
             seq = root / f"{style}_{i}"
             if not (seq / "meta.json").exists():
                 write_clip(SynthConfig(frames=frames, style=style, seed=1000 + i, height=size[0], width=size[1]),
                            seq, video=False)
-    for root in (train, test):
-        label_cli.main([*map(str, sorted(root.iterdir())), "--jobs", "2"])
-    return train, test
+    label_cli.main([*map(str, sorted(root.iterdir())), "--jobs", "2"])
+    return root
+
+
+def make_data(work: Path, train_clips: int, test_clips: int, frames: int, size: tuple[int, int]
+              ) -> tuple[Path, Path]:
+    """The table's training and test clips (rendered and labelled once)."""
+    return (write_clips(work / "train", range(train_clips), frames, size),
+            write_clips(work / "test", range(train_clips, train_clips + test_clips), frames, size))
 
 
 def _metrics(report: dict[str, Any], name: str) -> dict[str, float]:
@@ -120,12 +149,11 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
     for seed in seeds:
         for label, name in ledger.experiment["models"].items():
             for src in STYLES:
-                key = f"{label}/{src}/seed{seed}"
+                key = run_key(label, src, seed)
                 if key in ledger:
                     continue
                 t0 = time.perf_counter()
-                runs = work / "runs" / f"seed{seed}"
-                base = runs / f"{name}_{src}"
+                base = source_run(work, seed, name, src)
                 train_run(train, base, [*common, *tsets, f'model.name="{name}"', f"train.steps={steps}",
                                         *records(steps, CURVE_RECORDS), f"train.seed={seed}",
                                         f'data.train_styles=["{src}"]'])
@@ -139,7 +167,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
                         ledger.put(f"baselines/{tgt}", {b: _metrics(rep, b) for b in BASELINES if b in rep["overall"]})
                     if tgt == src:
                         continue
-                    ft = runs / f"{name}_{src}_ft_{tgt}"
+                    ft = finetune_run(base, tgt)
                     train_run(train, ft, [*common, *tsets, f'model.name="{name}"', f"train.steps={ft_steps}",
                                           *records(ft_steps, CURVE_RECORDS), f"train.seed={seed}",
                                           f'data.train_styles=["{tgt}"]', "data.fraction=0.2",
@@ -148,7 +176,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
                                    "--clips", "all", "--styles", tgt, "--no-baselines")
                     record["finetuned"][tgt] = {**_metrics(rep, "BSN"), "curve": _curve(ft)}
                     if not keep_runs:
-                        shutil.rmtree(ft, ignore_errors=True)
+                        keep_weights_only(ft)
                 record["seconds"] = round(time.perf_counter() - t0)
                 record["teacher"] = len(ledger.runs["teacher"]["retrained"])   # 0: the first teacher
                 ledger.put(key, record)
@@ -160,8 +188,8 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
 
 def keep_weights_only(run: Path) -> None:
     """Drop what only resuming needs (the optimizer's state, about 3x the weights) and keep the
-    finished run's weights, card and history, so a revised test or fine-tuning protocol can be run on
-    the ledger's runs without training them again."""
+    finished run's weights, card and history, so the ledger's runs can be tested again (a revised
+    test set, another fine-tuning protocol) without training them again."""
     Run(run).state_path.unlink(missing_ok=True)
 
 
@@ -173,8 +201,9 @@ COLUMNS = [(src, tgt, ft) for src in STYLES for tgt in sorted(STYLES, key=lambda
 def cells(ledger: Ledger, label: str, src: str, tgt: str, finetuned: bool, metric: str = "iou") -> list[float]:
     """``metric`` of every seed of ``label`` trained on ``src`` and tested on ``tgt``."""
     out = []
-    for key, rec in sorted(ledger.runs.items()):
-        if key.startswith(f"{label}/{src}/seed"):
+    for key, lab, s, _ in trained_keys(ledger):
+        if (lab, s) == (label, src):
+            rec = ledger.runs[key]
             part = rec["finetuned"].get(tgt) if finetuned else rec["test"].get(tgt)
             if part:
                 out.append(part[metric])
@@ -217,12 +246,11 @@ def plot_curves(ledger: Ledger, path: Path) -> None:
         axes[0].set_title("teacher: validation mIoU")
         axes[0].set_xlabel("step")
     for ax, label in zip(axes[1:], models, strict=True):
-        for key, rec in sorted(ledger.runs.items()):
-            if key.startswith(f"{label}/"):
-                _, src, seed = key.split("/")
-                c = rec["curve"]
+        for key, lab, src, seed in trained_keys(ledger):
+            if lab == label:
+                c = ledger.runs[key]["curve"]
                 ax.plot(c["steps"], c["val_iou"], color="tab:blue" if src == "town" else "tab:orange",
-                        alpha=0.8, label=f"{src} {seed}")
+                        alpha=0.8, label=f"{src} seed{seed}")
         ax.set_title(f"{label}: validation IoU (own style)")
         ax.set_xlabel("step")
         if ax.get_legend_handles_labels()[0]:
@@ -236,7 +264,7 @@ def plot_curves(ledger: Ledger, path: Path) -> None:
 
 def markdown(ledger: Ledger, tab: dict[str, Any], figure: str) -> str:
     ex = ledger.experiment
-    seeds = sorted({k.split("/")[2] for k in ledger.runs if k.count("/") == 2})
+    seeds = sorted({f"seed{seed}" for *_, seed in trained_keys(ledger)})
     head = " | ".join(f"{s} -> {t}{', fine-tuned' if ft else ''}" for s, t, ft in COLUMNS)
     lines = ["# BlindSpotNet accuracy (the paper's Table 2, synthetic world), with seeds", "",
              f"Held-out test clips ({ex['test_clips_per_style']} per style), IoU inside V, mean +- std over the "
@@ -256,8 +284,8 @@ def markdown(ledger: Ledger, tab: dict[str, Any], figure: str) -> str:
     lines += ["", "(`*`: beyond the spread.)", "", "Curves (validation IoU every tenth of a run's steps; "
               "flat: the last fifth gained under 0.01):", ""]
     for label in ex["models"]:
-        gains = [rec["curve"]["flattened"]["gain"] for k, rec in ledger.runs.items()
-                 if k.startswith(f"{label}/") and rec["curve"].get("flattened")]
+        gains = [ledger.runs[k]["curve"]["flattened"]["gain"] for k, lab, *_ in trained_keys(ledger)
+                 if lab == label and ledger.runs[k]["curve"].get("flattened")]
         if gains:
             flat = sum(g < 0.01 for g in gains)
             lines.append(f"- {label}: {flat} of {len(gains)} runs flat; last-fifth gain {fmt(gains)}")
@@ -266,7 +294,7 @@ def markdown(ledger: Ledger, tab: dict[str, Any], figure: str) -> str:
         lines.append(f"- teacher: validation mIoU {t['val_miou'][-1]:.3f}, last-fifth gain "
                      f"{t['flattened']['gain']:+.3f}")
         for i, again in enumerate(t.get("retrained", []), start=1):
-            keys = sorted(k for k, rec in ledger.runs.items() if k.count("/") == 2 and rec.get("teacher") == i)
+            keys = [k for k, *_ in trained_keys(ledger) if ledger.runs[k].get("teacher") == i]
             lines.append(f"- the teacher trained again by the same recipe (its work folder was lost), validation "
                          f"mIoU {again[-1]:.3f}; the runs after it distil from it: {', '.join(keys) or 'none yet'}")
     lines += ["", f"![curves]({figure})"]
@@ -300,9 +328,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="the architecture of BSN (its -d and -kd registry entries are the ablations); each "
                         "family has its own ledger and report (default %(default)s)")
     p.add_argument("--keep-runs", action="store_true",
-                   help="keep every run folder whole, with its training state and the fine-tuning runs (about "
-                        "210 MB each); by default only the source-style runs' weights, card and history are kept "
-                        "(about 46 MB each for shared-light)")
+                   help="keep every run folder whole, with its training state (about 210 MB each); by default "
+                        "only each run's weights, card and history are kept (about 46 MB each for shared-light)")
     p.add_argument("--report-only", action="store_true", help="write the report from the ledger, train nothing")
     p.add_argument("--fresh", action="store_true", help="delete the work folder and start a new ledger")
     args = p.parse_args(argv)

@@ -30,16 +30,31 @@ class Ledger:
         self.experiment = json.loads(json.dumps(experiment))        # as it reads back from disk
         self.runs: dict[str, dict[str, Any]] = {}
         if self.path.is_file() and not fresh:
-            try:
-                data = json.loads(self.path.read_text())
-                stored, runs = data["experiment"], data["runs"]
-            except (ValueError, KeyError, TypeError) as e:
-                raise ValueError(f"{self.path}: not a ledger ({e}); move it away or start over with --fresh") from e
+            stored, runs = self._load(self.path)
             if stored != self.experiment:
                 diff = sorted(k for k in set(stored) | set(self.experiment) if stored.get(k) != self.experiment.get(k))
                 raise ValueError(f"{self.path} holds another experiment (differs in {', '.join(diff)}): "
                                  "run with the same settings to continue it, or start over with --fresh")
             self.runs = dict(runs)
+
+    @classmethod
+    def read(cls, path: str | Path) -> Ledger:
+        """The ledger at ``path`` as it is, whatever its experiment (for reading; :meth:`put` works too)."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"no ledger at {path}")
+        experiment, runs = cls._load(path)
+        ledger = cls(path, experiment, fresh=True)
+        ledger.runs = dict(runs)
+        return ledger
+
+    @staticmethod
+    def _load(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+        try:
+            data = json.loads(path.read_text())
+            return data["experiment"], data["runs"]
+        except (ValueError, KeyError, TypeError) as e:
+            raise ValueError(f"{path}: not a ledger ({e}); move it away or start over with --fresh") from e
 
     def __contains__(self, key: str) -> bool:
         return key in self.runs

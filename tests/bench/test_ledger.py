@@ -91,3 +91,44 @@ def test_the_architecture_plot_draws_a_seeded_table_and_the_earlier_single_figur
     for name, res in (("seeded", seeded), ("earlier", earlier)):
         out = plot_arch(res, tmp_path / f"{name}.png")
         assert out.is_file() and out.stat().st_size > 0
+
+
+def test_read_opens_any_experiment_and_trained_keys_skip_the_shared_records(tmp_path):
+    from benchmarks.bench_bsn_accuracy import trained_keys
+    path = tmp_path / "l.json"
+    led = Ledger(path, EXPERIMENT)
+    for key in ("teacher", "baselines/town", "BSN-KD/suburb/seed2", "BSN/town/seed0"):
+        led.put(key, {})
+    again = Ledger.read(path)
+    assert again.experiment == EXPERIMENT
+    assert trained_keys(again) == [("BSN-KD/suburb/seed2", "BSN-KD", "suburb", 2), ("BSN/town/seed0", "BSN", "town", 0)]
+    with pytest.raises(FileNotFoundError, match="no ledger"):
+        Ledger.read(tmp_path / "none.json")
+
+
+def test_the_rescore_report_lists_runs_whose_weights_are_gone_and_averages_the_rest(tmp_path):
+    from benchmarks.bench_bsn_rescore import markdown as rescore_md
+    from benchmarks.bench_bsn_rescore import score_runs
+    led = Ledger(tmp_path / "l.json", EXPERIMENT)
+    led.put("BSN/town/seed0", {})
+    scores = score_runs(led, tmp_path / "work", {"table": tmp_path / "work" / "test"})  # no runs: none scored
+    assert scores["BSN/town/seed0"]["missing"].endswith("seed0/small-light_town")
+
+    def part(iou: float) -> dict:
+        m = {"iou": iou, "best_iou": 0.12, "best_threshold": 0.25, "ap": 0.15, "ap_by_chance": 0.02,
+             "clips": {"suburb_9": {"iou": iou, "ap": 0.1}, "suburb_10": {"iou": 0.3, "ap": 0.4}}}
+        return {"suburb": m, "town": {**m, "ap": None, "clips": {"town_9": {"iou": iou, "ap": None}}}}
+    for seed, iou in ((0, 0.05), (1, 0.07)):
+        scores[f"BSN/suburb/seed{seed}"] = {"model": "BSN", "source": "suburb", "seed": seed, "threshold": 0.1,
+                                            "table": part(iou), "finetuned": {}}
+    scores["BSN/suburb/seed0"]["finetuned"] = {"town": {"table": {"iou": 0.2}}}   # only its weights were kept
+    text = rescore_md("small-light", list(EXPERIMENT["models"]), scores, {"table": 2},
+                      {"suburb_9": "night, 89 deg"})
+    # town -> town, -> suburb, -> suburb fine-tuned, then suburb -> suburb, -> town, -> town fine-tuned
+    assert "| BSN | - | - | - | 0.060 +- 0.014 | 0.060 +- 0.014 | 0.200 (1 seed) |" in text
+    assert "| BSN-D | - | - | - | - | - | - |" in text
+    assert "| BSN/town/seed0 | - | - | weights gone |" in text
+    assert "| BSN | suburb -> suburb | table | 0.060 +- 0.014 | 0.120 +- 0.000 | 0.150 +- 0.000 |" in text
+    assert "| BSN | suburb -> town | table | 0.060 +- 0.014 | 0.120 +- 0.000 | - |" in text   # no AP: no positives
+    rows = [x for x in text.splitlines() if x.startswith("| suburb_")]
+    assert rows[0].startswith("| suburb_9 | night, 89 deg | - | 0.060 +- 0.014 |") and rows[1].startswith("| suburb_10")
