@@ -121,15 +121,25 @@ def experiment(args: argparse.Namespace) -> dict[str, Any]:
             "frames_per_clip": args.frames, "models": family_models(args.family)}
 
 
+def shared_settings(ex: dict[str, Any]) -> list[str]:
+    """``bsn-train`` settings every run of experiment ``ex`` shares (the teacher's run included)."""
+    h, w = ex["size"]
+    return [f"data.size=[{h}, {w}]", "data.val_fraction=0.25", f"train.batch_size={ex['batch_size']}",
+            "train.eval_frames=128"]
+
+
+def teacher_settings(work: Path) -> list[str]:
+    """``bsn-train`` settings that make a run distil from the table's shared teacher."""
+    return [f"teacher.checkpoint=\"{work / 'runs' / 'teacher' / 'teacher'}\""]
+
+
 def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_record=None) -> None:
     """Train and evaluate every (seed, model, source style) missing from ``ledger``."""
     ex = ledger.experiment
     train, test = make_data(work, ex["train_clips_per_style"], ex["test_clips_per_style"], ex["frames_per_clip"],
                             tuple(ex["size"]))
     steps, ft_steps = ex["steps"], ex["finetune_steps"]
-    h, w = ex["size"]
-    common = [f"data.size=[{h}, {w}]", "data.val_fraction=0.25", f"train.batch_size={ex['batch_size']}",
-              "train.eval_frames=128"]
+    common = shared_settings(ex)
     teacher = work / "runs" / "teacher"
     trained_here = not Run(teacher).checkpoint_path.is_file()
     train_run(train, teacher, [*common, 'model.name="small-light"', f"teacher.steps={ex['teacher_steps']}",
@@ -145,7 +155,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
         # this point distil from it; the ledger says so
         rec = ledger.runs["teacher"]
         ledger.put("teacher", {**rec, "retrained": [*rec.get("retrained", []), curve["val_miou"][-1:]]})
-    tsets = [f"teacher.checkpoint=\"{teacher / 'teacher'}\""]
+    tsets = teacher_settings(work)
     for seed in seeds:
         for label, name in ledger.experiment["models"].items():
             for src in STYLES:

@@ -55,6 +55,11 @@ def score(run: Path, data: Path, out: Path, style: str) -> dict[str, Any]:
             "clips": {c: {"iou": m["BSN"]["iou"], "ap": m["BSN"]["ap"]} for c, m in rep["per_clip"].items()}}
 
 
+def score_path(work: Path, test_set: str, seed: int, run: Path, style: str) -> Path:
+    """Where the score of ``run`` (of ``seed``) on the ``style`` clips of ``test_set`` is kept."""
+    return work / "rescore" / test_set / f"seed{seed}_{run.name}_on_{style}.json"
+
+
 def score_runs(ledger: Ledger, work: Path, test_sets: dict[str, Path]) -> dict[str, Any]:
     """Per trained key of the ledger: its model, source style, seed, threshold and, per test set and
     style, :func:`score`; ``missing`` instead of scores when the run's weights are gone."""
@@ -67,15 +72,13 @@ def score_runs(ledger: Ledger, work: Path, test_sets: dict[str, Path]) -> dict[s
             continue
         rec["threshold"] = Run(run).card().threshold
         for name, data in test_sets.items():
-            rec[name] = {tgt: score(run, data, work / "rescore" / name / f"seed{seed}_{run.name}_on_{tgt}.json", tgt)
-                         for tgt in STYLES}
+            rec[name] = {tgt: score(run, data, score_path(work, name, seed, run, tgt), tgt) for tgt in STYLES}
         rec["finetuned"] = {}
         for tgt in STYLES:
             ft = finetune_run(run, tgt)
             if tgt != src and Run(ft).model_path.is_file():
-                rec["finetuned"][tgt] = {
-                    name: score(ft, data, work / "rescore" / name / f"seed{seed}_{ft.name}_on_{tgt}.json", tgt)
-                    for name, data in test_sets.items()}
+                rec["finetuned"][tgt] = {name: score(ft, data, score_path(work, name, seed, ft, tgt), tgt)
+                                         for name, data in test_sets.items()}
         out[key] = rec
     return out
 
