@@ -57,6 +57,11 @@ FINETUNE_LR = 1e-4  # a tenth of training's: at 1e-3, 20 % of the target style e
 CURVE_RECORDS = 10  # validation records per run
 
 
+def ledger_path(out: Path, family: str) -> Path:
+    """The ledger of ``family``'s table in the results folder ``out``."""
+    return out / f"{report_name(family)}_ledger.json"
+
+
 def run_key(label: str, src: str, seed: int) -> str:
     """A trained run's key in the ledger: ``BSN/town/seed0``."""
     return f"{label}/{src}/seed{seed}"
@@ -350,7 +355,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.fresh:
         shutil.rmtree(work, ignore_errors=True)
     try:
-        ledger = Ledger(out / f"{report_name(args.family)}_ledger.json", experiment(args), fresh=args.fresh)
+        ledger = Ledger(ledger_path(out, args.family), experiment(args), fresh=args.fresh)
     except ValueError as e:
         print(f"bench_bsn_accuracy: {e}")
         return 2

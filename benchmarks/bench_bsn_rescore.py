@@ -32,6 +32,7 @@ from benchmarks.bench_bsn_accuracy import (
     FAMILIES,
     STYLES,
     finetune_run,
+    ledger_path,
     report_name,
     source_run,
     trained_keys,
@@ -53,6 +54,28 @@ def score(run: Path, data: Path, out: Path, style: str) -> dict[str, Any]:
         rep = eval_run(run, data, out, "--clips", "all", "--styles", style, "--no-baselines")
     return {**{k: rep["overall"]["BSN"][k] for k in FIELDS},
             "clips": {c: {"iou": m["BSN"]["iou"], "ap": m["BSN"]["ap"]} for c, m in rep["per_clip"].items()}}
+
+
+def add_table_arguments(p: argparse.ArgumentParser) -> None:
+    """``--out``, ``--work`` and ``--family``: where a Table 2 is, for the benchmarks that read its runs."""
+    p.add_argument("--out", default="benchmarks/results", help="results folder, where the table's ledger is")
+    p.add_argument("--work", default="benchmarks/scratch/accuracy", help="the table's work folder (its runs)")
+    p.add_argument("--family", choices=FAMILIES, default=FAMILIES[0], help="whose table (default %(default)s)")
+
+
+def read_table(out: Path, family: str, prog: str) -> Ledger | None:
+    """The ledger of ``family``'s table, or None after saying why there is none."""
+    try:
+        return Ledger.read(ledger_path(out, family))
+    except (FileNotFoundError, ValueError) as e:
+        print(f"{prog}: {e} (run benchmarks.bench_bsn_accuracy --family {family} first)")
+        return None
+
+
+def clip_order(name: str) -> tuple[str, int]:
+    """Sort key of a clip named ``<style>_<n>``: by style, then by number."""
+    style, n = name.rsplit("_", 1)
+    return style, int(n)
 
 
 def score_path(work: Path, test_set: str, seed: int, run: Path, style: str) -> Path:
@@ -145,7 +168,7 @@ def markdown(family: str, models: list[str], scores: dict[str, Any], sets: dict[
     lines += ["", "Per test clip, IoU at each run's own threshold, mean +- std over the kept runs trained on "
               "each style:", "", "| clip | light, field of view | " + " | ".join(f"{s}-trained" for s in STYLES)
               + " |", "|---" * (2 + len(STYLES)) + "|"]
-    for clip in sorted({c for c, _ in per_clip}, key=lambda c: (c.rsplit("_", 1)[0], int(c.rsplit("_", 1)[1]))):
+    for clip in sorted({c for c, _ in per_clip}, key=clip_order):
         lines.append(f"| {clip} | {clips.get(clip, '-')} | "
                      + " | ".join(fmt(per_clip.get((clip, s), [])) for s in STYLES) + " |")
     return "\n".join(lines)
@@ -153,19 +176,15 @@ def markdown(family: str, models: list[str], scores: dict[str, Any], sets: dict[
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="benchmarks/results", help="results folder, where the table's ledger is")
-    p.add_argument("--work", default="benchmarks/scratch/accuracy", help="the table's work folder (its runs)")
-    p.add_argument("--family", choices=FAMILIES, default=FAMILIES[0], help="whose table (default %(default)s)")
+    add_table_arguments(p)
     p.add_argument("--more-test-clips", type=int, default=6,
                    help="more test clips per style beyond the table's (default %(default)s; 0: the table's only)")
     args = p.parse_args(argv)
     if args.more_test_clips < 0:
         p.error("--more-test-clips must be 0 or more")
     out, work = Path(args.out), Path(args.work)
-    try:
-        ledger = Ledger.read(out / f"{report_name(args.family)}_ledger.json")
-    except (FileNotFoundError, ValueError) as e:
-        print(f"bench_bsn_rescore: {e} (run benchmarks.bench_bsn_accuracy --family {args.family} first)")
+    ledger = read_table(out, args.family, "bench_bsn_rescore")
+    if ledger is None:
         return 2
     ex = ledger.experiment
     first = ex["train_clips_per_style"] + ex["test_clips_per_style"]

@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.bench_bsn_accuracy import (
-    FAMILIES,
     FINETUNE_LR,
     report_name,
     shared_settings,
@@ -30,9 +29,8 @@ from benchmarks.bench_bsn_accuracy import (
     teacher_settings,
     trained_keys,
 )
-from benchmarks.bench_bsn_rescore import describe_clips, score, score_path
+from benchmarks.bench_bsn_rescore import add_table_arguments, clip_order, describe_clips, read_table, score, score_path
 from benchmarks.common import records, train_run, write_result
-from benchmarks.ledger import Ledger
 from bsn_edge.cli import label as label_cli
 from bsn_edge.data import find_clips, split_clips
 from bsn_edge.synth import SynthConfig, write_clip
@@ -89,7 +87,7 @@ def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
         for part in result["scores"][arm].values():
             for clip, m in part["clips"].items():
                 per_clip.setdefault(clip, {})[arm] = m
-    for clip in sorted(per_clip, key=lambda c: int(c.rsplit("_", 1)[1])):
+    for clip in sorted(per_clip, key=clip_order):
         cells = [f"{per_clip[clip][a]['iou']:.3f} / {per_clip[clip][a]['ap']:.3f}" if a in per_clip[clip] else "-"
                  for a in arms]
         lines.append(f"| {clip} | {described.get(clip, '-')} | " + " | ".join(cells) + " |")
@@ -103,9 +101,7 @@ def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="benchmarks/results", help="results folder, where the table's ledger is")
-    p.add_argument("--work", default="benchmarks/scratch/accuracy", help="the table's work folder (its runs)")
-    p.add_argument("--family", choices=FAMILIES, default=FAMILIES[0], help="whose table (default %(default)s)")
+    add_table_arguments(p)
     p.add_argument("--key", default=None, help="the suburb-trained run to fine-tune, as its ledger key "
                                                "(default: the first kept BSN one)")
     p.add_argument("--steps", type=int, default=600, help="fine-tuning steps per arm (default %(default)s)")
@@ -113,10 +109,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="how wide the added clips' cameras are at least, degrees (default %(default)s)")
     args = p.parse_args(argv)
     out, work = Path(args.out), Path(args.work)
-    try:
-        ledger = Ledger.read(out / f"{report_name(args.family)}_ledger.json")
-    except (FileNotFoundError, ValueError) as e:
-        print(f"bench_coverage: {e}")
+    ledger = read_table(out, args.family, "bench_coverage")
+    if ledger is None:
         return 2
     ex = ledger.experiment
     kept = {key: (label, seed, source_run(work, seed, ex["models"][label], src))

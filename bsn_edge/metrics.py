@@ -65,6 +65,13 @@ class ScoreHistogram:
         self.pos += np.bincount(k[t], minlength=self.bins)
         self.neg += np.bincount(k[~t], minlength=self.bins)
 
+    def merge(self, other: ScoreHistogram) -> None:
+        """Add the counts of ``other`` (of the same bins) to these."""
+        if other.bins != self.bins:
+            raise ValueError(f"cannot merge a ScoreHistogram of {other.bins} bins into one of {self.bins}")
+        self.pos += other.pos
+        self.neg += other.neg
+
     def positive_share(self) -> float | None:
         """The share of the pixels inside V that are positive: the average precision of a ranking by
         chance; None when nothing was added."""

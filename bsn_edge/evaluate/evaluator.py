@@ -69,7 +69,7 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
                 f = ds.items[k][1]
                 boxes = np.load(seq.boxes(f))
                 preds["Detection-3D"] = detection_3d(boxes, poses[f], intr, preds["Detection-2D"])
-            for h in (ranked, clip_ranked, sweep):
+            for h in (clip_ranked, sweep):
                 h.add(prob, label_m, vis)
             for m, p in preds.items():
                 counts[m].add(p, label_m, vis)
@@ -79,6 +79,7 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
                 rows.append((rgb, label_m, vis, preds))
         per_clip[clip.path.name] = {"style": clip.style, "frames": len(ds),
                                     **{m: c.metrics() for m, c in counts.items() if c.tp + c.fp + c.fn}}
+        ranked.merge(clip_ranked)
         if "BSN" in per_clip[clip.path.name]:
             per_clip[clip.path.name]["BSN"]["ap"] = clip_ranked.average_precision()
     scored = {m: c.metrics() for m, c in overall.items() if c.tp + c.fp + c.fn}
