@@ -260,6 +260,7 @@ def test_reduced_range_keeps_every_weight_within_seven_bits(spread_int8):
     assert spans[False][0] < -64 or spans[False][1] > 64
 
 
+@pytest.mark.slow     # a second runtime, not the product's
 def test_opencv_dnn_runs_the_fp32_model(run, tmp_path):
     """Portability: OpenCV's DNN module loads the fp32 model and matches onnxruntime.
 

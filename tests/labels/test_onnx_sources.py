@@ -28,7 +28,8 @@ def encoded(tmp_path_factory):
     """A clip whose blue channel carries 2 / depth (an 'inverse depth' a model can read back)."""
     root = tmp_path_factory.mktemp("onnx")
     seq = root / "seq"
-    write_clip(SynthConfig(frames=30, height=96, width=192, fps=10.0, camera="fixed", seed=3), seq, video=False)
+    write_clip(SynthConfig(frames=30, height=96, width=192, fps=10.0, camera="fixed", seed=3), seq, video=False,
+               workers=2)
     for i in range(30):
         p = seq / "rgb" / f"{i:06d}.png"
         img = cv2.imread(str(p))
@@ -125,7 +126,8 @@ def test_monocular_pipeline_without_poses_or_metric_depth(tmp_path):
     """Relative inverse depth + segmentation + video: seed VO, windowed alignment, metres from
     the camera height, PnP VO. Its labels must agree with those from exact sources."""
     seq = tmp_path / "mono"
-    write_clip(SynthConfig(frames=40, height=256, width=512, fps=10.0, camera="fixed", seed=5), seq, video=False)
+    write_clip(SynthConfig(frames=40, height=256, width=512, fps=10.0, camera="fixed", seed=5), seq, video=False,
+               workers=2)
     (seq / "rel").mkdir()
     for i in range(40):
         d = read_depth(seq / "depth" / f"{i:06d}.png")
@@ -153,7 +155,7 @@ def test_labels_with_the_depth_of_a_bsn_model_on_a_camera_it_never_saw(tmp_path)
     agrees with the clip's own within 15 %."""
     seq = tmp_path / "seq"
     write_clip(SynthConfig(frames=30, height=360, width=640, fps=10.0, seed=11, camera="fixed", hfov_deg=55.0,
-                           camera_height=1.2), seq, video=False)
+                           camera_height=1.2), seq, video=False, workers=2)
     truth = {i: read_depth(seq / "depth" / f"{i:06d}.png") for i in range(0, 30, 2)}
     road = {i: cv2.imread(str(seq / "semantic" / f"{i:06d}.png"), cv2.IMREAD_UNCHANGED) == sm.ROAD for i in truth}
     rep = label_sequence(seq, CFG, Sources(depth=f"bsn:{SHIPPED}"))

@@ -25,7 +25,7 @@ def umeyama(src, dst, with_scale):
 def rendered():
     cfg = SynthConfig(frames=80, height=256, width=512, fps=10.0, camera="fixed", style="town", seed=1)
     clip = make_clip(cfg)
-    frames = list(render_frames(clip))
+    frames = list(render_frames(clip, workers=2))
     return clip, frames
 
 

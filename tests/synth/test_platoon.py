@@ -49,6 +49,7 @@ def test_no_platoon_on_an_empty_road_or_when_off():
         SynthConfig(queue=-0.1)
 
 
+@pytest.mark.slow     # 24 worlds built
 def test_a_queued_clip_creeps_close_behind_a_platoon():
     for seed in range(4):
         sc = build_scenario(SynthConfig(frames=40, style="urban", seed=seed, lead=0.0, queue=1.0, parked=0,

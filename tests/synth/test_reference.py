@@ -41,7 +41,9 @@ def brute_force(boxes, layout, intr, T_wc, far, bs_range, near=0.05):
     return depth.reshape(shape), sem.reshape(shape), bs.reshape(shape)
 
 
-@pytest.mark.parametrize("style", ["town", "suburb", "highway", "urban"])
+# town and highway in the default run; suburb and urban (the slowest brute force) with -m slow
+@pytest.mark.parametrize("style", ["town", pytest.param("suburb", marks=pytest.mark.slow), "highway",
+                                   pytest.param("urban", marks=pytest.mark.slow)])
 def test_fast_renderer_matches_brute_force(style):
     cfg = SynthConfig(frames=40, height=40, width=80, style=style, seed=4)
     clip = make_clip(cfg)

@@ -446,6 +446,7 @@ def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tm
         dst.load_teacher_state()
 
 
+@pytest.mark.slow     # two trainings; starting from another run of the same kind is in the default run
 def test_a_shared_encoder_run_starts_from_a_two_network_runs_d(data, tmp_path):
     """train.init of a two-network run into a shared-encoder model: D's weights carry over (so its
     depth at step 0 is the source's, measured on the same split), the card says only D was taken,
