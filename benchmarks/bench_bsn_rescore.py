@@ -118,6 +118,28 @@ def describe_clips(folders: list[Path]) -> dict[str, str]:
     return out
 
 
+def arms_by_clip(scores: dict[str, dict[str, Any]], heads: dict[str, str], described: dict[str, str]) -> list[str]:
+    """A markdown table of arms side by side, a row per clip (``IoU / AP``), then each test set's
+    pooled scores; ``scores[arm][test set]`` as :func:`score` gives them, ``heads`` the arms' column
+    titles in order (the pooled lines name each arm by its title up to `` (``)."""
+    arms = list(heads)
+    lines = ["| clip | light, field of view | " + " | ".join(heads.values()) + " |", "|---" * (2 + len(arms)) + "|"]
+    per_clip: dict[str, dict[str, dict[str, float]]] = {}
+    for arm in arms:
+        for part in scores[arm].values():
+            for clip, m in part["clips"].items():
+                per_clip.setdefault(clip, {})[arm] = m
+    for clip in sorted(per_clip, key=clip_order):
+        cells = [f"{per_clip[clip][a]['iou']:.3f} / {per_clip[clip][a]['ap']:.3f}" if a in per_clip[clip] else "-"
+                 for a in arms]
+        lines.append(f"| {clip} | {described.get(clip, '-')} | " + " | ".join(cells) + " |")
+    lines += ["", "Over all the clips (pooled per test set, IoU / AP):", ""]
+    for n in scores[arms[0]]:
+        lines.append(f"- `{n}`: " + "; ".join(
+            f"{heads[a].split(' (')[0]} {scores[a][n]['iou']:.3f} / {scores[a][n]['ap']:.3f}" for a in arms))
+    return lines
+
+
 def _f(v: float | None) -> str:
     return "-" if v is None else f"{v:.3f}"
 

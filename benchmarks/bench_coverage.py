@@ -29,7 +29,14 @@ from benchmarks.bench_bsn_accuracy import (
     teacher_settings,
     trained_keys,
 )
-from benchmarks.bench_bsn_rescore import add_table_arguments, clip_order, describe_clips, read_table, score, score_path
+from benchmarks.bench_bsn_rescore import (
+    add_table_arguments,
+    arms_by_clip,
+    describe_clips,
+    read_table,
+    score,
+    score_path,
+)
 from benchmarks.common import records, train_run, write_result
 from bsn_edge.cli import label as label_cli
 from bsn_edge.data import find_clips, split_clips
@@ -79,23 +86,8 @@ def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
     lines = [f"# Does one clip of the missing kind close the gap? ({result['key']})", "",
              f"`{result['key']}` fine-tuned {result['steps']} steps at lr {result['lr']:g} on suburb's training "
              "clips plus nothing, one wide-angle day clip, or one wide-angle night clip (same seed), scored on "
-             "the suburb test clips at each model's own threshold: IoU / average precision.", "",
-             "| clip | light, field of view | " + " | ".join(heads[a] for a in arms) + " |",
-             "|---" * (2 + len(arms)) + "|"]
-    per_clip: dict[str, dict[str, dict[str, float]]] = {}
-    for arm in arms:
-        for part in result["scores"][arm].values():
-            for clip, m in part["clips"].items():
-                per_clip.setdefault(clip, {})[arm] = m
-    for clip in sorted(per_clip, key=clip_order):
-        cells = [f"{per_clip[clip][a]['iou']:.3f} / {per_clip[clip][a]['ap']:.3f}" if a in per_clip[clip] else "-"
-                 for a in arms]
-        lines.append(f"| {clip} | {described.get(clip, '-')} | " + " | ".join(cells) + " |")
-    lines += ["", "Over all the clips (pooled per test set, IoU / AP):", ""]
-    for n in result["scores"]["before"]:
-        lines.append(f"- `{n}`: " + "; ".join(
-            f"{heads[a].split(' (')[0]} {result['scores'][a][n]['iou']:.3f} / {result['scores'][a][n]['ap']:.3f}"
-            for a in arms))
+             "the suburb test clips at each model's own threshold: IoU / average precision.", ""]
+    lines += arms_by_clip(result["scores"], {a: heads[a] for a in arms}, described)
     return "\n".join(lines)
 
 

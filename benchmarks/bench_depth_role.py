@@ -1,0 +1,128 @@
+"""Where does depth reach B? A controlled check of why BSN-D is not below BSN in Table 2.
+
+    python -m benchmarks.bench_depth_role --family shared-light --out benchmarks/results \
+        --work ~/.cache/bsn-edge/accuracy [--seed 1] [--style town]
+
+In the paper D and B are two networks, and BSN-D's B has no depth at all. In a shared-encoder
+family B and D read one encoder, which D's depth loss trains as much as B's loss does: BSN-D's B
+still learns on features shaped by depth. Two questions, on one seed's kept runs of the table:
+
+- Does BSN's B use the depth it is given? BSN scored as trained, and again with its depth input
+  flattened at test time (each frame's depth feature replaced by its mean over the frame: the
+  frame's overall scale kept, where things are lost). A B that reads depth loses accuracy.
+- Does BSN-D's B draw on depth through the shared encoder? BSN-D trained again with the same
+  recipe and seed but without the depth loss (``train.depth_weight=0``), so nothing in the network
+  learns depth. If its B falls below BSN-D's, depth reaches B through the encoder.
+
+All are scored on the style's test clips of the table and of the rescore (``bench_bsn_rescore``
+renders those), at each run's own threshold and by average precision.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from benchmarks.bench_bsn_accuracy import (
+    CURVE_RECORDS,
+    report_name,
+    shared_settings,
+    source_run,
+    teacher_settings,
+)
+from benchmarks.bench_bsn_rescore import (
+    add_table_arguments,
+    arms_by_clip,
+    describe_clips,
+    read_table,
+    score,
+    score_path,
+)
+from benchmarks.common import records, train_run, write_result
+from bsn_edge.train import Run
+
+ARMS = {
+    "BSN": "BSN as trained",
+    "BSN flat depth": "BSN, its depth input flattened at test time",
+    "BSN-D": "BSN-D as trained",
+    "BSN-D no depth loss": "BSN-D trained without the depth loss",
+}
+
+
+@contextmanager
+def flattened_depth_input() -> Iterator[None]:
+    """While open, a shared-encoder BSN's B sees each frame's depth feature as its mean over the frame."""
+    import bsn_edge.models.shared as shared
+
+    real = shared.depth_feature
+
+    def flat(depth):
+        f = real(depth)
+        return f.mean(dim=(2, 3), keepdim=True).expand_as(f)
+
+    shared.depth_feature = flat
+    try:
+        yield
+    finally:
+        shared.depth_feature = real
+
+
+def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
+    arms = list(ARMS)
+    lines = [f"# Where does depth reach B? ({result['family']}, seed {result['seed']}, trained on "
+             f"{result['style']})", "",
+             "Scored on the style's test clips at each model's own threshold: IoU / average precision.", ""]
+    lines += [f"- **{a}**: {ARMS[a]}" for a in arms]
+    lines += ["", *arms_by_clip(result["scores"], {a: a for a in arms}, described)]
+    nd = result["no_depth_loss_val_iou"]
+    lines += ["", f"Validation IoU of the run without the depth loss over its training: "
+                  f"{', '.join(f'{v:.3f}' for v in nd)}." if nd else ""]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_table_arguments(p)
+    p.add_argument("--seed", type=int, default=1, help="whose kept runs, and the new run's seed (default %(default)s)")
+    p.add_argument("--style", default="town", help="the training style of the runs (default %(default)s)")
+    args = p.parse_args(argv)
+    out, work = Path(args.out), Path(args.work)
+    ledger = read_table(out, args.family, "bench_depth_role")
+    if ledger is None:
+        return 2
+    ex = ledger.experiment
+    runs = {label: source_run(work, args.seed, ex["models"][label], args.style) for label in ("BSN", "BSN-D")}
+    missing = [str(r) for r in runs.values() if not Run(r).model_path.is_file()]
+    if missing:
+        print(f"bench_depth_role: no kept run at {', '.join(missing)} (bench_bsn_accuracy trains them)")
+        return 2
+    no_depth = work / "depth_role" / f"seed{args.seed}_{ex['models']['BSN-D']}_{args.style}_no_depth_loss"
+    train_run(work / "train", no_depth,
+              [*shared_settings(ex), *teacher_settings(work), f'model.name="{ex["models"]["BSN-D"]}"',
+               f"train.steps={ex['steps']}", *records(ex["steps"], CURVE_RECORDS), f"train.seed={args.seed}",
+               f'data.train_styles=["{args.style}"]', "train.depth_weight=0"])
+    tests = {n: d for n, d in {"table": work / "test", "more": work / "test_more"}.items() if d.is_dir()}
+    scores_dir = work / "depth_role" / "scores"
+    scores: dict[str, Any] = {
+        label: {n: score(run, d, score_path(work, n, args.seed, run, args.style), args.style)
+                for n, d in tests.items()} for label, run in runs.items()}
+    with flattened_depth_input():
+        scores["BSN flat depth"] = {n: score(runs["BSN"], d, scores_dir / f"seed{args.seed}_flat_{n}.json",
+                                             args.style) for n, d in tests.items()}
+    scores["BSN-D no depth loss"] = {n: score(no_depth, d, scores_dir / f"{no_depth.name}_{n}.json", args.style)
+                                     for n, d in tests.items()}
+    curve = [r["val_iou"] for r in Run(no_depth).history() if r.get("phase") == "train" and "val_iou" in r]
+    result = {"family": args.family, "seed": args.seed, "style": args.style,
+              "scores": {a: scores[a] for a in ARMS}, "no_depth_loss_val_iou": [round(v, 4) for v in curve]}
+    name = f"{report_name(args.family)}_depth_role"
+    path = write_result(out, name, result, markdown(result, describe_clips(list(tests.values()))))
+    print((out / f"{name}.md").read_text())
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
