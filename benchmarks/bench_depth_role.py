@@ -28,6 +28,7 @@ from typing import Any
 
 from benchmarks.bench_bsn_accuracy import (
     CURVE_RECORDS,
+    STYLES,
     report_name,
     shared_settings,
     source_run,
@@ -87,7 +88,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_table_arguments(p)
     p.add_argument("--seed", type=int, default=1, help="whose kept runs, and the new run's seed (default %(default)s)")
-    p.add_argument("--style", default="town", help="the training style of the runs (default %(default)s)")
+    p.add_argument("--style", choices=STYLES, default="town",
+                   help="the training style of the runs (default %(default)s)")
     args = p.parse_args(argv)
     out, work = Path(args.out), Path(args.work)
     ledger = read_table(out, args.family, "bench_depth_role")
