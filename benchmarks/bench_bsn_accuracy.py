@@ -138,12 +138,19 @@ def teacher_settings(work: Path) -> list[str]:
     return [f"teacher.checkpoint=\"{work / 'runs' / 'teacher' / 'teacher'}\""]
 
 
+def source_settings(ex: dict[str, Any], work: Path, name: str, src: str, seed: int) -> list[str]:
+    """``bsn-train`` settings of the table's run of registry model ``name`` trained on style ``src``
+    with ``seed`` (its data is the table's training clips)."""
+    return [*shared_settings(ex), *teacher_settings(work), f'model.name="{name}"', f"train.steps={ex['steps']}",
+            *records(ex["steps"], CURVE_RECORDS), f"train.seed={seed}", f'data.train_styles=["{src}"]']
+
+
 def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_record=None) -> None:
     """Train and evaluate every (seed, model, source style) missing from ``ledger``."""
     ex = ledger.experiment
     train, test = make_data(work, ex["train_clips_per_style"], ex["test_clips_per_style"], ex["frames_per_clip"],
                             tuple(ex["size"]))
-    steps, ft_steps = ex["steps"], ex["finetune_steps"]
+    ft_steps = ex["finetune_steps"]
     common = shared_settings(ex)
     teacher = work / "runs" / "teacher"
     trained_here = not Run(teacher).checkpoint_path.is_file()
@@ -169,9 +176,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
                     continue
                 t0 = time.perf_counter()
                 base = source_run(work, seed, name, src)
-                train_run(train, base, [*common, *tsets, f'model.name="{name}"', f"train.steps={steps}",
-                                        *records(steps, CURVE_RECORDS), f"train.seed={seed}",
-                                        f'data.train_styles=["{src}"]'])
+                train_run(train, base, source_settings(ex, work, name, src, seed))
                 record: dict[str, Any] = {"curve": _curve(base), "test": {}, "finetuned": {}}
                 for tgt in STYLES:
                     with_baselines = f"baselines/{tgt}" not in ledger

@@ -26,14 +26,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from benchmarks.bench_bsn_accuracy import (
-    CURVE_RECORDS,
-    STYLES,
-    report_name,
-    shared_settings,
-    source_run,
-    teacher_settings,
-)
+from benchmarks.bench_bsn_accuracy import STYLES, report_name, source_run, source_settings
 from benchmarks.bench_bsn_rescore import (
     add_table_arguments,
     arms_by_clip,
@@ -42,7 +35,7 @@ from benchmarks.bench_bsn_rescore import (
     score,
     score_path,
 )
-from benchmarks.common import records, train_run, write_result
+from benchmarks.common import train_run, write_result
 from bsn_edge.train import Run
 
 ARMS = {
@@ -55,20 +48,22 @@ ARMS = {
 
 @contextmanager
 def flattened_depth_input() -> Iterator[None]:
-    """While open, a shared-encoder BSN's B sees each frame's depth feature as its mean over the frame."""
-    import bsn_edge.models.shared as shared
+    """While open, B sees each frame's depth feature as its mean over the frame, in both model
+    layouts (two networks and one shared encoder)."""
+    import bsn_edge.models.bsn as two
+    import bsn_edge.models.shared as one
 
-    real = shared.depth_feature
+    real = two.depth_feature
 
     def flat(depth):
         f = real(depth)
         return f.mean(dim=(2, 3), keepdim=True).expand_as(f)
 
-    shared.depth_feature = flat
+    two.depth_feature = one.depth_feature = flat
     try:
         yield
     finally:
-        shared.depth_feature = real
+        two.depth_feature = one.depth_feature = real
 
 
 def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
@@ -103,9 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     no_depth = work / "depth_role" / f"seed{args.seed}_{ex['models']['BSN-D']}_{args.style}_no_depth_loss"
     train_run(work / "train", no_depth,
-              [*shared_settings(ex), *teacher_settings(work), f'model.name="{ex["models"]["BSN-D"]}"',
-               f"train.steps={ex['steps']}", *records(ex["steps"], CURVE_RECORDS), f"train.seed={args.seed}",
-               f'data.train_styles=["{args.style}"]', "train.depth_weight=0"])
+              [*source_settings(ex, work, ex["models"]["BSN-D"], args.style, args.seed), "train.depth_weight=0"])
     tests = {n: d for n, d in {"table": work / "test", "more": work / "test_more"}.items() if d.is_dir()}
     scores_dir = work / "depth_role" / "scores"
     scores: dict[str, Any] = {

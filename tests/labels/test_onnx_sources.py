@@ -28,8 +28,7 @@ def encoded(tmp_path_factory):
     """A clip whose blue channel carries 2 / depth (an 'inverse depth' a model can read back)."""
     root = tmp_path_factory.mktemp("onnx")
     seq = root / "seq"
-    write_clip(SynthConfig(frames=30, height=96, width=192, fps=10.0, camera="fixed", seed=3), seq, video=False,
-               workers=2)
+    write_clip(SynthConfig(frames=30, height=96, width=192, fps=10.0, camera="fixed", seed=3), seq, video=False)
     for i in range(30):
         p = seq / "rgb" / f"{i:06d}.png"
         img = cv2.imread(str(p))
