@@ -13,6 +13,10 @@ still learns on features shaped by depth. Two questions, on one seed's kept runs
 - Does BSN-D's B draw on depth through the shared encoder? BSN-D trained again with the same
   recipe and seed but without the depth loss (``train.depth_weight=0``), so nothing in the network
   learns depth. If its B falls below BSN-D's, depth reaches B through the encoder.
+- Would better depth help? BSN given the ground-truth depth instead of D's at test time, and BSN
+  trained and scored with it throughout (the family's ``-oracle`` model, same recipe and seed).
+  If the oracle stands clearly above BSN, D's depth is what holds B back; if not, B makes little
+  of depth at this budget, however good.
 
 All are scored on the style's test clips of the table and of the rescore (``bench_bsn_rescore``
 renders those), at each run's own threshold and by average precision.
@@ -36,6 +40,7 @@ from benchmarks.bench_bsn_rescore import (
     score_path,
 )
 from benchmarks.common import train_run, write_result
+from bsn_edge.models import MODELS
 from bsn_edge.train import Run
 
 ARMS = {
@@ -43,27 +48,46 @@ ARMS = {
     "BSN flat depth": "BSN, its depth input flattened at test time",
     "BSN-D": "BSN-D as trained",
     "BSN-D no depth loss": "BSN-D trained without the depth loss",
+    "BSN true depth": "BSN, given the ground-truth depth instead of D's at test time",
+    "BSN oracle": "BSN trained and scored with the ground-truth depth as B's input",
 }
 
 
 @contextmanager
 def flattened_depth_input() -> Iterator[None]:
-    """While open, B sees each frame's depth feature as its mean over the frame, in both model
-    layouts (two networks and one shared encoder)."""
-    import bsn_edge.models.bsn as two
-    import bsn_edge.models.shared as one
+    """While open, B sees each frame's depth feature as its mean over the frame (both model layouts
+    take it from ``bsn_edge.models.bsn.depth_feature``)."""
+    import bsn_edge.models.bsn as bsn
 
-    real = two.depth_feature
+    real = bsn.depth_feature
 
     def flat(depth):
         f = real(depth)
         return f.mean(dim=(2, 3), keepdim=True).expand_as(f)
 
-    two.depth_feature = one.depth_feature = flat
+    bsn.depth_feature = flat
     try:
         yield
     finally:
-        two.depth_feature = one.depth_feature = real
+        bsn.depth_feature = real
+
+
+@contextmanager
+def true_depth_input() -> Iterator[None]:
+    """While open, every model a run loads gives B the ground-truth depth instead of D's (the
+    evaluator passes it to an ``oracle_depth`` model); the weights are the run's own."""
+    real = Run._build
+
+    def as_oracle(self, card, state):
+        model = real(self, card, state)
+        model.oracle_depth = model.use_depth
+        return model
+
+    Run._build = as_oracle
+    try:
+        yield
+    finally:
+        Run._build = real
 
 
 def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
@@ -73,9 +97,8 @@ def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
              "Scored on the style's test clips at each model's own threshold: IoU / average precision.", ""]
     lines += [f"- **{a}**: {ARMS[a]}" for a in arms]
     lines += ["", *arms_by_clip(result["scores"], {a: a for a in arms}, described)]
-    nd = result["no_depth_loss_val_iou"]
-    lines += ["", f"Validation IoU of the run without the depth loss over its training: "
-                  f"{', '.join(f'{v:.3f}' for v in nd)}." if nd else ""]
+    lines += [""] + [f"Validation IoU of {a} over its training: {', '.join(f'{v:.3f}' for v in curve)}."
+                     for a, curve in result["val_iou"].items() if curve]
     return "\n".join(lines).rstrip() + "\n"
 
 
@@ -96,9 +119,15 @@ def main(argv: list[str] | None = None) -> int:
     if missing:
         print(f"bench_depth_role: no kept run at {', '.join(missing)} (bench_bsn_accuracy trains them)")
         return 2
+    oracle_name = f"{ex['models']['BSN']}-oracle"
+    if oracle_name not in MODELS:
+        print(f"bench_depth_role: the registry has no {oracle_name!r} model for the oracle arm")
+        return 2
     no_depth = work / "depth_role" / f"seed{args.seed}_{ex['models']['BSN-D']}_{args.style}_no_depth_loss"
     train_run(work / "train", no_depth,
               [*source_settings(ex, work, ex["models"]["BSN-D"], args.style, args.seed), "train.depth_weight=0"])
+    oracle = work / "depth_role" / f"seed{args.seed}_{oracle_name}_{args.style}"
+    train_run(work / "train", oracle, source_settings(ex, work, oracle_name, args.style, args.seed))
     tests = {n: d for n, d in {"table": work / "test", "more": work / "test_more"}.items() if d.is_dir()}
     scores_dir = work / "depth_role" / "scores"
     scores: dict[str, Any] = {
@@ -107,11 +136,17 @@ def main(argv: list[str] | None = None) -> int:
     with flattened_depth_input():
         scores["BSN flat depth"] = {n: score(runs["BSN"], d, scores_dir / f"seed{args.seed}_flat_{n}.json",
                                              args.style) for n, d in tests.items()}
-    scores["BSN-D no depth loss"] = {n: score(no_depth, d, scores_dir / f"{no_depth.name}_{n}.json", args.style)
-                                     for n, d in tests.items()}
-    curve = [r["val_iou"] for r in Run(no_depth).history() if r.get("phase") == "train" and "val_iou" in r]
+    with true_depth_input():
+        scores["BSN true depth"] = {n: score(runs["BSN"], d, scores_dir / f"seed{args.seed}_true_depth_{n}.json",
+                                             args.style) for n, d in tests.items()}
+    trained = {"BSN-D no depth loss": no_depth, "BSN oracle": oracle}
+    curves = {}
+    for label, run in trained.items():
+        scores[label] = {n: score(run, d, scores_dir / f"{run.name}_{n}.json", args.style) for n, d in tests.items()}
+        curves[label] = [round(r["val_iou"], 4) for r in Run(run).history()
+                         if r.get("phase") == "train" and "val_iou" in r]
     result = {"family": args.family, "seed": args.seed, "style": args.style,
-              "scores": {a: scores[a] for a in ARMS}, "no_depth_loss_val_iou": [round(v, 4) for v in curve]}
+              "scores": {a: scores[a] for a in ARMS}, "val_iou": curves}
     name = f"{report_name(args.family)}_depth_role"
     path = write_result(out, name, result, markdown(result, describe_clips(list(tests.values()))))
     print((out / f"{name}.md").read_text())

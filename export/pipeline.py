@@ -23,6 +23,7 @@ from bsn_edge.export.fused import check_parity, to_onnx
 from bsn_edge.export.integer_input import INTEGER_INPUT, integer_input
 from bsn_edge.export.quantize import QuantConfig, quantize
 from bsn_edge.export.seal import seal
+from bsn_edge.models import ORACLE_DEPTH_NOTE
 from bsn_edge.runtime import selftest
 from bsn_edge.runtime.model_file import ModelFile, session
 from bsn_edge.sequence.images import atomic_write_bytes
@@ -45,6 +46,8 @@ def export_run(checkpoint: str | Path, out: str | Path, size: tuple[int, int] | 
         raise ValueError(f"calibration frames must be >= 1, got {calib_frames}")
     qcfg = qcfg or QuantConfig()
     model, card = Run(checkpoint).load_model()
+    if model.oracle_depth:
+        raise ValueError(f"{checkpoint}: a {card.variant!r} run cannot be exported: {ORACLE_DEPTH_NOTE}")
     if card.threshold is None:
         raise ValueError(f"{checkpoint}: the run has no decision threshold yet (training did not finish)")
     h, w = size or card.input_size

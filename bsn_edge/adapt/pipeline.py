@@ -26,6 +26,7 @@ from bsn_edge.labels.batch import label_many
 from bsn_edge.labels.generator import made_with
 from bsn_edge.labels.sources.base import ClipData
 from bsn_edge.labels.sources.registry import make_seg
+from bsn_edge.models import ORACLE_DEPTH_NOTE
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.meta import SequenceMeta
 from bsn_edge.train.run import Run
@@ -287,7 +288,9 @@ def adapt(run_dir: str | Path, videos: list[str | Path], out: str | Path, cfg: A
     src = Run(run_dir)
     try:
         card = src.card()
-        src.load_model()
+        model, _ = src.load_model()
+        if model.oracle_depth:
+            raise AdaptError(f"{run_dir}: a {card.variant!r} run cannot be adapted: {ORACLE_DEPTH_NOTE}")
         load_teacher(src)
     except (FileNotFoundError, ValueError) as e:
         raise AdaptError(str(e)) from None

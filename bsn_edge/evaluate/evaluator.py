@@ -15,7 +15,7 @@ from bsn_edge.metrics import Counts, ScoreHistogram, ThresholdSweep
 from bsn_edge.sequence import read_kitti_poses
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth.sheet import tint
-from bsn_edge.train.trainer import scaled
+from bsn_edge.train.trainer import outputs, scaled
 
 METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
 
@@ -51,7 +51,7 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
         for k in range(len(ds)):
             item = ds[k]
             x = item["image"][None]
-            logits, depth, _ = model(x)
+            logits, depth, _ = outputs(model, x, {"depth": item["depth"][None]})
             prob = torch.sigmoid(logits)[0, 0].numpy()
             d = depth[0, 0].numpy()
             label_m = item["blindspot"][0].numpy() > 0.5

@@ -1,6 +1,6 @@
 """Networks in plain torch: ResNet encoders, DeepLabV3+, U-Net, D, B and the registry."""
 
-from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, DepthNet, depth_feature
+from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, ORACLE_DEPTH_NOTE, BlindSpotNet, DepthNet, depth_feature
 from bsn_edge.models.registry import (
     MODELS,
     ModelSpec,
@@ -17,6 +17,7 @@ __all__ = [
     "MAX_DEPTH_M",
     "MIN_DEPTH_M",
     "MODELS",
+    "ORACLE_DEPTH_NOTE",
     "BlindSpotNet",
     "DepthNet",
     "ModelSpec",

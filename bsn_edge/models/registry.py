@@ -28,7 +28,9 @@ class ModelSpec:
     paper's; 64 separable is the light one). use_depth: B sees D's depth. distill: trained with
     the teacher's pairwise-similarity loss (lambda = 1) or without (lambda = 0). shared_encoder:
     D and B read one ResNet-18 encoder (:class:`~bsn_edge.models.shared.SharedEncoderBSN`) instead
-    of one each.
+    of one each. oracle_depth: B reads the ground-truth depth given with the frame instead of D's,
+    a research arm that says how much better depth would help B (no camera has that depth, so
+    such a model is not exported or adapted).
     """
 
     arch: str = "deeplab"
@@ -41,6 +43,7 @@ class ModelSpec:
     output_stride: int = 16     # of both encoders
     input_scale: float = 1.0    # both networks run on the frame resized by this
     shared_encoder: bool = False
+    oracle_depth: bool = False
 
     def __post_init__(self) -> None:
         if self.arch not in ("deeplab", "unet"):
@@ -65,9 +68,11 @@ MODELS: dict[str, ModelSpec] = {
     "small-kd": ModelSpec(distill=False),
     "small-light-d": ModelSpec(use_depth=False, **_LIGHT),
     "small-light-kd": ModelSpec(distill=False, **_LIGHT),
+    "small-light-oracle": ModelSpec(oracle_depth=True, **_LIGHT),
     "shared-light": ModelSpec(shared_encoder=True, **_LIGHT),
     "shared-light-d": ModelSpec(shared_encoder=True, use_depth=False, **_LIGHT),
     "shared-light-kd": ModelSpec(shared_encoder=True, distill=False, **_LIGHT),
+    "shared-light-oracle": ModelSpec(shared_encoder=True, oracle_depth=True, **_LIGHT),
 }
 
 
@@ -81,7 +86,7 @@ def get_spec(name: str) -> ModelSpec:
 def build(spec: ModelSpec) -> BlindSpotNet:
     if spec.shared_encoder:
         return SharedEncoderBSN(spec.encoder_depth, spec.output_stride, spec.decoder_width, spec.depth_width,
-                                spec.separable, spec.use_depth, spec.input_scale)
+                                spec.separable, spec.use_depth, spec.input_scale, spec.oracle_depth)
     in_ch = 4 if spec.use_depth else 3
     if spec.arch == "unet":
         b: nn.Module = UNet(in_ch, 1)
@@ -89,7 +94,7 @@ def build(spec: ModelSpec) -> BlindSpotNet:
         enc = ResNetEncoder(spec.encoder_depth, in_ch, spec.output_stride)
         b = EncoderDecoder(enc, 1, spec.decoder_width, spec.separable)
     d = DepthNet(18, spec.depth_width, output_stride=spec.output_stride)
-    return BlindSpotNet(b, d, spec.use_depth, spec.input_scale)
+    return BlindSpotNet(b, d, spec.use_depth, spec.input_scale, spec.oracle_depth)
 
 
 def create_model(name: str) -> BlindSpotNet:

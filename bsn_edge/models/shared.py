@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from bsn_edge.models.bsn import LOG_MAX_DEPTH, LOG_MIN_DEPTH, BlindSpotNet, depth_feature
+from bsn_edge.models.bsn import LOG_MAX_DEPTH, LOG_MIN_DEPTH, BlindSpotNet
 from bsn_edge.models.deeplab import DeepLabV3PlusDecoder, SegmentationHead, aspp_rates, conv_bn_relu
 from bsn_edge.models.resnet import ResNetEncoder
 
@@ -82,11 +82,11 @@ class SharedEncoderBSN(BlindSpotNet):
 
     def __init__(self, encoder_depth: int = 18, output_stride: int = 32, decoder_width: int = 64,
                  depth_width: int = 32, separable: bool = True, use_depth: bool = True,
-                 input_scale: float = 1.0) -> None:
+                 input_scale: float = 1.0, oracle_depth: bool = False) -> None:
         encoder = ResNetEncoder(encoder_depth, 3, output_stride)
         d = SharedDepth(encoder, depth_width)       # D's decoder is separable in both layouts
         b = DepthAwareDecoder(encoder.out_channels, encoder.strides, decoder_width, separable, use_depth)
-        super().__init__(b, d, use_depth, input_scale)
+        super().__init__(b, d, use_depth, input_scale, oracle_depth)
 
     @property
     def frame_encoder(self) -> ResNetEncoder:
@@ -98,15 +98,15 @@ class SharedEncoderBSN(BlindSpotNet):
         """How much smaller than the network's input :meth:`predict_coarse`'s outputs are."""
         return self.depth_net.encoder.strides[0]
 
-    def predict_coarse(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    def predict_coarse(self, x: Tensor, given: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
         """Blind-spot logits and log-depth at :attr:`coarse_stride`, and B's decoder features:
         :meth:`predict` before its bilinear upsampling, which an exporter can fuse with the frame's."""
         feats = self.depth_net.encoder(x)
         log_coarse = self.depth_net.coarse(feats)
-        seen = depth_feature(log_coarse.detach().exp()) if self.use_depth else None
+        seen = self.seen_depth(log_coarse.exp(), given) if self.use_depth else None
         logits, b_feats = self.blindspot.coarse(feats, seen)
         return logits, log_coarse, b_feats
 
-    def predict(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        logits, log_coarse, b_feats = self.predict_coarse(x)
+    def predict(self, x: Tensor, given: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
+        logits, log_coarse, b_feats = self.predict_coarse(x, given)
         return self.blindspot.head.up(logits), self.depth_net.head.up(log_coarse).exp(), b_feats

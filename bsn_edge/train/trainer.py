@@ -313,6 +313,19 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
     return teacher.eval()
 
 
+def given_depth(model: torch.nn.Module, b: dict[str, torch.Tensor]) -> torch.Tensor | None:
+    """The ground-truth depth of batch ``b`` for a model whose B reads it (``oracle_depth``, a research
+    arm), else None. ``model`` may be wrapped (DistributedDataParallel)."""
+    inner = getattr(model, "module", model)
+    return b["depth"] if getattr(inner, "oracle_depth", False) else None
+
+
+def outputs(model: torch.nn.Module, x: torch.Tensor, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, ...]:
+    """``model(x)``, and for an ``oracle_depth`` model ``model(x, depth)`` with batch ``b``'s depth."""
+    depth = given_depth(model, b)
+    return model(x) if depth is None else model(x, depth.to(x.device))
+
+
 @torch.no_grad()
 def choose_threshold(model: torch.nn.Module, ds, batch: int = 8) -> tuple[float, dict[str, float]]:
     """The threshold with the best IoU inside V on ``ds`` (the validation split)."""
@@ -320,7 +333,7 @@ def choose_threshold(model: torch.nn.Module, ds, batch: int = 8) -> tuple[float,
     sweep = ThresholdSweep()
     dev = next(model.parameters()).device
     for b in DataLoader(ds, batch_size=batch):
-        prob = torch.sigmoid(model(b["image"].to(dev))[0]).cpu().numpy()
+        prob = torch.sigmoid(outputs(model, b["image"].to(dev), b)[0]).cpu().numpy()
         sweep.add(prob, b["blindspot"].numpy() > 0.5, b["visibility"].numpy() > 0.5)
     return sweep.best()
 
@@ -348,7 +361,7 @@ def losses(net: torch.nn.Module, b: dict[str, torch.Tensor], teacher: torch.nn.M
     cl = cfg.train.channels_last
     dev = b["image"].device
     with _autocast(dev, dtype):
-        logits, depth, feats = net(_layout(b["image"], cl))
+        logits, depth, feats = outputs(net, _layout(b["image"], cl), b)
     logits, depth, feats = logits.float(), depth.float(), feats.float()
     l_bce = masked_bce(logits, b["blindspot"], b["visibility"])
     l_depth = depth_loss(depth, b["depth"], b["sky"], _depth_weights(b["semantic"], cfg.train.depth_object_weight),
@@ -383,7 +396,7 @@ def validate(model: torch.nn.Module, cache: SampleCache, frames: int, dtype: tor
     err, n, road_err, road_n = 0.0, 0, 0.0, 0
     for b in cache.evenly(frames):
         with _autocast(dev, dtype):
-            logits, depth, _ = model(_layout(b["image"].to(dev), channels_last))
+            logits, depth, _ = outputs(model, _layout(b["image"].to(dev), channels_last), b)
         sweep.add(torch.sigmoid(logits.float()).cpu().numpy(), b["blindspot"].numpy() > 0.5,
                   b["visibility"].numpy() > 0.5)
         gt = b["depth"]

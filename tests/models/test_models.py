@@ -12,7 +12,8 @@ def test_shapes_and_gradients(name):
     torch.manual_seed(0)
     m = create_model(name)
     x = torch.randn(2, 3, 64, 128)
-    logits, depth, feats = m(x)
+    given = torch.rand(2, 1, 64, 128) * 50 if m.oracle_depth else None    # ground-truth depth, for an oracle
+    logits, depth, feats = m(x, given)
     assert logits.shape == (2, 1, 64, 128) and depth.shape == (2, 1, 64, 128)
     assert feats.ndim == 4 and feats.shape[0] == 2
     assert (depth > 0).all()
