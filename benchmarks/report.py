@@ -19,7 +19,8 @@ from benchmarks.common import machine
 from benchmarks.ledger import mean_std
 
 ORDER = ("synth", "labels", "train_step", "train_step_avx2_research", "train_step_avx2_shared",
-         "bsn_accuracy", "bsn_accuracy_shared-light", "bsn_arch", "bsn_arch_light",
+         "bsn_accuracy", "bsn_accuracy_shared-light", "bsn_accuracy_shared-light_rescore",
+         "bsn_accuracy_shared-light_coverage", "bsn_accuracy_shared-light_depth_role", "bsn_arch", "bsn_arch_light",
          "quant", "floor", "floor_avx2", "int8_cpu",
          "runtime", "runtime_avx2", "runtime_avx2_decode", "runtime_avx2_flight", "runtime_avx2_shared",
          "runtime_avx2_s3", "runtime_avx2_s3fast", "runtime_avx2_s3warp", "runtime_avx2_s3flight",
