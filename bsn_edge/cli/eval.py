@@ -83,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"BSN without its threshold: average precision {bsn['ap']:.3f}; the best threshold on these clips, "
               f"{bsn['best_threshold']:.2f}, would give IoU {bsn['best_iou']:.3f} (an upper bound: chosen on the "
               f"clips it scores; the run's own is {report['threshold']:.2f})")
+    if model.oracle_depth:
+        print(f"B read {report['b_reads']}: these figures are not what a car would see")
     print(f"wrote {out}")
     return 0
 

@@ -26,7 +26,8 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
              ) -> dict[str, Any]:
     """Metrics inside V for BSN and the baselines, overall and per clip, plus grid rows. BSN also gets
     scores that need no threshold: its average precision, and the best IoU any threshold of the sweep
-    would give on these clips (optimistic: chosen on the clips it scores)."""
+    would give on these clips (optimistic: chosen on the clips it scores). ``b_reads`` says what B
+    read beside the frame: D's depth, none, or for an ``oracle_depth`` model the clips' own depth."""
     if card.threshold is None:
         raise ValueError("the run has no decision threshold yet (training did not finish)")
     threshold = card.threshold
@@ -87,7 +88,9 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
         best_th, best = sweep.best()
         scored["BSN"] |= {"ap": ranked.average_precision(), "ap_by_chance": ranked.positive_share(),
                           "best_threshold": best_th, "best_iou": best["iou"]}
-    return {"threshold": threshold, "overall": scored,
+    b_reads = ("ground-truth depth (a research oracle; no camera has it)" if model.oracle_depth
+               else "D's depth" if model.use_depth else "no depth")
+    return {"threshold": threshold, "overall": scored, "b_reads": b_reads,
             "per_clip": per_clip, "grid_rows": rows,
             "segmentation": "teacher" if teacher is not None else "ground truth (no teacher in the run)"}
 

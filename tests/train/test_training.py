@@ -19,6 +19,7 @@ from bsn_edge.cli import train as train_cli
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
 from bsn_edge.export import read_card
 from bsn_edge.metrics import THRESHOLDS
+from bsn_edge.models import BlindSpotNet
 from bsn_edge.train import Run, load_config
 from bsn_edge.train.losses import masked_bce
 
@@ -134,6 +135,35 @@ def test_smoke_config_end_to_end(data, tmp_path, capsys):
     assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet", "--resume",
                            "--set", "data.label=\"T2s\"", "--set", "train.steps=8"]) == 0
     assert json.loads((run / "checkpoint.json").read_text())["step"] == 8
+
+
+def test_an_oracle_run_trains_and_is_scored_on_each_frames_own_depth(data, tmp_path, monkeypatch, capsys):
+    given = []
+    real = BlindSpotNet.seen_depth
+
+    def recorded(self, depth, truth):
+        given.append(truth)
+        return real(self, depth, truth)
+
+    monkeypatch.setattr(BlindSpotNet, "seen_depth", recorded)
+    run = tmp_path / "run"
+    assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet",
+                           "--set", "data.label=\"T2s\"", "--set", "data.val_fraction=0.34",
+                           "--set", "model.name=\"shared-light-oracle\""]) == 0
+    assert given and all(g is not None for g in given)       # training, validation and the threshold
+    given.clear()
+    report = tmp_path / "report.json"
+    assert eval_cli.main(["--run", str(run), "--data", str(data), "--out", str(report), "--clips", "all",
+                          "--styles", "town", "--no-baselines"]) == 0
+    assert "ground-truth depth" in capsys.readouterr().out
+    assert json.loads(report.read_text())["b_reads"].startswith("ground-truth depth")
+    # the first frame scored is town_0's first: B was given that frame's depth, read here on its own
+    card = Run(run).card()
+    clip = next(c for c in find_clips(data, "T2s") if c.path.name == "town_0")
+    truth = BlindSpotDataset([clip], card.input_size, label_name="T2s", camera=card.camera,
+                             mounting=card.mounting)[0]["depth"]
+    assert truth.max() > 0
+    torch.testing.assert_close(given[0], truth[None])
 
 
 def test_checkpoints_refuse_tampering_and_other_architectures(data, tmp_path):
