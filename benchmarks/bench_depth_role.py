@@ -1,11 +1,11 @@
 """Where does depth reach B? A controlled check of why BSN-D is not below BSN in Table 2.
 
     python -m benchmarks.bench_depth_role --family shared-light --out benchmarks/results \
-        --work ~/.cache/bsn-edge/accuracy [--seed 1] [--style town]
+        --work ~/.cache/bsn-edge/accuracy [--seeds 1 2] [--style town]
 
 In the paper D and B are two networks, and BSN-D's B has no depth at all. In a shared-encoder
 family B and D read one encoder, which D's depth loss trains as much as B's loss does: BSN-D's B
-still learns on features shaped by depth. Two questions, on one seed's kept runs of the table:
+still learns on features shaped by depth. Three questions, on the kept runs of the table's seeds:
 
 - Does BSN's B use the depth it is given? BSN scored as trained, and again with its depth input
   flattened at test time (each frame's depth feature replaced by its mean over the frame: the
@@ -40,6 +40,7 @@ from benchmarks.bench_bsn_rescore import (
     score_path,
 )
 from benchmarks.common import train_run, write_result
+from benchmarks.ledger import fmt
 from bsn_edge.models import MODELS
 from bsn_edge.train import Run
 
@@ -91,21 +92,60 @@ def true_depth_input() -> Iterator[None]:
 
 
 def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
-    arms = list(ARMS)
-    lines = [f"# Where does depth reach B? ({result['family']}, seed {result['seed']}, trained on "
-             f"{result['style']})", "",
+    arms, seeds = list(ARMS), result["seeds"]
+    lines = [f"# Where does depth reach B? ({result['family']}, trained on {result['style']}, "
+             f"seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))})", "",
              "Scored on the style's test clips at each model's own threshold: IoU / average precision.", ""]
     lines += [f"- **{a}**: {ARMS[a]}" for a in arms]
-    lines += ["", *arms_by_clip(result["scores"], {a: a for a in arms}, described)]
-    lines += [""] + [f"Validation IoU of {a} over its training: {', '.join(f'{v:.3f}' for v in curve)}."
-                     for a, curve in result["val_iou"].items() if curve]
+    if len(seeds) > 1:
+        lines += ["", "Pooled over each test set's clips, mean +- std over the seeds (IoU; AP):", "",
+                  "| arm | " + " | ".join(f"`{n}` IoU | `{n}` AP" for n in result["tests"]) + " |",
+                  "|---" * (1 + 2 * len(result["tests"])) + "|"]
+        for a in arms:
+            cells = [fmt(result["scores"][str(sd)][a][n][k] for sd in seeds)
+                     for n in result["tests"] for k in ("iou", "ap")]
+            lines.append(f"| {a} | " + " | ".join(cells) + " |")
+    for sd in seeds:
+        lines += ["", f"## Seed {sd}", "", *arms_by_clip(result["scores"][str(sd)], {a: a for a in arms}, described)]
+        lines += [""] + [f"Validation IoU of {a} over its training: {', '.join(f'{v:.3f}' for v in curve)}."
+                         for a, curve in result["val_iou"][str(sd)].items() if curve]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def seed_arms(ex: dict[str, Any], work: Path, seed: int, style: str, tests: dict[str, Path]
+              ) -> tuple[dict[str, Any], dict[str, list[float]]]:
+    """Every arm's scores of one seed (training the two runs of its own first, or going on with
+    them) and the validation curves of those two."""
+    runs = {label: source_run(work, seed, ex["models"][label], style) for label in ("BSN", "BSN-D")}
+    oracle_name = f"{ex['models']['BSN']}-oracle"
+    no_depth = work / "depth_role" / f"seed{seed}_{ex['models']['BSN-D']}_{style}_no_depth_loss"
+    train_run(work / "train", no_depth,
+              [*source_settings(ex, work, ex["models"]["BSN-D"], style, seed), "train.depth_weight=0"])
+    oracle = work / "depth_role" / f"seed{seed}_{oracle_name}_{style}"
+    train_run(work / "train", oracle, source_settings(ex, work, oracle_name, style, seed))
+    scores_dir = work / "depth_role" / "scores"
+    scores: dict[str, Any] = {
+        label: {n: score(run, d, score_path(work, n, seed, run, style), style)
+                for n, d in tests.items()} for label, run in runs.items()}
+    with flattened_depth_input():
+        scores["BSN flat depth"] = {n: score(runs["BSN"], d, scores_dir / f"seed{seed}_flat_{n}.json", style)
+                                    for n, d in tests.items()}
+    with true_depth_input():
+        scores["BSN true depth"] = {n: score(runs["BSN"], d, scores_dir / f"seed{seed}_true_depth_{n}.json", style)
+                                    for n, d in tests.items()}
+    curves = {}
+    for label, run in {"BSN-D no depth loss": no_depth, "BSN oracle": oracle}.items():
+        scores[label] = {n: score(run, d, scores_dir / f"{run.name}_{n}.json", style) for n, d in tests.items()}
+        curves[label] = [round(r["val_iou"], 4) for r in Run(run).history()
+                         if r.get("phase") == "train" and "val_iou" in r]
+    return {a: scores[a] for a in ARMS}, curves
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_table_arguments(p)
-    p.add_argument("--seed", type=int, default=1, help="whose kept runs, and the new run's seed (default %(default)s)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1],
+                   help="whose kept runs, and the new runs' seeds (default %(default)s)")
     p.add_argument("--style", choices=STYLES, default="town",
                    help="the training style of the runs (default %(default)s)")
     args = p.parse_args(argv)
@@ -114,8 +154,9 @@ def main(argv: list[str] | None = None) -> int:
     if ledger is None:
         return 2
     ex = ledger.experiment
-    runs = {label: source_run(work, args.seed, ex["models"][label], args.style) for label in ("BSN", "BSN-D")}
-    missing = [str(r) for r in runs.values() if not Run(r).model_path.is_file()]
+    seeds = sorted(set(args.seeds))
+    missing = [str(r) for sd in seeds for r in (source_run(work, sd, ex["models"][label], args.style)
+                                                for label in ("BSN", "BSN-D")) if not Run(r).model_path.is_file()]
     if missing:
         print(f"bench_depth_role: no kept run at {', '.join(missing)} (bench_bsn_accuracy trains them)")
         return 2
@@ -123,30 +164,11 @@ def main(argv: list[str] | None = None) -> int:
     if oracle_name not in MODELS:
         print(f"bench_depth_role: the registry has no {oracle_name!r} model for the oracle arm")
         return 2
-    no_depth = work / "depth_role" / f"seed{args.seed}_{ex['models']['BSN-D']}_{args.style}_no_depth_loss"
-    train_run(work / "train", no_depth,
-              [*source_settings(ex, work, ex["models"]["BSN-D"], args.style, args.seed), "train.depth_weight=0"])
-    oracle = work / "depth_role" / f"seed{args.seed}_{oracle_name}_{args.style}"
-    train_run(work / "train", oracle, source_settings(ex, work, oracle_name, args.style, args.seed))
     tests = {n: d for n, d in {"table": work / "test", "more": work / "test_more"}.items() if d.is_dir()}
-    scores_dir = work / "depth_role" / "scores"
-    scores: dict[str, Any] = {
-        label: {n: score(run, d, score_path(work, n, args.seed, run, args.style), args.style)
-                for n, d in tests.items()} for label, run in runs.items()}
-    with flattened_depth_input():
-        scores["BSN flat depth"] = {n: score(runs["BSN"], d, scores_dir / f"seed{args.seed}_flat_{n}.json",
-                                             args.style) for n, d in tests.items()}
-    with true_depth_input():
-        scores["BSN true depth"] = {n: score(runs["BSN"], d, scores_dir / f"seed{args.seed}_true_depth_{n}.json",
-                                             args.style) for n, d in tests.items()}
-    trained = {"BSN-D no depth loss": no_depth, "BSN oracle": oracle}
-    curves = {}
-    for label, run in trained.items():
-        scores[label] = {n: score(run, d, scores_dir / f"{run.name}_{n}.json", args.style) for n, d in tests.items()}
-        curves[label] = [round(r["val_iou"], 4) for r in Run(run).history()
-                         if r.get("phase") == "train" and "val_iou" in r]
-    result = {"family": args.family, "seed": args.seed, "style": args.style,
-              "scores": {a: scores[a] for a in ARMS}, "val_iou": curves}
+    result: dict[str, Any] = {"family": args.family, "style": args.style, "seeds": seeds, "tests": list(tests),
+                              "scores": {}, "val_iou": {}}
+    for sd in seeds:
+        result["scores"][str(sd)], result["val_iou"][str(sd)] = seed_arms(ex, work, sd, args.style, tests)
     name = f"{report_name(args.family)}_depth_role"
     path = write_result(out, name, result, markdown(result, describe_clips(list(tests.values()))))
     print((out / f"{name}.md").read_text())
