@@ -4,6 +4,7 @@ and nothing that would put such a model in a car (export, adaptation) accepts it
 import pytest
 import torch
 
+from bsn_edge.adapt import AdaptError, adapt
 from bsn_edge.cli import export as export_cli
 from bsn_edge.models import MAX_DEPTH_M, create_model, depth_feature
 from bsn_edge.models.bsn import given_depth_feature
@@ -87,13 +88,25 @@ def test_the_trainer_hands_the_batchs_depth_to_the_oracle_only():
     assert given_depth(wrapped, batch) is batch["depth"]
 
 
-def test_an_oracle_run_is_not_exported(tmp_path, capsys):
+@pytest.fixture
+def oracle_run(tmp_path):
+    """An (untrained) oracle run folder as bsn-train writes it."""
     torch.manual_seed(0)
     card = card_for((64, 128), variant="shared-light-oracle", threshold=0.4)
     fields = {k: getattr(card, k) for k in ("variant", "spec", "input_size", "threshold", "camera", "depth_range",
                                             "config_digest")}
     Run(tmp_path / "run").save(create_model("shared-light-oracle"), fields, {"step": 0})
+    return tmp_path / "run"
+
+
+def test_an_oracle_run_is_not_exported(oracle_run, tmp_path, capsys):
     out = tmp_path / "model.onnx"
-    assert export_cli.main(["--checkpoint", str(tmp_path / "run"), "--out", str(out)]) != 0
+    assert export_cli.main(["--checkpoint", str(oracle_run), "--out", str(out)]) != 0
     assert "ground-truth depth" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_an_oracle_run_is_not_adapted(oracle_run, tmp_path):
+    with pytest.raises(AdaptError, match="cannot be adapted: its B reads ground-truth depth"):
+        adapt(oracle_run, [tmp_path / "any.mp4"], tmp_path / "adapted")
+    assert not (tmp_path / "adapted").exists()
