@@ -112,12 +112,11 @@ def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
-def seed_arms(ex: dict[str, Any], work: Path, seed: int, style: str, tests: dict[str, Path]
+def seed_arms(ex: dict[str, Any], work: Path, seed: int, style: str, tests: dict[str, Path], oracle_name: str
               ) -> tuple[dict[str, Any], dict[str, list[float]]]:
     """Every arm's scores of one seed (training the two runs of its own first, or going on with
-    them) and the validation curves of those two."""
+    them; ``oracle_name`` is the registry's oracle of the family) and the validation curves of those two."""
     runs = {label: source_run(work, seed, ex["models"][label], style) for label in ("BSN", "BSN-D")}
-    oracle_name = f"{ex['models']['BSN']}-oracle"
     no_depth = work / "depth_role" / f"seed{seed}_{ex['models']['BSN-D']}_{style}_no_depth_loss"
     train_run(work / "train", no_depth,
               [*source_settings(ex, work, ex["models"]["BSN-D"], style, seed), "train.depth_weight=0"])
@@ -168,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     result: dict[str, Any] = {"family": args.family, "style": args.style, "seeds": seeds, "tests": list(tests),
                               "scores": {}, "val_iou": {}}
     for sd in seeds:
-        result["scores"][str(sd)], result["val_iou"][str(sd)] = seed_arms(ex, work, sd, args.style, tests)
+        result["scores"][str(sd)], result["val_iou"][str(sd)] = seed_arms(ex, work, sd, args.style, tests, oracle_name)
     name = f"{report_name(args.family)}_depth_role"
     path = write_result(out, name, result, markdown(result, describe_clips(list(tests.values()))))
     print((out / f"{name}.md").read_text())
