@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.bench_bsn_accuracy import (
+    BASELINES,
     COLUMNS,
     FAMILIES,
     STYLES,
@@ -54,6 +55,31 @@ def score(run: Path, data: Path, out: Path, style: str) -> dict[str, Any]:
         rep = eval_run(run, data, out, "--clips", "all", "--styles", style, "--no-baselines")
     return {**{k: rep["overall"]["BSN"][k] for k in FIELDS},
             "clips": {c: {"iou": m["BSN"]["iou"], "ap": m["BSN"]["ap"]} for c, m in rep["per_clip"].items()}}
+
+
+def score_baselines(run: Path, data: Path, out: Path, style: str) -> dict[str, float]:
+    """IoU of each baseline over the ``style`` clips in ``data``. The baselines need no training, but
+    they read a run: Traversable its D's depth, all three its teacher's segmentation."""
+    if out.is_file() and out.stat().st_mtime > Run(run).model_path.stat().st_mtime:
+        rep = json.loads(out.read_text())
+    else:
+        rep = eval_run(run, data, out, "--clips", "all", "--styles", style)
+    return {b: rep["overall"][b]["iou"] for b in BASELINES if b in rep["overall"]}
+
+
+def baselines_on(scores: dict[str, Any], models: list[str], work: Path, name: str, data: Path) -> dict[str, Any]:
+    """The baselines on test set ``name`` (``data``), read through one kept run of ``scores``: the first
+    model's (BSN's) if one is kept, trained on the first style, lowest seed first. Which run (None
+    when none is kept), and per style :func:`score_baselines`."""
+    kept = [k for k, r in scores.items() if "missing" not in r]
+    key = min(kept, default=None, key=lambda k: (models.index(scores[k]["model"]),
+                                                  STYLES.index(scores[k]["source"]), scores[k]["seed"]))
+    if key is None:
+        return {"run": None}
+    rec = scores[key]
+    run = source_run(work, rec["seed"], rec["name"], rec["source"])
+    return {"run": key, **{tgt: score_baselines(run, data, work / "rescore" / name / f"baselines_on_{tgt}.json", tgt)
+                           for tgt in STYLES}}
 
 
 def add_table_arguments(p: argparse.ArgumentParser) -> None:
@@ -88,8 +114,9 @@ def score_runs(ledger: Ledger, work: Path, test_sets: dict[str, Path]) -> dict[s
     style, :func:`score`; ``missing`` instead of scores when the run's weights are gone."""
     out: dict[str, Any] = {}
     for key, label, src, seed in trained_keys(ledger):
-        run = source_run(work, seed, ledger.experiment["models"][label], src)
-        rec: dict[str, Any] = {"model": label, "source": src, "seed": seed}
+        name = ledger.experiment["models"][label]
+        run = source_run(work, seed, name, src)
+        rec: dict[str, Any] = {"model": label, "name": name, "source": src, "seed": seed}
         if not Run(run).model_path.is_file():
             out[key] = {**rec, "missing": str(run)}
             continue
@@ -145,7 +172,7 @@ def _f(v: float | None) -> str:
 
 
 def markdown(family: str, models: list[str], scores: dict[str, Any], sets: dict[str, int],
-             clips: dict[str, str]) -> str:
+             clips: dict[str, str], baselines: dict[str, Any]) -> str:
     names = list(sets)
     lines = [f"# Table 2 ({family}) scored again: without a threshold, and on more test clips", "",
              "Every kept source-style run of the table on each style's test clips: IoU at the threshold its "
@@ -187,6 +214,12 @@ def markdown(family: str, models: list[str], scores: dict[str, Any], sets: dict[
             parts = [r["finetuned"].get(tgt, {}).get(fresh) if ft else r[fresh][tgt] for r in runs]
             vals.append(fmt(p["iou"] for p in parts if p))
         lines.append(f"| {label} | " + " | ".join(vals) + " |")
+    if baselines.get("run"):
+        for b in BASELINES:
+            if all(b in baselines[t] for _, t, _ in COLUMNS):
+                lines.append(f"| {b} | " + " | ".join(f"{baselines[t][b]:.3f}" for _, t, _ in COLUMNS) + " |")
+        lines += ["", f"Baselines (no training): Traversable reads the depth of `{baselines['run']}`'s D, all three "
+                  "the shared teacher's segmentation."]
     lines += ["", "Per test clip, IoU at each run's own threshold, mean +- std over the kept runs trained on "
               "each style:", "", "| clip | light, field of view | " + " | ".join(f"{s}-trained" for s in STYLES)
               + " |", "|---" * (2 + len(STYLES)) + "|"]
@@ -217,11 +250,13 @@ def main(argv: list[str] | None = None) -> int:
                                         ex["frames_per_clip"], tuple(ex["size"]))
         sets["more"] = args.more_test_clips
     scores = score_runs(ledger, work, test_sets)
+    fresh = list(test_sets)[-1]
+    baselines = baselines_on(scores, list(ex["models"]), work, fresh, test_sets[fresh])
     name = f"{report_name(args.family)}_rescore"
     path = write_result(out, name, {"family": args.family, "ledger": ledger.path.name, "test_sets": sets,
-                                    "runs": scores},
+                                    "runs": scores, "baselines": {fresh: baselines}},
                         markdown(args.family, list(ex["models"]), scores, sets,
-                                 describe_clips(list(test_sets.values()))))
+                                 describe_clips(list(test_sets.values())), baselines))
     print((out / f"{name}.md").read_text())
     print(f"wrote {path}")
     return 0

@@ -63,9 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     size = tuple(args.size or card.input_size)
     teacher = None if args.no_baselines else run.load_teacher()
     res = evaluate(model, card, clips, size, label, teacher,
-                   teacher_scale=float(cfg.get("teacher", {}).get("scale", 0.5)))
-    if args.no_baselines:
-        res["overall"] = {"BSN": res["overall"]["BSN"]}
+                   teacher_scale=float(cfg.get("teacher", {}).get("scale", 0.5)), baselines=not args.no_baselines)
     rows = res.pop("grid_rows")
     report = {"run": str(run.path), "model": card.variant, "size": list(size),
               "clips": [c.path.name for c in clips], **res}
@@ -73,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out, (json.dumps(report, indent=1) + "\n").encode())
     if rows:
-        write_image(out.with_suffix(".png"), grid_image(rows))
+        write_image(out.with_suffix(".png"), grid_image(rows, res["methods"]))
     print(f"{'method':<14} {'IoU':>6} {'recall':>7} {'precision':>9}   "
           f"({len(clips)} clips, {size[0]}x{size[1]})")
     for m, r in report["overall"].items():

@@ -22,16 +22,19 @@ METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
 
 @torch.no_grad()
 def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], label: str,
-             teacher: torch.nn.Module | None, grid_frames: int = 3, teacher_scale: float = 0.5
-             ) -> dict[str, Any]:
-    """Metrics inside V for BSN and the baselines, overall and per clip, plus grid rows. BSN also gets
-    scores that need no threshold: its average precision, and the best IoU any threshold of the sweep
-    would give on these clips (optimistic: chosen on the clips it scores). ``b_reads`` says what B
-    read beside the frame: D's depth, none, or for an ``oracle_depth`` model the clips' own depth."""
+             teacher: torch.nn.Module | None, grid_frames: int = 3, teacher_scale: float = 0.5,
+             baselines: bool = True) -> dict[str, Any]:
+    """Metrics inside V for BSN and (unless ``baselines`` is False) the baselines, overall and per
+    clip, plus grid rows. BSN also gets scores that need no threshold: its average precision, and the
+    best IoU any threshold of the sweep would give on these clips (optimistic: chosen on the clips it
+    scores). ``b_reads`` says what B read beside the frame: D's depth, none, or for an
+    ``oracle_depth`` model the clips' own depth. The baselines read the teacher's segmentation, or
+    the ground truth's when ``teacher`` is None."""
     if card.threshold is None:
         raise ValueError("the run has no decision threshold yet (training did not finish)")
     threshold = card.threshold
-    overall = {m: Counts() for m in METHODS}
+    methods = METHODS if baselines else METHODS[:1]
+    overall = {m: Counts() for m in methods}
     ranked, sweep = ScoreHistogram(), ThresholdSweep()
     per_clip: dict[str, dict[str, Any]] = {}
     rows = []
@@ -45,7 +48,7 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
         if poses is not None:
             poses = poses @ ds.warps(clip).pose_fix
         has_boxes = seq.dir(seq.BOXES).is_dir() and poses is not None
-        counts = {m: Counts() for m in METHODS}
+        counts = {m: Counts() for m in methods}
         clip_ranked = ScoreHistogram()
         picks = set(np.linspace(0, len(ds) - 1, grid_frames).round().astype(int).tolist()) \
             if grid_frames else set()
@@ -57,19 +60,20 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
             d = depth[0, 0].numpy()
             label_m = item["blindspot"][0].numpy() > 0.5
             vis = item["visibility"][0].numpy() > 0.5
-            if teacher is not None:
-                t_logits = teacher(scaled(x, teacher_scale))[0]
-                t_logits = torch.nn.functional.interpolate(t_logits, size=x.shape[2:], mode="bilinear",
-                                                           align_corners=False)
-                sem = t_logits.argmax(1)[0].numpy().astype(np.uint8)
-            else:
-                sem = item["semantic"].numpy().astype(np.uint8)
-            preds = {"BSN": prob >= threshold, "Traversable": traversable_hidden(sem, d, intr),
-                     "Detection-2D": detection_2d(sem)}
-            if has_boxes:
-                f = ds.items[k][1]
-                boxes = np.load(seq.boxes(f))
-                preds["Detection-3D"] = detection_3d(boxes, poses[f], intr, preds["Detection-2D"])
+            preds = {"BSN": prob >= threshold}
+            if baselines:
+                if teacher is not None:
+                    t_logits = teacher(scaled(x, teacher_scale))[0]
+                    t_logits = torch.nn.functional.interpolate(t_logits, size=x.shape[2:], mode="bilinear",
+                                                               align_corners=False)
+                    sem = t_logits.argmax(1)[0].numpy().astype(np.uint8)
+                else:
+                    sem = item["semantic"].numpy().astype(np.uint8)
+                preds |= {"Traversable": traversable_hidden(sem, d, intr), "Detection-2D": detection_2d(sem)}
+                if has_boxes:
+                    f = ds.items[k][1]
+                    boxes = np.load(seq.boxes(f))
+                    preds["Detection-3D"] = detection_3d(boxes, poses[f], intr, preds["Detection-2D"])
             for h in (clip_ranked, sweep):
                 h.add(prob, label_m, vis)
             for m, p in preds.items():
@@ -90,7 +94,7 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
                           "best_threshold": best_th, "best_iou": best["iou"]}
     b_reads = ("ground-truth depth (a research oracle; no camera has it)" if model.oracle_depth
                else "D's depth" if model.use_depth else "no depth")
-    return {"threshold": threshold, "overall": scored, "b_reads": b_reads,
+    return {"threshold": threshold, "methods": list(methods), "overall": scored, "b_reads": b_reads,
             "per_clip": per_clip, "grid_rows": rows,
             "segmentation": "teacher" if teacher is not None else "ground truth (no teacher in the run)"}
 

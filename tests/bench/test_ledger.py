@@ -122,8 +122,13 @@ def test_the_rescore_report_lists_runs_whose_weights_are_gone_and_averages_the_r
         scores[f"BSN/suburb/seed{seed}"] = {"model": "BSN", "source": "suburb", "seed": seed, "threshold": 0.1,
                                             "table": part(iou), "finetuned": {}}
     scores["BSN/suburb/seed0"]["finetuned"] = {"town": {"table": {"iou": 0.2}}}   # only its weights were kept
+    base = {"run": "BSN/suburb/seed0", "town": {b: 0.1 for b in ("Traversable", "Detection-2D", "Detection-3D")},
+            "suburb": {"Traversable": 0.2, "Detection-2D": 0.3, "Detection-3D": 0.4}}
     text = rescore_md("small-light", list(EXPERIMENT["models"]), scores, {"table": 2},
-                      {"suburb_9": "night, 89 deg"})
+                      {"suburb_9": "night, 89 deg"}, base)
+    # a baseline scores the test style of each column: town, suburb, suburb, suburb, town, town
+    assert "| Detection-3D | 0.100 | 0.400 | 0.400 | 0.400 | 0.100 | 0.100 |" in text
+    assert "`BSN/suburb/seed0`'s D" in text
     # town -> town, -> suburb, -> suburb fine-tuned, then suburb -> suburb, -> town, -> town fine-tuned
     assert "| BSN | - | - | - | 0.060 +- 0.014 | 0.060 +- 0.014 | 0.200 (1 seed) |" in text
     assert "| BSN-D | - | - | - | - | - | - |" in text
@@ -132,3 +137,18 @@ def test_the_rescore_report_lists_runs_whose_weights_are_gone_and_averages_the_r
     assert "| BSN | suburb -> town | table | 0.060 +- 0.014 | 0.120 +- 0.000 | - |" in text   # no AP: no positives
     rows = [x for x in text.splitlines() if x.startswith("| suburb_")]
     assert rows[0].startswith("| suburb_9 | night, 89 deg | - | 0.060 +- 0.014 |") and rows[1].startswith("| suburb_10")
+
+
+def test_the_rescore_reads_the_baselines_through_bsns_first_kept_run(tmp_path, monkeypatch):
+    from benchmarks import bench_bsn_rescore as rescore
+    read = []
+    monkeypatch.setattr(rescore, "score_baselines", lambda run, data, out, style: read.append((run, out)) or {})
+    scores = {"BSN-D/suburb/seed0": {"model": "BSN-D", "name": "small-light-d", "source": "suburb", "seed": 0},
+              "BSN/suburb/seed0": {"model": "BSN", "source": "suburb", "seed": 0, "missing": "gone"},
+              "BSN/suburb/seed1": {"model": "BSN", "name": "small-light", "source": "suburb", "seed": 1},
+              "BSN/suburb/seed2": {"model": "BSN", "name": "small-light", "source": "suburb", "seed": 2}}
+    models = list(EXPERIMENT["models"])
+    assert rescore.baselines_on(scores, models, tmp_path, "more", tmp_path / "more")["run"] == "BSN/suburb/seed1"
+    assert {r for r, _ in read} == {tmp_path / "runs" / "seed1" / "small-light_suburb"}
+    assert {o.name for _, o in read} == {"baselines_on_town.json", "baselines_on_suburb.json"}
+    assert rescore.baselines_on({}, models, tmp_path, "more", tmp_path)["run"] is None

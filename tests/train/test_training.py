@@ -131,6 +131,13 @@ def test_smoke_config_end_to_end(data, tmp_path, capsys):
     # the run's threshold is one of the sweep's, so the best on these clips is at least its IoU
     assert bsn["best_threshold"] in THRESHOLDS and bsn["best_iou"] >= bsn["iou"]
     assert report.with_suffix(".png").is_file()
+    # without baselines nothing but BSN is scored, per clip too (the per-clip baselines would read the
+    # ground truth's segmentation, not the teacher's)
+    assert eval_cli.main([*argv[:5], str(tmp_path / "eval" / "bsn.json"), "--clips", "all", "--no-baselines"]) == 0
+    alone = json.loads((tmp_path / "eval" / "bsn.json").read_text())
+    assert alone["methods"] == ["BSN"] and set(alone["overall"]) == {"BSN"}
+    assert all(set(c) == {"style", "frames", "BSN"} for c in alone["per_clip"].values())
+    assert alone["overall"]["BSN"] == bsn
     # resume continues to more steps without starting over
     assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet", "--resume",
                            "--set", "data.label=\"T2s\"", "--set", "train.steps=8"]) == 0
