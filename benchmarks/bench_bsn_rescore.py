@@ -59,10 +59,10 @@ def score(run: Path, data: Path, out: Path, style: str) -> dict[str, Any]:
 
 def score_baselines(run: Path, data: Path, out: Path, style: str) -> dict[str, float]:
     """IoU of each baseline over the ``style`` clips in ``data``. The baselines need no training, but
-    they read a run: Traversable its D's depth, all three its teacher's segmentation."""
-    if out.is_file() and out.stat().st_mtime > Run(run).model_path.stat().st_mtime:
-        rep = json.loads(out.read_text())
-    else:
+    they read a run: Traversable its D's depth, all three its teacher's segmentation. A score is
+    read back only if it was made through the same run, after its weights."""
+    rep = json.loads(out.read_text()) if out.is_file() else {}
+    if rep.get("run") != str(run) or out.stat().st_mtime <= Run(run).model_path.stat().st_mtime:
         rep = eval_run(run, data, out, "--clips", "all", "--styles", style)
     return {b: rep["overall"][b]["iou"] for b in BASELINES if b in rep["overall"]}
 

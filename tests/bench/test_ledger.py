@@ -2,11 +2,13 @@
 table's statistics match values worked out by hand."""
 
 import json
+import os
 
 import pytest
 
 from benchmarks.bench_bsn_accuracy import markdown, table
 from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
+from bsn_edge.train import Run
 
 EXPERIMENT = {"steps": 3000, "size": [128, 256],
               "models": {"BSN": "small-light", "BSN-D": "small-light-d", "BSN-KD": "small-light-kd"}}
@@ -152,3 +154,28 @@ def test_the_rescore_reads_the_baselines_through_bsns_first_kept_run(tmp_path, m
     assert {r for r, _ in read} == {tmp_path / "runs" / "seed1" / "small-light_suburb"}
     assert {o.name for _, o in read} == {"baselines_on_town.json", "baselines_on_suburb.json"}
     assert rescore.baselines_on({}, models, tmp_path, "more", tmp_path)["run"] is None
+
+
+def test_a_baseline_score_is_read_back_only_through_the_same_run_after_its_weights(tmp_path, monkeypatch):
+    from benchmarks import bench_bsn_rescore as rescore
+    made = []
+
+    def fake_eval(run, data, out, *extra):
+        made.append(run)
+        rep = {"run": str(run), "overall": {"Traversable": {"iou": 0.5}}}
+        out.write_text(json.dumps(rep))
+        return rep
+    monkeypatch.setattr(rescore, "eval_run", fake_eval)
+    runs = [tmp_path / "runs" / f"seed{s}" / "small-light_town" for s in (1, 2)]
+    for r in runs:
+        r.mkdir(parents=True)
+        Run(r).model_path.write_bytes(b"weights")
+        os.utime(Run(r).model_path, (1_000_000, 1_000_000))
+    out = tmp_path / "baselines_on_town.json"
+    for run, evaluated in ((runs[0], 1), (runs[0], 1), (runs[1], 2)):
+        assert rescore.score_baselines(run, tmp_path, out, "town") == {"Traversable": 0.5}
+        assert len(made) == evaluated
+    Run(runs[1]).model_path.write_bytes(b"trained again")      # newer weights than the score
+    os.utime(out, (1_000_000, 1_000_000))
+    rescore.score_baselines(runs[1], tmp_path, out, "town")
+    assert made == [runs[0], runs[1], runs[1]]
