@@ -47,23 +47,26 @@ from bsn_edge.train import Run
 FIELDS = ("iou", "best_iou", "best_threshold", "ap", "ap_by_chance")
 
 
+def evaluated(run: Path, data: Path, out: Path, *extra: str) -> dict[str, Any]:
+    """The ``bsn-eval`` report of ``run`` on ``data`` at ``out``: read back if it was made through
+    ``run`` after its weights, made (:func:`eval_run`) otherwise."""
+    rep = json.loads(out.read_text()) if out.is_file() else {}
+    if rep.get("run") != str(run) or out.stat().st_mtime <= Run(run).model_path.stat().st_mtime:
+        rep = eval_run(run, data, out, *extra)
+    return rep
+
+
 def score(run: Path, data: Path, out: Path, style: str) -> dict[str, Any]:
     """:data:`FIELDS` of ``run`` over the ``style`` clips in ``data``, and IoU and AP per clip."""
-    if out.is_file() and out.stat().st_mtime > Run(run).model_path.stat().st_mtime:
-        rep = json.loads(out.read_text())
-    else:
-        rep = eval_run(run, data, out, "--clips", "all", "--styles", style, "--no-baselines")
+    rep = evaluated(run, data, out, "--clips", "all", "--styles", style, "--no-baselines")
     return {**{k: rep["overall"]["BSN"][k] for k in FIELDS},
             "clips": {c: {"iou": m["BSN"]["iou"], "ap": m["BSN"]["ap"]} for c, m in rep["per_clip"].items()}}
 
 
 def score_baselines(run: Path, data: Path, out: Path, style: str) -> dict[str, float]:
     """IoU of each baseline over the ``style`` clips in ``data``. The baselines need no training, but
-    they read a run: Traversable its D's depth, all three its teacher's segmentation. A score is
-    read back only if it was made through the same run, after its weights."""
-    rep = json.loads(out.read_text()) if out.is_file() else {}
-    if rep.get("run") != str(run) or out.stat().st_mtime <= Run(run).model_path.stat().st_mtime:
-        rep = eval_run(run, data, out, "--clips", "all", "--styles", style)
+    they read a run: Traversable its D's depth, all three its teacher's segmentation."""
+    rep = evaluated(run, data, out, "--clips", "all", "--styles", style)
     return {b: rep["overall"][b]["iou"] for b in BASELINES if b in rep["overall"]}
 
 
