@@ -29,7 +29,7 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
     best IoU any threshold of the sweep would give on these clips (optimistic: chosen on the clips it
     scores). ``b_reads`` says what B read beside the frame: D's depth, none, or for an
     ``oracle_depth`` model the clips' own depth. The baselines read the teacher's segmentation, or
-    the ground truth's when ``teacher`` is None."""
+    the ground truth's when ``teacher`` is None; ``segmentation`` says which (None: no baselines)."""
     if card.threshold is None:
         raise ValueError("the run has no decision threshold yet (training did not finish)")
     threshold = card.threshold
@@ -96,7 +96,8 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
                else "D's depth" if model.use_depth else "no depth")
     return {"threshold": threshold, "methods": list(methods), "overall": scored, "b_reads": b_reads,
             "per_clip": per_clip, "grid_rows": rows,
-            "segmentation": "teacher" if teacher is not None else "ground truth (no teacher in the run)"}
+            "segmentation": (None if not baselines else "teacher" if teacher is not None
+                             else "ground truth (no teacher in the run)")}
 
 
 def grid_image(rows, methods=METHODS) -> np.ndarray:

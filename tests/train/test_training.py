@@ -135,7 +135,8 @@ def test_smoke_config_end_to_end(data, tmp_path, capsys):
     # ground truth's segmentation, not the teacher's)
     assert eval_cli.main([*argv[:5], str(tmp_path / "eval" / "bsn.json"), "--clips", "all", "--no-baselines"]) == 0
     alone = json.loads((tmp_path / "eval" / "bsn.json").read_text())
-    assert alone["methods"] == ["BSN"] and set(alone["overall"]) == {"BSN"}
+    assert alone["methods"] == ["BSN"] and set(alone["overall"]) == {"BSN"} and alone["segmentation"] is None
+    assert rep["segmentation"] == "teacher"
     assert all(set(c) == {"style", "frames", "BSN"} for c in alone["per_clip"].values())
     assert alone["overall"]["BSN"] == bsn
     # resume continues to more steps without starting over
