@@ -135,7 +135,7 @@ def shared_settings(ex: dict[str, Any]) -> list[str]:
 
 def teacher_settings(work: Path) -> list[str]:
     """``bsn-train`` settings that make a run distil from the table's shared teacher."""
-    return [f"teacher.checkpoint=\"{work / 'runs' / 'teacher' / 'teacher'}\""]
+    return [f"teacher.checkpoint=\"{teacher_run(work) / 'teacher'}\""]
 
 
 def source_settings(ex: dict[str, Any], work: Path, name: str, src: str, seed: int) -> list[str]:
@@ -145,28 +145,45 @@ def source_settings(ex: dict[str, Any], work: Path, name: str, src: str, seed: i
             *records(ex["steps"], CURVE_RECORDS), f"train.seed={seed}", f'data.train_styles=["{src}"]']
 
 
+def teacher_run(work: Path) -> Path:
+    """The folder of the table's shared teacher in ``work``."""
+    return work / "runs" / "teacher"
+
+
+def prepare(work: Path, ex: dict[str, Any]) -> tuple[Path, Path, dict[str, Any] | None]:
+    """The clips and the shared teacher of experiment ``ex`` in ``work``, each made where missing:
+    (training clips, test clips, the teacher's validation curve if it was trained by this call,
+    None if it was there already)."""
+    train, test = make_data(work, ex["train_clips_per_style"], ex["test_clips_per_style"], ex["frames_per_clip"],
+                            tuple(ex["size"]))
+    teacher = teacher_run(work)
+    trained_here = not Run(teacher).checkpoint_path.is_file()
+    train_run(train, teacher, [*shared_settings(ex), 'model.name="small-light"', f"teacher.steps={ex['teacher_steps']}",
+                               f"teacher.eval_every={max(1, ex['teacher_steps'] // CURVE_RECORDS)}",
+                               "train.steps=1", "train.checkpoint_every=1"])
+    return train, test, (teacher_curve(teacher) if trained_here else None)
+
+
+def teacher_curve(teacher: Path) -> dict[str, Any]:
+    """The validation mIoU records of the teacher's run and whether they had flattened."""
+    recs = [r for r in Run(teacher).history() if r.get("phase") == "teacher"]
+    return {"steps": [r["step"] for r in recs], "val_miou": [round(r["val_miou"], 4) for r in recs],
+            "flattened": flattened(recs, "val_miou")}
+
+
 def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_record=None) -> None:
     """Train and evaluate every (seed, model, source style) missing from ``ledger``."""
     ex = ledger.experiment
-    train, test = make_data(work, ex["train_clips_per_style"], ex["test_clips_per_style"], ex["frames_per_clip"],
-                            tuple(ex["size"]))
+    train, test, trained = prepare(work, ex)
     ft_steps = ex["finetune_steps"]
     common = shared_settings(ex)
-    teacher = work / "runs" / "teacher"
-    trained_here = not Run(teacher).checkpoint_path.is_file()
-    train_run(train, teacher, [*common, 'model.name="small-light"', f"teacher.steps={ex['teacher_steps']}",
-                               f"teacher.eval_every={max(1, ex['teacher_steps'] // CURVE_RECORDS)}",
-                               "train.steps=1", "train.checkpoint_every=1"])
-    recs = [r for r in Run(teacher).history() if r.get("phase") == "teacher"]
-    curve = {"steps": [r["step"] for r in recs], "val_miou": [round(r["val_miou"], 4) for r in recs],
-             "flattened": flattened(recs, "val_miou")}
     if "teacher" not in ledger:
-        ledger.put("teacher", {**curve, "retrained": []})
-    elif trained_here:
+        ledger.put("teacher", {**(trained or teacher_curve(teacher_run(work))), "retrained": []})
+    elif trained is not None:
         # the work folder was lost (another machine): the same recipe trained again, the runs after
         # this point distil from it; the ledger says so
         rec = ledger.runs["teacher"]
-        ledger.put("teacher", {**rec, "retrained": [*rec.get("retrained", []), curve["val_miou"][-1:]]})
+        ledger.put("teacher", {**rec, "retrained": [*rec.get("retrained", []), trained["val_miou"][-1:]]})
     tsets = teacher_settings(work)
     for seed in seeds:
         for label, name in ledger.experiment["models"].items():

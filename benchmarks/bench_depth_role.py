@@ -20,17 +20,25 @@ still learns on features shaped by depth. Three questions, on the kept runs of t
 
 All are scored on the style's test clips of the table and of the rescore (``bench_bsn_rescore``
 renders those), at each run's own threshold and by average precision.
+
+The table's kept runs live in ``--work``, which does not travel with the results. With ``--retrain``
+a seed whose kept BSN or BSN-D run is gone has it trained again by the table's recipe and seed (the
+table's clips and teacher made again first where they are gone too); the report compares each source
+run's IoU on the table's test clips with the table's record, so it says whether the arms stand on the
+table's own runs. Seeds already in the report and not asked for again keep their recorded scores.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from benchmarks.bench_bsn_accuracy import STYLES, report_name, source_run, source_settings
+from benchmarks.bench_bsn_accuracy import STYLES, prepare, report_name, run_key, source_run, source_settings
 from benchmarks.bench_bsn_rescore import (
     add_table_arguments,
     arms_by_clip,
@@ -40,7 +48,7 @@ from benchmarks.bench_bsn_rescore import (
     score_path,
 )
 from benchmarks.common import train_run, write_result
-from benchmarks.ledger import fmt
+from benchmarks.ledger import Ledger, fmt
 from bsn_edge.models import MODELS
 from bsn_edge.train import Run
 
@@ -52,6 +60,8 @@ ARMS = {
     "BSN true depth": "BSN, given the ground-truth depth instead of D's at test time",
     "BSN oracle": "BSN trained and scored with the ground-truth depth as B's input",
 }
+
+SOURCE = {True: "the table's own run", False: "trained again by the table's recipe", None: "not in the table"}
 
 
 @contextmanager
@@ -106,7 +116,13 @@ def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
                      for n in result["tests"] for k in ("iou", "ap")]
             lines.append(f"| {a} | " + " | ".join(cells) + " |")
     for sd in seeds:
-        lines += ["", f"## Seed {sd}", "", *arms_by_clip(result["scores"][str(sd)], {a: a for a in arms}, described)]
+        lines += ["", f"## Seed {sd}", ""]
+        runs = result.get("source_runs", {}).get(str(sd))
+        if runs:
+            lines += ["Source runs, IoU on the table's test clips as scored here and as the table recorded it: "
+                      + "; ".join(f"{label} {r['here']} / {r['table']} ({SOURCE[r['same_run']]})"
+                                  for label, r in runs.items()) + ".", ""]
+        lines += arms_by_clip(result["scores"][str(sd)], {a: a for a in arms}, described)
         lines += [""] + [f"Validation IoU of {a} over its training: {', '.join(f'{v:.3f}' for v in curve)}."
                          for a, curve in result["val_iou"][str(sd)].items() if curve]
     return "\n".join(lines).rstrip() + "\n"
@@ -140,6 +156,35 @@ def seed_arms(ex: dict[str, Any], work: Path, seed: int, style: str, tests: dict
     return {a: scores[a] for a in ARMS}, curves
 
 
+def source_check(ledger: Ledger, scores: dict[str, Any], seed: int, style: str) -> dict[str, Any]:
+    """Per source run (BSN, BSN-D) of ``seed``: its IoU on the table's test clips of ``style`` as the
+    table recorded it and as scored here, and whether they agree (to the table's four places): the
+    arms stand on the table's own run, or on one trained again by its recipe."""
+    out = {}
+    for label in ("BSN", "BSN-D"):
+        rec = ledger.get(run_key(label, style, seed))
+        table = rec["test"][style]["iou"] if rec else None
+        here = scores[label]["table"]["iou"] if "table" in scores[label] else None
+        out[label] = {"table": table, "here": None if here is None else round(here, 4),
+                      "same_run": None if table is None or here is None else abs(table - round(here, 4)) < 1e-4}
+    return out
+
+
+def earlier(path: Path, family: str, style: str) -> dict[str, Any]:
+    """The report at ``path`` if it is of the same family and style (its seeds are kept), else nothing."""
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return old if (old.get("family"), old.get("style")) == (family, style) and "scores" in old else {}
+
+
+def missing_runs(ex: dict[str, Any], work: Path, seeds: list[int], style: str) -> list[tuple[str, int, Path]]:
+    """The kept source runs (BSN, BSN-D) of ``seeds`` that are not in ``work``: (label, seed, folder)."""
+    runs = [(label, sd, source_run(work, sd, ex["models"][label], style)) for sd in seeds for label in ("BSN", "BSN-D")]
+    return [r for r in runs if not Run(r[2]).model_path.is_file()]
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_table_arguments(p)
@@ -147,6 +192,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="whose kept runs, and the new runs' seeds (default %(default)s)")
     p.add_argument("--style", choices=STYLES, default="town",
                    help="the training style of the runs (default %(default)s)")
+    p.add_argument("--retrain", action="store_true",
+                   help="train a seed's BSN or BSN-D run again by the table's recipe where its kept run is gone "
+                        "(the table's clips and teacher too, where they are gone)")
     args = p.parse_args(argv)
     out, work = Path(args.out), Path(args.work)
     ledger = read_table(out, args.family, "bench_depth_role")
@@ -154,21 +202,38 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     ex = ledger.experiment
     seeds = sorted(set(args.seeds))
-    missing = [str(r) for sd in seeds for r in (source_run(work, sd, ex["models"][label], args.style)
-                                                for label in ("BSN", "BSN-D")) if not Run(r).model_path.is_file()]
-    if missing:
-        print(f"bench_depth_role: no kept run at {', '.join(missing)} (bench_bsn_accuracy trains them)")
+    missing = missing_runs(ex, work, seeds, args.style)
+    if missing and not args.retrain:
+        where = ", ".join(str(r) for *_, r in missing)
+        print(f"bench_depth_role: no kept run at {where} (bench_bsn_accuracy trains them; --retrain trains them "
+              "again by the table's recipe)")
         return 2
     oracle_name = f"{ex['models']['BSN']}-oracle"
     if oracle_name not in MODELS:
         print(f"bench_depth_role: the registry has no {oracle_name!r} model for the oracle arm")
         return 2
+    if missing:
+        train, _, teacher = prepare(work, ex)
+        if teacher is not None:
+            print(f"bench_depth_role: the table's teacher trained again, validation mIoU {teacher['val_miou'][-1]:.3f}")
+        for label, sd, run in missing:
+            train_run(train, run, source_settings(ex, work, ex["models"][label], args.style, sd))
     tests = {n: d for n, d in {"table": work / "test", "more": work / "test_more"}.items() if d.is_dir()}
-    result: dict[str, Any] = {"family": args.family, "style": args.style, "seeds": seeds, "tests": list(tests),
-                              "scores": {}, "val_iou": {}}
+    name = f"{report_name(args.family)}_depth_role"
+    before = earlier(out / f"{name}.json", args.family, args.style)
+    kept = [int(sd) for sd in before.get("scores", {}) if int(sd) not in seeds and before.get("tests") == list(tests)]
+    result: dict[str, Any] = {"family": args.family, "style": args.style, "seeds": sorted([*kept, *seeds]),
+                              "tests": list(tests), "scores": {}, "val_iou": {}, "source_runs": {},
+                              "scored": {}}
+    for sd in kept:
+        for part in ("scores", "val_iou", "source_runs"):
+            if str(sd) in before.get(part, {}):
+                result[part][str(sd)] = before[part][str(sd)]
+        result["scored"][str(sd)] = before.get("scored", {}).get(str(sd), before.get("measured_at"))
     for sd in seeds:
         result["scores"][str(sd)], result["val_iou"][str(sd)] = seed_arms(ex, work, sd, args.style, tests, oracle_name)
-    name = f"{report_name(args.family)}_depth_role"
+        result["source_runs"][str(sd)] = source_check(ledger, result["scores"][str(sd)], sd, args.style)
+        result["scored"][str(sd)] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     path = write_result(out, name, result, markdown(result, describe_clips(list(tests.values()))))
     print((out / f"{name}.md").read_text())
     print(f"wrote {path}")
