@@ -38,7 +38,16 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from benchmarks.bench_bsn_accuracy import STYLES, prepare, report_name, run_key, source_run, source_settings
+from benchmarks.bench_bsn_accuracy import (
+    STYLES,
+    prepare,
+    report_name,
+    run_key,
+    source_run,
+    source_settings,
+    teacher_curve,
+    teacher_run,
+)
 from benchmarks.bench_bsn_rescore import (
     add_table_arguments,
     arms_by_clip,
@@ -121,7 +130,12 @@ def markdown(result: dict[str, Any], described: dict[str, str]) -> str:
         if runs:
             lines += ["Source runs, IoU on the table's test clips as scored here and as the table recorded it: "
                       + "; ".join(f"{label} {r['here']} / {r['table']} ({SOURCE[r['same_run']]})"
-                                  for label, r in runs.items()) + ".", ""]
+                                  for label, r in runs.items()) + "."]
+        teacher = result.get("teacher", {}).get(str(sd))
+        if teacher and None not in teacher.values():
+            lines.append(f"The teacher they distil from: validation mIoU {teacher['here']:.3f} (the table's first "
+                         f"teacher: {teacher['table']:.3f}).")
+        lines.append("")
         lines += arms_by_clip(result["scores"][str(sd)], {a: a for a in arms}, described)
         lines += [""] + [f"Validation IoU of {a} over its training: {', '.join(f'{v:.3f}' for v in curve)}."
                          for a, curve in result["val_iou"][str(sd)].items() if curve]
@@ -179,6 +193,12 @@ def earlier(path: Path, family: str, style: str) -> dict[str, Any]:
     return old if (old.get("family"), old.get("style")) == (family, style) and "scores" in old else {}
 
 
+def teacher_miou(work: Path) -> float | None:
+    """The last validation mIoU of the table's teacher in ``work`` (None if it has none)."""
+    curve = teacher_curve(teacher_run(work))["val_miou"]
+    return curve[-1] if curve else None
+
+
 def missing_runs(ex: dict[str, Any], work: Path, seeds: list[int], style: str) -> list[tuple[str, int, Path]]:
     """The kept source runs (BSN, BSN-D) of ``seeds`` that are not in ``work``: (label, seed, folder)."""
     runs = [(label, sd, source_run(work, sd, ex["models"][label], style)) for sd in seeds for label in ("BSN", "BSN-D")]
@@ -224,15 +244,17 @@ def main(argv: list[str] | None = None) -> int:
     kept = [int(sd) for sd in before.get("scores", {}) if int(sd) not in seeds and before.get("tests") == list(tests)]
     result: dict[str, Any] = {"family": args.family, "style": args.style, "seeds": sorted([*kept, *seeds]),
                               "tests": list(tests), "scores": {}, "val_iou": {}, "source_runs": {},
-                              "scored": {}}
+                              "teacher": {}, "scored": {}}
     for sd in kept:
-        for part in ("scores", "val_iou", "source_runs"):
+        for part in ("scores", "val_iou", "source_runs", "teacher"):
             if str(sd) in before.get(part, {}):
                 result[part][str(sd)] = before[part][str(sd)]
         result["scored"][str(sd)] = before.get("scored", {}).get(str(sd), before.get("measured_at"))
     for sd in seeds:
         result["scores"][str(sd)], result["val_iou"][str(sd)] = seed_arms(ex, work, sd, args.style, tests, oracle_name)
         result["source_runs"][str(sd)] = source_check(ledger, result["scores"][str(sd)], sd, args.style)
+        result["teacher"][str(sd)] = {"table": (ledger.get("teacher") or {}).get("val_miou", [None])[-1],
+                                      "here": teacher_miou(work)}
         result["scored"][str(sd)] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     path = write_result(out, name, result, markdown(result, describe_clips(list(tests.values()))))
     print((out / f"{name}.md").read_text())

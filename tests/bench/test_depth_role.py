@@ -26,6 +26,7 @@ def table(tmp_path):
     """A results folder with the table's ledger (BSN and BSN-D town seed 2 recorded) and an empty work folder."""
     out, work = tmp_path / "results", tmp_path / "work"
     led = Ledger(out / "bsn_accuracy_shared-light_ledger.json", EXPERIMENT)
+    led.put("teacher", {"val_miou": [0.4567, 0.5901]})
     led.put("BSN/town/seed2", {"test": {"town": {"iou": 0.2357}}})
     led.put("BSN-D/town/seed2", {"test": {"town": {"iou": 0.2149}}})
     for d in ("test", "test_more"):
@@ -95,6 +96,7 @@ def test_seeds_scored_earlier_are_kept_and_a_seed_asked_again_is_replaced(table,
     md = (out / f"{REPORT}.md").read_text()
     assert "seeds 1, 2" in md and "| BSN | 0.250 +- 0.071 | 0.350 +- 0.071 |" in md
     assert "BSN 0.2 / 0.2357 (trained again by the table's recipe)" in md
+    assert new["teacher"]["2"] == {"table": 0.5901, "here": None}      # no teacher in this work folder
 
 
 def test_an_earlier_report_of_another_style_is_not_mixed_in(table, monkeypatch):
