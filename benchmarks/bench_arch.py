@@ -118,6 +118,37 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
     return teacher
 
 
+def plot_curves(ledger: Ledger, names: list[str], path: Path) -> bool:
+    """Every run's validation IoU over its steps, one colour per architecture, into ``path``; False
+    (nothing drawn) when the ledger has no curve of ``names``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = [(k, r["curve"]) for k, r in sorted(ledger.runs.items()) if r.get("curve", {}).get("steps")
+            and k.split("/")[0] in names]
+    if not runs:
+        return False
+    fig, ax = plt.subplots(figsize=(6.5, 3.6))
+    colours = {n: f"C{i}" for i, n in enumerate(names)}
+    labelled: set[str] = set()
+    for key, c in runs:
+        name = key.split("/")[0]
+        ax.plot(c["steps"], c["val_iou"], color=colours[name], alpha=0.8, marker=".",
+                label=None if name in labelled else name)
+        labelled.add(name)
+    ax.set_xlabel("step")
+    ax.set_ylabel("validation IoU")
+    ax.set_title("validation IoU over training, every seed")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return True
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
@@ -183,6 +214,16 @@ def main(argv: list[str] | None = None) -> int:
         lines += ["", f"IoU: inside V on the held-out clips, every model trained {budget['steps']} steps of batch 8 at "
                       f"{budget['size'][0]}x{budget['size'][1]} with one shared teacher, once per seed, and evaluated "
                       "at that size; runs flat: the last fifth of a run's steps gained under 0.01 validation IoU."]
+    if ledger is not None:
+        lines.append("")
+        for name in args.only:
+            gains = [(k.split("/")[1], r["curve"]["flattened"]["gain"]) for k, r in sorted(ledger.runs.items())
+                     if k.startswith(f"{name}/seed") and r["curve"].get("flattened")]
+            if gains:
+                lines.append(f"- `{name}`: last-fifth gain " + ", ".join(f"{sd} {g:+.3f}" for sd, g in gains))
+        figure = f"{args.report}_curves.png"
+        if plot_curves(ledger, args.only, Path(args.out) / figure):
+            lines += ["", f"![curves]({figure})"]
     if runs:
         lines += ["", "IoU (own run): " + "; ".join(f"`{k}` {run_budget(Path(v))}" for k, v in runs.items())
                   + "; evaluated at its own training size."]

@@ -179,3 +179,14 @@ def test_a_baseline_score_is_read_back_only_through_the_same_run_after_its_weigh
     os.utime(out, (1_000_000, 1_000_000))
     rescore.score_baselines(runs[1], tmp_path, out, "town")
     assert made == [runs[0], runs[1], runs[1]]
+
+
+def test_the_architecture_table_draws_every_seeds_curve_of_the_architectures_asked(tmp_path):
+    from benchmarks.bench_arch import plot_curves
+    led = Ledger(tmp_path / "l.json", {"steps": 6000})
+    curve = {"steps": [600, 1200, 1800], "val_iou": [0.2, 0.3, 0.31]}
+    for key in ("small-light/seed0", "small-light/seed1", "shared-light/seed0"):
+        led.put(key, {"iou": 0.3, "curve": curve})
+    assert plot_curves(led, ["small-light", "shared-light"], tmp_path / "c.png")
+    assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not plot_curves(led, ["unet"], tmp_path / "none.png") and not (tmp_path / "none.png").exists()
