@@ -23,7 +23,7 @@ ORDER = ("synth", "labels", "train_step", "train_step_avx2_research", "train_ste
          "bsn_accuracy_shared-light_coverage", "bsn_accuracy_shared-light_depth_role", "bsn_arch", "bsn_arch_light",
          "bsn_arch_light_6k",
          "quant", "floor", "floor_avx2", "int8_cpu",
-         "runtime", "runtime_avx2", "runtime_avx2_decode", "runtime_avx2_flight", "runtime_avx2_shared",
+         "runtime", "runtime_s3", "runtime_avx2", "runtime_avx2_decode", "runtime_avx2_flight", "runtime_avx2_shared",
          "runtime_avx2_s3", "runtime_avx2_s3fast", "runtime_avx2_s3warp", "runtime_avx2_s3flight",
          "runtime_avx2_budget", "tradeoff", "tradeoff_avx2",
          "calibration", "calibration_avx2", "footprint", "realcam", "realview", "cameras", "remap", "remap_mirror",
