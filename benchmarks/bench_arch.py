@@ -189,10 +189,12 @@ def main(argv: list[str] | None = None) -> int:
         for name in args.only:
             row = measure(name, size, args.repeats, Path(tmp))
             if ledger is not None:
-                recs = [r for k, r in sorted(ledger.runs.items()) if k.startswith(f"{name}/seed")]
-                row["iou_seeds"] = [r["iou"] for r in recs]
+                recs = {k.split("/")[1]: r for k, r in sorted(ledger.runs.items()) if k.startswith(f"{name}/seed")}
+                row["iou_seeds"] = [r["iou"] for r in recs.values()]
                 row["iou"] = fmt(row["iou_seeds"])
-                gains = [r["curve"]["flattened"]["gain"] for r in recs if r["curve"].get("flattened")]
+                row["last_fifth_gain"] = {sd: r["curve"]["flattened"]["gain"] for sd, r in recs.items()
+                                          if r["curve"].get("flattened")}
+                gains = row["last_fifth_gain"].values()
                 row["flat"] = f"{sum(g < 0.01 for g in gains)} of {len(gains)}"
             if name in runs:
                 row["iou_run"] = held_out_iou(Path(runs[name]), Path(args.data), Path(tmp) / f"{name}.json")
@@ -216,11 +218,10 @@ def main(argv: list[str] | None = None) -> int:
                       "at that size; runs flat: the last fifth of a run's steps gained under 0.01 validation IoU."]
     if ledger is not None:
         lines.append("")
-        for name in args.only:
-            gains = [(k.split("/")[1], r["curve"]["flattened"]["gain"]) for k, r in sorted(ledger.runs.items())
-                     if k.startswith(f"{name}/seed") and r["curve"].get("flattened")]
-            if gains:
-                lines.append(f"- `{name}`: last-fifth gain " + ", ".join(f"{sd} {g:+.3f}" for sd, g in gains))
+        for r in rows:
+            if r.get("last_fifth_gain"):
+                lines.append(f"- `{r['model']}`: last-fifth gain "
+                             + ", ".join(f"{sd} {g:+.3f}" for sd, g in r["last_fifth_gain"].items()))
         figure = f"{args.report}_curves.png"
         if plot_curves(ledger, args.only, Path(args.out) / figure):
             lines += ["", f"![curves]({figure})"]

@@ -184,13 +184,15 @@ def source_check(ledger: Ledger, scores: dict[str, Any], seed: int, style: str) 
     return out
 
 
-def earlier(path: Path, family: str, style: str) -> dict[str, Any]:
-    """The report at ``path`` if it is of the same family and style (its seeds are kept), else nothing."""
+def earlier(path: Path, family: str, style: str, tests: list[str]) -> dict[str, Any]:
+    """The report at ``path`` if it is of the same family, style and test sets (its seeds are kept),
+    else nothing."""
     try:
         old = json.loads(path.read_text())
     except (OSError, ValueError):
         return {}
-    return old if (old.get("family"), old.get("style")) == (family, style) and "scores" in old else {}
+    same = (old.get("family"), old.get("style"), old.get("tests")) == (family, style, tests)
+    return old if same and "scores" in old else {}
 
 
 def teacher_miou(work: Path) -> float | None:
@@ -240,8 +242,8 @@ def main(argv: list[str] | None = None) -> int:
             train_run(train, run, source_settings(ex, work, ex["models"][label], args.style, sd))
     tests = {n: d for n, d in {"table": work / "test", "more": work / "test_more"}.items() if d.is_dir()}
     name = f"{report_name(args.family)}_depth_role"
-    before = earlier(out / f"{name}.json", args.family, args.style)
-    kept = [int(sd) for sd in before.get("scores", {}) if int(sd) not in seeds and before.get("tests") == list(tests)]
+    before = earlier(out / f"{name}.json", args.family, args.style, list(tests))
+    kept = [int(sd) for sd in before.get("scores", {}) if int(sd) not in seeds]
     result: dict[str, Any] = {"family": args.family, "style": args.style, "seeds": sorted([*kept, *seeds]),
                               "tests": list(tests), "scores": {}, "val_iou": {}, "source_runs": {},
                               "teacher": {}, "scored": {}}
