@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from benchmarks.bench_campaign import flattened
+from benchmarks.bench_campaign import run_curve
 from benchmarks.common import eval_run, records, summary, time_calls, train_run, write_result
 from benchmarks.ledger import Ledger, fmt
 from bsn_edge.camera import Intrinsics
@@ -39,7 +39,6 @@ from bsn_edge.cli.common import parse_size
 from bsn_edge.export import to_onnx
 from bsn_edge.models import create_model, describe
 from bsn_edge.runtime.model_file import session
-from bsn_edge.train import Run
 
 ARCHS = ("unet", "small", "small-light", "shared-light", "medium", "large")
 
@@ -78,13 +77,6 @@ def train_uniform(name: str, data: Path, work: Path, steps: int, size: tuple[int
     return train_run(data, (work / name) if seed == 0 else (work / f"seed{seed}" / name), sets)
 
 
-def curve(run: Path) -> dict:
-    """A run's validation IoU records and whether its last fifth had flattened."""
-    recs = [r for r in Run(run).history() if r.get("phase") == "train" and "val_iou" in r]
-    return {"steps": [r["step"] for r in recs], "val_iou": [round(r["val_iou"], 4) for r in recs],
-            "flattened": flattened(recs)}
-
-
 def run_budget(run: Path) -> str:
     """How a run was trained, from its resolved config."""
     cfg = json.loads((run / "config.json").read_text())
@@ -112,7 +104,7 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
             if key in ledger:
                 continue
             run = train_uniform(name, data, work, args.train_steps, args.train_size, teacher, seed)
-            ledger.put(key, {"iou": held_out_iou(run, data, tmp / f"{name}_{seed}.json"), "curve": curve(run)})
+            ledger.put(key, {"iou": held_out_iou(run, data, tmp / f"{name}_{seed}.json"), "curve": run_curve(run)})
             if not args.keep_runs:
                 shutil.rmtree(run, ignore_errors=True)
     return teacher
@@ -196,6 +188,8 @@ def main(argv: list[str] | None = None) -> int:
                                           if r["curve"].get("flattened")}
                 gains = row["last_fifth_gain"].values()
                 row["flat"] = f"{sum(g < 0.01 for g in gains)} of {len(gains)}"
+                row["precision"] = sorted({p for r in recs.values()
+                                           for p in r["curve"].get("precision", ["unrecorded"])})
             if name in runs:
                 row["iou_run"] = held_out_iou(Path(runs[name]), Path(args.data), Path(tmp) / f"{name}.json")
             rows.append(row)
@@ -221,7 +215,8 @@ def main(argv: list[str] | None = None) -> int:
         for r in rows:
             if r.get("last_fifth_gain"):
                 lines.append(f"- `{r['model']}`: last-fifth gain "
-                             + ", ".join(f"{sd} {g:+.3f}" for sd, g in r["last_fifth_gain"].items()))
+                             + ", ".join(f"{sd} {g:+.3f}" for sd, g in r["last_fifth_gain"].items())
+                             + f"; trained in {' and '.join(r['precision'])}")
         figure = f"{args.report}_curves.png"
         if plot_curves(ledger, args.only, Path(args.out) / figure):
             lines += ["", f"![curves]({figure})"]

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.bench_campaign import flattened
+from benchmarks.bench_campaign import run_curve
 from benchmarks.common import eval_run, records, train_run, write_result
 from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
 from bsn_edge.cli import label as label_cli
@@ -112,12 +112,6 @@ def _metrics(report: dict[str, Any], name: str) -> dict[str, float]:
     return {k: round(m[k], 4) for k in METRICS}
 
 
-def _curve(run: Path) -> dict[str, Any]:
-    recs = [r for r in Run(run).history() if r.get("phase") == "train" and "val_iou" in r]
-    return {"steps": [r["step"] for r in recs], "val_iou": [round(r["val_iou"], 4) for r in recs],
-            "flattened": flattened(recs), "seconds": round(recs[-1]["seconds"]) if recs else None}
-
-
 def experiment(args: argparse.Namespace) -> dict[str, Any]:
     """What a ledger's runs share; a ledger of another experiment is not mixed into."""
     return {"steps": args.steps, "finetune_steps": args.finetune_steps, "finetune_lr": FINETUNE_LR,
@@ -161,14 +155,7 @@ def prepare(work: Path, ex: dict[str, Any]) -> tuple[Path, Path, dict[str, Any] 
     train_run(train, teacher, [*shared_settings(ex), 'model.name="small-light"', f"teacher.steps={ex['teacher_steps']}",
                                f"teacher.eval_every={max(1, ex['teacher_steps'] // CURVE_RECORDS)}",
                                "train.steps=1", "train.checkpoint_every=1"])
-    return train, test, (teacher_curve(teacher) if trained_here else None)
-
-
-def teacher_curve(teacher: Path) -> dict[str, Any]:
-    """The validation mIoU records of the teacher's run and whether they had flattened."""
-    recs = [r for r in Run(teacher).history() if r.get("phase") == "teacher"]
-    return {"steps": [r["step"] for r in recs], "val_miou": [round(r["val_miou"], 4) for r in recs],
-            "flattened": flattened(recs, "val_miou")}
+    return train, test, (run_curve(teacher, "teacher", "val_miou") if trained_here else None)
 
 
 def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_record=None) -> None:
@@ -178,7 +165,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
     ft_steps = ex["finetune_steps"]
     common = shared_settings(ex)
     if "teacher" not in ledger:
-        ledger.put("teacher", {**(trained or teacher_curve(teacher_run(work))), "retrained": []})
+        ledger.put("teacher", {**(trained or run_curve(teacher_run(work), "teacher", "val_miou")), "retrained": []})
     elif trained is not None:
         # the work folder was lost (another machine): the same recipe trained again, the runs after
         # this point distil from it; the ledger says so
@@ -194,7 +181,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
                 t0 = time.perf_counter()
                 base = source_run(work, seed, name, src)
                 train_run(train, base, source_settings(ex, work, name, src, seed))
-                record: dict[str, Any] = {"curve": _curve(base), "test": {}, "finetuned": {}}
+                record: dict[str, Any] = {"curve": run_curve(base), "test": {}, "finetuned": {}}
                 for tgt in STYLES:
                     with_baselines = f"baselines/{tgt}" not in ledger
                     extra = ("--clips", "all", "--styles", tgt, *(() if with_baselines else ("--no-baselines",)))
@@ -211,7 +198,7 @@ def run_table(work: Path, ledger: Ledger, seeds: list[int], keep_runs: bool, on_
                                           f'train.init="{base}"', f"train.lr={FINETUNE_LR}"])
                     rep = eval_run(ft, test, work / "eval" / f"seed{seed}_{ft.name}_on_{tgt}.json",
                                    "--clips", "all", "--styles", tgt, "--no-baselines")
-                    record["finetuned"][tgt] = {**_metrics(rep, "BSN"), "curve": _curve(ft)}
+                    record["finetuned"][tgt] = {**_metrics(rep, "BSN"), "curve": run_curve(ft)}
                     if not keep_runs:
                         keep_weights_only(ft)
                 record["seconds"] = round(time.perf_counter() - t0)

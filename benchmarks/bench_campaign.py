@@ -42,6 +42,17 @@ def flattened(records: list[dict[str, Any]], key: str = "val_iou", share: float 
     return {"from_step": int(cut), "to_step": int(last), "gain": gain, "flat": gain < FLAT_IOU}
 
 
+def run_curve(run: Path, phase: str = "train", key: str = "val_iou") -> dict[str, Any]:
+    """A run's validation records of ``phase`` (``train``: B's IoU; ``teacher``: its ``val_miou``),
+    whether their last fifth had flattened, the training seconds and the arithmetic it trained in
+    (``precision``: every kind its records name, sorted; ``unrecorded`` for records written before
+    the trainer named it)."""
+    recs = [r for r in Run(run).history() if r.get("phase") == phase and key in r]
+    return {"steps": [r["step"] for r in recs], key: [round(r[key], 4) for r in recs],
+            "flattened": flattened(recs, key), "seconds": round(recs[-1]["seconds"]) if recs else None,
+            "precision": sorted({r.get("precision", "unrecorded") for r in recs if r["step"]})}
+
+
 def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> None:
     # only the panels with records: a leg that starts from a trained teacher has no teacher curve
     panels = (["teacher"] if teacher else []) + (["validation", "losses"] if student else [])

@@ -45,7 +45,6 @@ from benchmarks.bench_bsn_accuracy import (
     run_key,
     source_run,
     source_settings,
-    teacher_curve,
     teacher_run,
 )
 from benchmarks.bench_bsn_rescore import (
@@ -56,6 +55,7 @@ from benchmarks.bench_bsn_rescore import (
     score,
     score_path,
 )
+from benchmarks.bench_campaign import run_curve
 from benchmarks.common import train_run, write_result
 from benchmarks.ledger import Ledger, fmt
 from bsn_edge.models import MODELS
@@ -165,8 +165,7 @@ def seed_arms(ex: dict[str, Any], work: Path, seed: int, style: str, tests: dict
     curves = {}
     for label, run in {"BSN-D no depth loss": no_depth, "BSN oracle": oracle}.items():
         scores[label] = {n: score(run, d, scores_dir / f"{run.name}_{n}.json", style) for n, d in tests.items()}
-        curves[label] = [round(r["val_iou"], 4) for r in Run(run).history()
-                         if r.get("phase") == "train" and "val_iou" in r]
+        curves[label] = run_curve(run)["val_iou"]
     return {a: scores[a] for a in ARMS}, curves
 
 
@@ -197,7 +196,7 @@ def earlier(path: Path, family: str, style: str, tests: list[str]) -> dict[str, 
 
 def teacher_miou(work: Path) -> float | None:
     """The last validation mIoU of the table's teacher in ``work`` (None if it has none)."""
-    curve = teacher_curve(teacher_run(work))["val_miou"]
+    curve = run_curve(teacher_run(work), "teacher", "val_miou")["val_miou"]
     return curve[-1] if curve else None
 
 

@@ -19,6 +19,11 @@ levers are added one at a time:
 The configurations take turns for ``--rounds`` rounds of ``--steps`` steps (after a warm-up
 each), and each reports its median step. One-off costs (building the cache, the teacher's
 features) are reported apart, per frame.
+
+``--model`` takes several architectures, measured side by side in the same turns; ``--as-trained``
+keeps only what ``bsn-train`` runs on this CPU (4, and 6 where the CPU has native bf16), and the
+report then gives the hours a run of ``--budget`` steps takes at that rate (its validation records
+not counted): what a table that trains every architecture to a plateau costs on this machine.
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ from benchmarks.common import write_result
 from bsn_edge.cli.common import parse_size
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.data.cache import SampleCache
-from bsn_edge.models import create_model, create_teacher
+from bsn_edge.models import create_model, create_teacher, get_spec
 from bsn_edge.train.config import load_config
 from bsn_edge.train.optim import Optimizer
 from bsn_edge.train.trainer import (
@@ -58,6 +63,8 @@ LEVERS = [
     ("channels last + bf16 autocast", {**_BEFORE, "cache": True, "teacher_grid": True, "channels_last": True,
                                        "precision": "bf16"}),
 ]
+# what bsn-train runs: channels-last with the cached teacher features, in fp32 or (native bf16) autocast
+AS_TRAINED = ("+ channels last", "channels last + bf16 autocast")
 
 
 class Setup:
@@ -100,13 +107,26 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=6, help="timed steps per configuration and round")
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--batch", type=int, default=8)
-    p.add_argument("--model", default="small-light")
+    p.add_argument("--model", nargs="+", default=["small-light"], help="architectures, side by side")
     p.add_argument("--size", type=parse_size, default=(256, 512), metavar="HxW",
                    help="training size (the runtime's 256x512; the research tables' 128x256)")
+    p.add_argument("--as-trained", action="store_true",
+                   help="only the configurations bsn-train runs on this CPU (channels-last; bf16 where native)")
+    p.add_argument("--budget", type=int, default=12_000, help="steps of a run, for the hours column")
     p.add_argument("--name", default="train_step", help="report name in --out")
     args = p.parse_args(argv)
+    if args.steps < 1 or args.rounds < 1 or args.budget < 1:
+        p.error("--steps, --rounds and --budget must be at least 1")
+    for m in args.model:
+        try:
+            get_spec(m)
+        except ValueError as e:
+            p.error(f"--model: {e}")
     torch.set_num_threads(2)
-    clips = find_clips(args.data)[: args.clips]
+    try:
+        clips = find_clips(args.data)[: args.clips]
+    except (FileNotFoundError, ValueError) as e:
+        p.error(f"--data: {e}")
     size = args.size
     cam_cfg = load_config(None, [f"data.size=[{size[0]}, {size[1]}]"]).data
     camera, mounting = cam_cfg.model_camera()
@@ -122,32 +142,42 @@ def main(argv: list[str] | None = None) -> int:
     teacher_s = (time.perf_counter() - t0) / len(ds)
 
     levers = [(n, lv) for n, lv in LEVERS if lv["precision"] != "bf16" or cpu_has_native_bf16()]
-    setups = [Setup(n, lv, ds, cache, grid_cache, args.batch, args.model) for n, lv in levers]
-    for s in setups:
+    if args.as_trained:
+        levers = [(n, lv) for n, lv in levers if n in AS_TRAINED]
+        levers = levers[-1:] if cpu_has_native_bf16() else levers[:1]
+    setups = {m: [Setup(n, lv, ds, cache, grid_cache, args.batch, m) for n, lv in levers] for m in args.model}
+    every = [s for group in setups.values() for s in group]
+    for s in every:
         s.step(False)
         s.step(False)
     for _ in range(args.rounds):
-        for s in setups:
+        for s in every:
             s.step(False)                       # the other configurations ran since: one untimed step
             for _ in range(args.steps):
                 s.step(True)
-    base = statistics.median(setups[0].times)
     rows = []
-    for s in setups:
-        med = statistics.median(s.times)
-        rows.append({"config": s.name, "seconds_per_step": med, "samples_per_second": args.batch / med,
-                     "speedup": base / med, "n": len(s.times)})
-    res = {"model": args.model, "batch": args.batch, "size": list(size), "threads": 2, "frames": len(ds),
+    for m, group in setups.items():
+        base = statistics.median(group[0].times)
+        for s in group:
+            med = statistics.median(s.times)
+            rows.append({"model": m, "config": s.name, "seconds_per_step": med,
+                         "samples_per_second": args.batch / med, "speedup": base / med,
+                         "budget_hours": med * args.budget / 3600, "n": len(s.times)})
+    res = {"models": args.model, "batch": args.batch, "size": list(size), "threads": 2, "frames": len(ds),
            "clips": [c.path.name for c in clips], "cache_build_ms_per_frame": 1e3 * build_s,
-           "teacher_features_ms_per_frame": 1e3 * teacher_s, "native_bf16": cpu_has_native_bf16(), "rows": rows}
-    lines = [f"# Training step, lever by lever\n\n`{args.model}`, batch {args.batch} at {size[0]}x{size[1]}, D + B + "
+           "teacher_features_ms_per_frame": 1e3 * teacher_s, "native_bf16": cpu_has_native_bf16(),
+           "budget_steps": args.budget, "rows": rows}
+    names = ", ".join(f"`{m}`" for m in args.model)
+    lines = [f"# Training step, lever by lever\n\n{names}, batch {args.batch} at {size[0]}x{size[1]}, D + B + "
              f"the teacher's distillation + Adam, 2 threads, on {len(clips)} labelled clips ({len(ds)} frames); "
              f"configurations in turn, {args.rounds} rounds of {args.steps} steps, median step.\n",
-             "| configuration | s / step | samples / s | vs before |", "|---|---|---|---|"]
-    lines += [f"| {r['config']} | {r['seconds_per_step']:.3f} | {r['samples_per_second']:.1f} | "
-              f"{r['speedup']:.2f}x |" for r in rows]
+             f"| model | configuration | s / step | samples / s | vs first | h for {args.budget:,} steps |",
+             "|---|---|---|---|---|---|"]
+    lines += [f"| {r['model']} | {r['config']} | {r['seconds_per_step']:.3f} | {r['samples_per_second']:.1f} | "
+              f"{r['speedup']:.2f}x | {r['budget_hours']:.2f} |" for r in rows]
     lines.append(f"\nOne-off per frame: the sample cache {1e3 * build_s:.1f} ms, the teacher's features "
-                 f"(plain and flipped) {1e3 * teacher_s:.1f} ms.")
+                 f"(plain and flipped) {1e3 * teacher_s:.1f} ms. Hours: the median step times the steps, "
+                 "without the run's validation records.")
     if not cpu_has_native_bf16():
         lines.append("\nThis CPU has no native bf16 (AMX or AVX-512 BF16): `train.precision=auto` trains in fp32 here.")
     md = "\n".join(lines)

@@ -125,6 +125,13 @@ def autocast_dtype(cfg: Config, device: torch.device) -> torch.dtype | None:
     return torch.bfloat16 if want == "bf16" else None
 
 
+def precision_name(dtype: torch.dtype | None) -> str:
+    """How a history record's training arithmetic is named: ``bf16`` (autocast) or ``fp32``. Every
+    record carries it: ``train.precision=auto`` trains differently on different CPUs, and a run
+    resumed on another machine may change it from one piece to the next."""
+    return "bf16" if dtype == torch.bfloat16 else "fp32"
+
+
 def _autocast(device: torch.device, dtype: torch.dtype | None):
     return torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None)
 
@@ -283,6 +290,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         if start == 0 and t.init and val_cache is not None and t.eval_every:
             # where a teacher trained on from another begins
             run.append_history({"phase": "teacher", "step": 0, "samples": 0, "seconds": 0.0,
+                                "precision": precision_name(dtype),
                                 **{f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, t.scale,
                                                                            cfg.train.eval_frames, dtype).items()}})
     model.train()
@@ -302,6 +310,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         if rank == 0 and val_cache is not None and t.eval_every and (done % t.eval_every == 0 or done == t.steps):
             run.append_history({"phase": "teacher", "step": done, "samples": done * t.batch_size * world,
                                 "seconds": round(seconds, 1), "ce": float(np.mean(losses)),
+                                "precision": precision_name(dtype),
                                 **{f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, t.scale,
                                                                            cfg.train.eval_frames, dtype).items()}})
             losses = []
@@ -478,6 +487,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         if start == 0 and cfg.train.init and cfg.train.eval_every and val_cache is not None:
             # where a run started from another begins: its gain is then measured, not assumed
             run.append_history({"phase": "train", "step": 0, "samples": 0, "seconds": 0.0,
+                                "precision": precision_name(dtype),
                                 **{f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
                                                                       cl).items()}})
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
@@ -503,7 +513,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             mean = np.mean(since, axis=0)
             rec = {"phase": "train", "step": done, "samples": done * cfg.train.batch_size * world,
                    "seconds": round(seconds, 1), "loss": float(mean[0]), "bce": float(mean[1]),
-                   "kd": float(mean[2]), "depth": float(mean[3])}
+                   "kd": float(mean[2]), "depth": float(mean[3]), "precision": precision_name(dtype)}
             if val_cache is not None:
                 rec.update({f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
                                                                 cl).items()})

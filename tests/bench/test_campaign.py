@@ -33,3 +33,24 @@ def test_a_leg_without_teacher_records_draws_no_empty_teacher_panel(tmp_path):
     # 5 inches a panel at 90 dpi: two panels for a leg, three with the teacher's curve
     assert cv2.imread(str(tmp_path / "leg.png")).shape[1] == 2 * 5 * 90
     assert cv2.imread(str(tmp_path / "whole.png")).shape[1] == 3 * 5 * 90
+
+
+def test_a_runs_curve_names_every_arithmetic_its_pieces_trained_in(tmp_path):
+    import json
+
+    from benchmarks.bench_campaign import run_curve
+
+    # a run begun where records did not name their arithmetic, resumed in bf16, then in fp32; step 0
+    # (the start's own score) is no training; a teacher record and a loss-only record are not B's curve
+    lines = [{"phase": "teacher", "step": 5, "seconds": 1.0, "val_miou": 0.5, "precision": "fp32"},
+             {"phase": "train", "step": 0, "seconds": 0.0, "val_iou": 0.1, "precision": "fp32"},
+             {"phase": "train", "step": 10, "seconds": 4.0, "val_iou": 0.2},
+             {"phase": "train", "step": 20, "seconds": 7.0, "val_iou": 0.3, "precision": "bf16"},
+             {"phase": "train", "step": 25, "seconds": 8.0, "loss": 0.4, "precision": "fp32"},
+             {"phase": "train", "step": 30, "seconds": 9.6, "val_iou": 0.35, "precision": "fp32"}]
+    (tmp_path / "history.jsonl").write_text("".join(json.dumps(r) + "\n" for r in lines))
+    c = run_curve(tmp_path)
+    assert c["steps"] == [0, 10, 20, 30] and c["val_iou"] == [0.1, 0.2, 0.3, 0.35]
+    assert c["precision"] == ["bf16", "fp32", "unrecorded"] and c["seconds"] == 10
+    t = run_curve(tmp_path, "teacher", "val_miou")
+    assert t["steps"] == [5] and t["val_miou"] == [0.5] and t["precision"] == ["fp32"] and t["flattened"] is None

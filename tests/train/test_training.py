@@ -406,6 +406,23 @@ def test_a_training_in_pieces_is_the_uninterrupted_run(data, uninterrupted, tmp_
     assert_same_weights(run, uninterrupted)
 
 
+@pytest.mark.parametrize("precision, native, named", [("fp32", True, "fp32"), ("auto", True, "bf16"),
+                                                        ("auto", False, "fp32")])
+def test_every_history_record_names_the_arithmetic_it_trained_in(data, tmp_path, monkeypatch, precision, native,
+                                                                   named):
+    """``train.precision=auto`` trains in bf16 only on a CPU with native bf16, so the same command
+    trains differently on different machines: the teacher's and B's records say which."""
+    from bsn_edge.train import trainer
+    monkeypatch.setattr(trainer, "cpu_has_native_bf16", lambda: native)
+    cfg = load_config(SMOKE, ["data.label=\"T2s\"", f"train.precision=\"{precision}\"", "train.steps=2",
+                              "train.eval_every=1", "teacher.steps=2", "teacher.eval_every=1",
+                              "data.val_fraction=0.34"])
+    trainer.train(cfg, data, tmp_path / "run", progress=False)
+    recs = Run(tmp_path / "run").history()
+    assert sorted({r["phase"] for r in recs}) == ["teacher", "train"]
+    assert [r["precision"] for r in recs] == [named] * len(recs)
+
+
 def test_train_cli_says_how_to_go_on_after_a_piece(data, tmp_path, capsys):
     run = tmp_path / "run"
     assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--stop-after", "1e-9"]) == 0
