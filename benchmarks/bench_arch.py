@@ -198,7 +198,8 @@ def main(argv: list[str] | None = None) -> int:
                "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
     res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget,
            "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()}}
-    lines = ["# Architectures (the paper's Table 3)", "",
+    title = "# Architectures (the paper's Table 3)" + (f", {budget['steps']:,} steps" if budget else "")
+    lines = [title, "",
              f"Fused D + B at {size[0]}x{size[1]}; frames/s of the fp32 ONNX model in onnxruntime with 2 threads.",
              "", "| model | params (M) | GMACs | ms | frames/s | IoU (mean +- std over seeds) | runs flat "
                  "| IoU (own run) |",

@@ -168,7 +168,8 @@ def main(argv: list[str] | None = None) -> int:
            "teacher_features_ms_per_frame": 1e3 * teacher_s, "native_bf16": cpu_has_native_bf16(),
            "budget_steps": args.budget, "rows": rows}
     names = ", ".join(f"`{m}`" for m in args.model)
-    lines = [f"# Training step, lever by lever\n\n{names}, batch {args.batch} at {size[0]}x{size[1]}, D + B + "
+    title = "Training step as bsn-train runs it here" if args.as_trained else "Training step, lever by lever"
+    lines = [f"# {title}\n\n{names}, batch {args.batch} at {size[0]}x{size[1]}, D + B + "
              f"the teacher's distillation + Adam, 2 threads, on {len(clips)} labelled clips ({len(ds)} frames); "
              f"configurations in turn, {args.rounds} rounds of {args.steps} steps, median step.\n",
              f"| model | configuration | s / step | samples / s | vs first | h for {args.budget:,} steps |",

@@ -31,7 +31,8 @@ def test_as_trained_measures_each_architecture_in_what_bsn_train_runs_here(clips
     for r in res["rows"]:
         assert r["n"] == 2 and r["budget_hours"] == pytest.approx(2 * r["seconds_per_step"])
         assert r["samples_per_second"] == pytest.approx(2 / r["seconds_per_step"])
-    assert "h for 7,200 steps" in (tmp_path / "ts.md").read_text()
+    md = (tmp_path / "ts.md").read_text()
+    assert md.startswith("# Training step as bsn-train runs it here") and "h for 7,200 steps" in md
 
 
 def test_an_unknown_architecture_is_named_with_the_valid_ones(tmp_path, capsys):
