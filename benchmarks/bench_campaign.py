@@ -45,8 +45,8 @@ def flattened(records: list[dict[str, Any]], key: str = "val_iou", share: float 
 def run_curve(run: Path, phase: str = "train", key: str = "val_iou") -> dict[str, Any]:
     """A run's validation records of ``phase`` (``train``: B's IoU; ``teacher``: its ``val_miou``),
     whether their last fifth had flattened, the training seconds and the arithmetic it trained in
-    (``precision``: every kind its records name, sorted; ``unrecorded`` for records written before
-    the trainer named it)."""
+    (``precision``: every kind its training records name, sorted, step 0 left out as the start's own
+    score; ``unrecorded`` for records written before the trainer named it)."""
     recs = [r for r in Run(run).history() if r.get("phase") == phase and key in r]
     return {"steps": [r["step"] for r in recs], key: [round(r[key], 4) for r in recs],
             "flattened": flattened(recs, key), "seconds": round(recs[-1]["seconds"]) if recs else None,

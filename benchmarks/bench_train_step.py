@@ -143,8 +143,8 @@ def main(argv: list[str] | None = None) -> int:
 
     levers = [(n, lv) for n, lv in LEVERS if lv["precision"] != "bf16" or cpu_has_native_bf16()]
     if args.as_trained:
-        levers = [(n, lv) for n, lv in levers if n in AS_TRAINED]
-        levers = levers[-1:] if cpu_has_native_bf16() else levers[:1]
+        # bf16 is already gone where the CPU has no native bf16: the last one left is what bsn-train runs
+        levers = [(n, lv) for n, lv in levers if n in AS_TRAINED][-1:]
     setups = {m: [Setup(n, lv, ds, cache, grid_cache, args.batch, m) for n, lv in levers] for m in args.model}
     every = [s for group in setups.values() for s in group]
     for s in every:
