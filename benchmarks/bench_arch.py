@@ -35,6 +35,7 @@ from benchmarks.bench_campaign import run_curve
 from benchmarks.common import eval_run, records, summary, time_calls, train_run, write_result
 from benchmarks.ledger import Ledger, fmt
 from bsn_edge.camera import Intrinsics
+from bsn_edge.card import UNRECORDED
 from bsn_edge.cli.common import parse_size
 from bsn_edge.export import to_onnx
 from bsn_edge.models import create_model, describe
@@ -189,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
                 gains = row["last_fifth_gain"].values()
                 row["flat"] = f"{sum(g < 0.01 for g in gains)} of {len(gains)}"
                 row["precision"] = sorted({p for r in recs.values()
-                                           for p in r["curve"].get("precision", ["unrecorded"])})
+                                           for p in r["curve"].get("precision", [UNRECORDED])})
             if name in runs:
                 row["iou_run"] = held_out_iou(Path(runs[name]), Path(args.data), Path(tmp) / f"{name}.json")
             rows.append(row)

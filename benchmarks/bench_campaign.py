@@ -21,6 +21,7 @@ matplotlib.use("Agg")  # headless: before pyplot is imported
 import matplotlib.pyplot as plt
 
 from benchmarks.common import write_result
+from bsn_edge.card import UNRECORDED
 from bsn_edge.train import Run
 
 FLAT_IOU = 0.01
@@ -46,11 +47,11 @@ def run_curve(run: Path, phase: str = "train", key: str = "val_iou") -> dict[str
     """A run's validation records of ``phase`` (``train``: B's IoU; ``teacher``: its ``val_miou``),
     whether their last fifth had flattened, the training seconds and the arithmetic it trained in
     (``precision``: every kind its training records name, sorted, step 0 left out as the start's own
-    score; ``unrecorded`` for records written before the trainer named it)."""
+    score; ``UNRECORDED`` for records written before the trainer named it)."""
     recs = [r for r in Run(run).history() if r.get("phase") == phase and key in r]
     return {"steps": [r["step"] for r in recs], key: [round(r[key], 4) for r in recs],
             "flattened": flattened(recs, key), "seconds": round(recs[-1]["seconds"]) if recs else None,
-            "precision": sorted({r.get("precision", "unrecorded") for r in recs if r["step"]})}
+            "precision": sorted({r.get("precision", UNRECORDED) for r in recs if r["step"]})}
 
 
 def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> None:

@@ -39,12 +39,18 @@ _HEX64 = re.compile(r"[0-9a-f]{64}")
 EARLY_MOUNTING = Mounting(height_m=REFERENCE_HEIGHT_M, pitch_deg=1.5)
 
 
+# the arithmetic of a training piece whose records do not name it (written before they did)
+UNRECORDED = "unrecorded"
+
+
 @dataclass(frozen=True)
 class TrainingRecord:
     """How a model was trained, as its run recorded it: optimizer steps and samples seen in all
     (every piece and resume of the run), wall-clock hours of training, the clips it trained and
-    validated on, the run it started from (``init``, empty: from scratch) and where its teacher
-    came from."""
+    validated on, the run it started from (``init``, empty: from scratch), where its teacher
+    came from, and the arithmetic D and B trained in (``precision``: ``bf16``, ``fp32``, or the
+    kinds of its pieces joined by ``+``, ``unrecorded`` for a piece from before the trainer named
+    it; empty when no piece did, and then left out of the card, so older cards digest as they did)."""
 
     steps: int
     samples: int
@@ -53,16 +59,23 @@ class TrainingRecord:
     val_clips: int
     init: str = ""
     teacher: str = ""
+    precision: str = ""
 
     def __post_init__(self) -> None:
         if min(self.steps, self.samples, self.train_clips, self.val_clips) < 0 or not self.hours >= 0:
             raise ValueError(f"a training record counts nothing below zero, got {self}")
 
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        if not self.precision:
+            del d["precision"]
+        return d
+
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> TrainingRecord:
         return cls(steps=int(d["steps"]), samples=int(d["samples"]), hours=float(d["hours"]),
                    train_clips=int(d["train_clips"]), val_clips=int(d["val_clips"]), init=str(d.get("init", "")),
-                   teacher=str(d.get("teacher", "")))
+                   teacher=str(d.get("teacher", "")), precision=str(d.get("precision", "")))
 
 
 @dataclass(frozen=True)
@@ -181,7 +194,7 @@ class ModelCard:
             "mounting": self.mounting.to_dict(),
         }
         if self.training is not None:       # absent, not null: cards from before it read and digest as they did
-            d["training"] = dataclasses.asdict(self.training)
+            d["training"] = self.training.to_dict()
         return d
 
     @classmethod

@@ -29,7 +29,7 @@ from typing import Any
 
 import torch
 
-from bsn_edge.card import ModelCard, TrainingRecord
+from bsn_edge.card import UNRECORDED, ModelCard, TrainingRecord
 from bsn_edge.models import BlindSpotNet, ModelSpec, build, create_teacher, weights_bytes
 from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.train.config import TeacherConfig
@@ -155,12 +155,16 @@ class Run:
         """How the run was trained: samples and seconds summed over every piece, as the trainer
         recorded them with the checkpoint (runs from before that: the history's last training record,
         scaled to the run's last step); the clips from the checkpoint; the start and the teacher from
-        the config. Counted from scratch: a run that started from another run's weights (``train.init``)
-        adds that run's record, and ``init`` names it with its own count. None for a run with neither."""
+        the config; the arithmetic of every piece as the trainer recorded it (runs from before that:
+        as the history's training records name it). Counted from scratch: a run that started from
+        another run's weights (``train.init``) adds that run's record, and ``init`` names it with its
+        own count. None for a run with neither."""
         steps = int(info.get("step") or 0)
         trained = info.get("trained")
+        # step 0 is the start's own score, not a piece of this run's training
+        recs = [r for r in self.history() if r.get("phase") == "train" and r.get("step")]
+        kinds = set((trained or {}).get("precision", [])) or {r.get("precision", UNRECORDED) for r in recs}
         if trained is None:
-            recs = [r for r in self.history() if r.get("phase") == "train" and r.get("step")]
             if not recs or not steps:
                 return None
             scale = steps / recs[-1]["step"]
@@ -179,12 +183,14 @@ class Run:
         if frozen is not None:
             before = TrainingRecord.from_dict(frozen["training"])
             steps, samples, hours = steps + before.steps, samples + before.samples, hours + before.hours
+            kinds |= set(before.precision.split("+")) if before.precision else {UNRECORDED}
             # a shared-encoder model takes only D from a two-network run (models.start_from)
             d_only = frozen["variant"] != cfg.get("model", {}).get("name", frozen["variant"])
             start += f" ({'its D, ' if d_only else ''}after {before.steps} steps)"
         return TrainingRecord(steps=steps, samples=round(samples), hours=round(hours, 2),
                               train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),
-                              init=start, teacher=teacher)
+                              init=start, teacher=teacher,
+                              precision="" if kinds <= {UNRECORDED} else "+".join(sorted(kinds)))
 
     @classmethod
     def init_record(cls, init: str | Path) -> dict[str, Any] | None:
@@ -197,7 +203,7 @@ class Run:
         card = Run(init).card()
         if card.training is None:
             return None
-        return {"variant": card.variant, "training": dataclasses.asdict(card.training)}
+        return {"variant": card.variant, "training": card.training.to_dict()}
 
     def card(self) -> ModelCard:
         return self.info()["card"]

@@ -25,7 +25,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from bsn_edge import semantics as sm
-from bsn_edge.card import UNCHOSEN_THRESHOLD, ModelCard
+from bsn_edge.card import UNCHOSEN_THRESHOLD, UNRECORDED, ModelCard
 from bsn_edge.data import BlindSpotDataset, Clip, find_clips, split_clips
 from bsn_edge.data.cache import SampleCache, default_cache_root
 from bsn_edge.labels.generator import label_camera
@@ -475,6 +475,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         optim.load_state_dict(state)
         start = int(state["step"])
         seconds_before = float(state.get("seconds", 0.0))
+    # the arithmetic of every piece so far, this one's included (a state from before it was kept: unrecorded)
+    kinds = sorted({precision_name(dtype)} | (set(state.get("precision", [UNRECORDED])) if state else set()))
     model.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
     batches = training_batches(data.train_ds, cache, cfg.train.batch_size, world, rank, cfg.train.seed,
@@ -522,8 +524,9 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps or out_of_time):
             _save(run, model, cfg, data, done, threshold=None,
                   resume_state={**optim.state_dict(), "step": done,
-                                "torch_rng": torch.get_rng_state(), "seconds": seconds},
-                  trained={"samples": done * cfg.train.batch_size * world, "seconds": round(seconds, 1)})
+                                "torch_rng": torch.get_rng_state(), "seconds": seconds, "precision": kinds},
+                  trained={"samples": done * cfg.train.batch_size * world, "seconds": round(seconds, 1),
+                           "precision": kinds})
         if out_of_time:
             break
     elapsed = time.perf_counter() - t0
