@@ -22,7 +22,7 @@ ORDER = ("synth", "labels", "train_step", "train_step_avx2_research", "train_ste
          "train_step_avx512_research", "train_step_archs",
          "bsn_accuracy", "bsn_accuracy_shared-light", "bsn_accuracy_shared-light_rescore",
          "bsn_accuracy_shared-light_coverage", "bsn_accuracy_shared-light_depth_role", "bsn_arch", "bsn_arch_light",
-         "bsn_arch_light_6k", "bsn_arch_light_12k",
+         "bsn_arch_light_6k", "bsn_arch_light_12k", "bsn_arch_light_24k", "bsn_arch_heavy_12k",
          "quant", "floor", "floor_avx2", "int8_cpu",
          "runtime", "runtime_s3", "runtime_avx2", "runtime_avx2_decode", "runtime_avx2_flight", "runtime_avx2_shared",
          "runtime_avx2_s3", "runtime_avx2_s3fast", "runtime_avx2_s3warp", "runtime_avx2_s3flight",
@@ -120,6 +120,8 @@ def build(results: Path) -> Path:
              "bsn_arch": ("arch.png", plot_arch), "bsn_arch_light": ("arch_light.png", plot_arch),
              "bsn_arch_light_6k": ("arch_light_6k.png", plot_arch),
              "bsn_arch_light_12k": ("arch_light_12k.png", plot_arch),
+             "bsn_arch_light_24k": ("arch_light_24k.png", plot_arch),
+             "bsn_arch_heavy_12k": ("arch_heavy_12k.png", plot_arch),
              "quant": ("quant.png", plot_quant)}
     for name in ORDER:
         md = results / f"{name}.md"
