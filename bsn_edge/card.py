@@ -41,6 +41,7 @@ EARLY_MOUNTING = Mounting(height_m=REFERENCE_HEIGHT_M, pitch_deg=1.5)
 
 # the arithmetic of a training piece whose records do not name it (written before they did)
 UNRECORDED = "unrecorded"
+PRECISIONS = ("bf16", "fp32", UNRECORDED)
 
 
 @dataclass(frozen=True)
@@ -48,9 +49,9 @@ class TrainingRecord:
     """How a model was trained, as its run recorded it: optimizer steps and samples seen in all
     (every piece and resume of the run), wall-clock hours of training, the clips it trained and
     validated on, the run it started from (``init``, empty: from scratch), where its teacher
-    came from, and the arithmetic D and B trained in (``precision``: ``bf16``, ``fp32``, or the
-    kinds of its pieces joined by ``+``, ``unrecorded`` for a piece from before the trainer named
-    it; empty when no piece did, and then left out of the card, so older cards digest as they did)."""
+    came from, and the arithmetic D and B trained in (``precision``: every kind its pieces ran in,
+    sorted, ``bf16`` or ``fp32``, ``unrecorded`` for a piece from before the trainer named it; empty
+    when no piece did, and then left out of the card, so older cards digest as they did)."""
 
     steps: int
     samples: int
@@ -59,15 +60,19 @@ class TrainingRecord:
     val_clips: int
     init: str = ""
     teacher: str = ""
-    precision: str = ""
+    precision: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if min(self.steps, self.samples, self.train_clips, self.val_clips) < 0 or not self.hours >= 0:
             raise ValueError(f"a training record counts nothing below zero, got {self}")
+        if not set(self.precision) <= set(PRECISIONS) or list(self.precision) != sorted(set(self.precision)):
+            raise ValueError(f"training precision: sorted kinds of {PRECISIONS}, got {self.precision!r}")
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
-        if not self.precision:
+        if self.precision:
+            d["precision"] = list(self.precision)
+        else:
             del d["precision"]
         return d
 
@@ -75,7 +80,7 @@ class TrainingRecord:
     def from_dict(cls, d: Mapping[str, Any]) -> TrainingRecord:
         return cls(steps=int(d["steps"]), samples=int(d["samples"]), hours=float(d["hours"]),
                    train_clips=int(d["train_clips"]), val_clips=int(d["val_clips"]), init=str(d.get("init", "")),
-                   teacher=str(d.get("teacher", "")), precision=str(d.get("precision", "")))
+                   teacher=str(d.get("teacher", "")), precision=tuple(map(str, d.get("precision", ()))))
 
 
 @dataclass(frozen=True)

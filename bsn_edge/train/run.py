@@ -183,14 +183,14 @@ class Run:
         if frozen is not None:
             before = TrainingRecord.from_dict(frozen["training"])
             steps, samples, hours = steps + before.steps, samples + before.samples, hours + before.hours
-            kinds |= set(before.precision.split("+")) if before.precision else {UNRECORDED}
+            kinds |= set(before.precision) or {UNRECORDED}
             # a shared-encoder model takes only D from a two-network run (models.start_from)
             d_only = frozen["variant"] != cfg.get("model", {}).get("name", frozen["variant"])
             start += f" ({'its D, ' if d_only else ''}after {before.steps} steps)"
         return TrainingRecord(steps=steps, samples=round(samples), hours=round(hours, 2),
                               train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),
                               init=start, teacher=teacher,
-                              precision="" if kinds <= {UNRECORDED} else "+".join(sorted(kinds)))
+                              precision=() if kinds <= {UNRECORDED} else tuple(sorted(kinds)))
 
     @classmethod
     def init_record(cls, init: str | Path) -> dict[str, Any] | None:

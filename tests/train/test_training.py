@@ -422,7 +422,7 @@ def test_every_history_record_names_the_arithmetic_it_trained_in(data, tmp_path,
     recs = Run(tmp_path / "run").history()
     assert sorted({r["phase"] for r in recs}) == ["teacher", "train"]
     assert [r["precision"] for r in recs] == [named] * len(recs)
-    assert Run(tmp_path / "run").card().training.precision == named
+    assert Run(tmp_path / "run").card().training.precision == (named,)
 
 
 def test_the_card_names_every_arithmetic_its_pieces_trained_in(data, tmp_path):
@@ -436,9 +436,9 @@ def test_the_card_names_every_arithmetic_its_pieces_trained_in(data, tmp_path):
     # a first piece in fp32, stopped after a step, then resumed in bf16, as on another CPU
     summary = train(load_config(SMOKE, [*sets, "train.precision=\"fp32\""]), data, first, progress=False,
                     stop_after=1e-9)
-    assert summary["stopped_at"] == 1 and Run(first).card().training.precision == "fp32"
+    assert summary["stopped_at"] == 1 and Run(first).card().training.precision == ("fp32",)
     train(load_config(SMOKE, [*sets, "train.precision=\"bf16\""]), data, first, progress=False, resume=True)
-    assert Run(first).card().training.precision == "bf16+fp32"
+    assert Run(first).card().training.precision == ("bf16", "fp32")
     # the same run as written before the trainer recorded it: the key is left out of its card
     info = json.loads(Run(first).checkpoint_path.read_text())
     del info["trained"]["precision"]
@@ -446,12 +446,16 @@ def test_the_card_names_every_arithmetic_its_pieces_trained_in(data, tmp_path):
     recs = [{k: v for k, v in r.items() if k != "precision"} for r in Run(first).history()]
     Run(first).history_path.write_text("".join(json.dumps(r) + "\n" for r in recs))
     card = Run(first).card()
-    assert card.training.precision == "" and "precision" not in card.to_dict()["training"]
+    assert card.training.precision == () and "precision" not in card.to_dict()["training"]
     assert ModelCard.from_dict(card.to_dict()) == card
     train(load_config(SMOKE, [*sets, "train.precision=\"fp32\"", f"train.init=\"{first}\"",
                               f"teacher.checkpoint=\"{first}\""]), data, second, progress=False)
     record = Run(second).card().training
-    assert record.precision == "fp32+unrecorded" and record.steps == 4
+    assert record.precision == ("fp32", "unrecorded") and record.steps == 4
+    # a card's kinds are a sorted list of known names: a bare string or an unknown kind is named
+    for bad in ("bf16", ["fp32", "bf16"], ["fp16"]):
+        with pytest.raises(ValueError, match="training precision"):
+            TrainingRecord.from_dict({**record.to_dict(), "precision": bad})
 
 
 def test_train_cli_says_how_to_go_on_after_a_piece(data, tmp_path, capsys):
@@ -496,7 +500,7 @@ def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tm
     assert card.training == TrainingRecord(steps=2, samples=4, hours=card.training.hours,
                                            train_clips=len(info["train_clips"]), val_clips=len(info["val_clips"]),
                                            init="", teacher="trained in the run, 4 steps",
-                                           precision="bf16" if cpu_has_native_bf16() else "fp32")
+                                           precision=("bf16",) if cpu_has_native_bf16() else ("fp32",))
     assert 0 <= card.training.hours < 1
     assert json.loads(dst.checkpoint_path.read_text())["card"]["training"]["steps"] == 2
     assert read_card(out).training == card.training
