@@ -21,7 +21,6 @@ matplotlib.use("Agg")  # headless: before pyplot is imported
 import matplotlib.pyplot as plt
 
 from benchmarks.common import write_result
-from bsn_edge.card import UNRECORDED
 from bsn_edge.train import Run
 
 FLAT_IOU = 0.01
@@ -51,7 +50,7 @@ def run_curve(run: Path, phase: str = "train", key: str = "val_iou") -> dict[str
     recs = [r for r in Run(run).history() if r.get("phase") == phase and key in r]
     return {"steps": [r["step"] for r in recs], key: [round(r[key], 4) for r in recs],
             "flattened": flattened(recs, key), "seconds": round(recs[-1]["seconds"]) if recs else None,
-            "precision": sorted({r.get("precision", UNRECORDED) for r in recs if r["step"]})}
+            "precision": sorted(Run(run).history_precision(phase))}
 
 
 def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> None:

@@ -39,9 +39,9 @@ _HEX64 = re.compile(r"[0-9a-f]{64}")
 EARLY_MOUNTING = Mounting(height_m=REFERENCE_HEIGHT_M, pitch_deg=1.5)
 
 
-# the arithmetic of a training piece whose records do not name it (written before they did)
-UNRECORDED = "unrecorded"
-PRECISIONS = ("bf16", "fp32", UNRECORDED)
+# the arithmetic a training piece ran in; UNRECORDED: its records do not name it (written before they did)
+BF16, FP32, UNRECORDED = "bf16", "fp32", "unrecorded"
+PRECISIONS = (BF16, FP32, UNRECORDED)
 
 
 @dataclass(frozen=True)

@@ -163,7 +163,7 @@ class Run:
         trained = info.get("trained")
         # step 0 is the start's own score, not a piece of this run's training
         recs = [r for r in self.history() if r.get("phase") == "train" and r.get("step")]
-        kinds = set((trained or {}).get("precision", [])) or {r.get("precision", UNRECORDED) for r in recs}
+        kinds = set((trained or {}).get("precision", [])) or self.history_precision()
         if trained is None:
             if not recs or not steps:
                 return None
@@ -270,6 +270,12 @@ class Run:
             if isinstance(rec, dict):
                 out.append(rec)
         return out
+
+    def history_precision(self, phase: str = "train") -> set[str]:
+        """The arithmetic the history's ``phase`` records name, step 0 left out (the start's own
+        score, not a piece of this run's training); ``UNRECORDED`` for records written before the
+        trainer named it."""
+        return {r.get("precision", UNRECORDED) for r in self.history() if r.get("phase") == phase and r.get("step")}
 
     @classmethod
     def of_teacher(cls, checkpoint: str | Path) -> Run:

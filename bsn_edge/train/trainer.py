@@ -25,7 +25,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from bsn_edge import semantics as sm
-from bsn_edge.card import UNCHOSEN_THRESHOLD, UNRECORDED, ModelCard
+from bsn_edge.card import BF16, FP32, UNCHOSEN_THRESHOLD, UNRECORDED, ModelCard
 from bsn_edge.data import BlindSpotDataset, Clip, find_clips, split_clips
 from bsn_edge.data.cache import SampleCache, default_cache_root
 from bsn_edge.labels.generator import label_camera
@@ -121,15 +121,15 @@ def autocast_dtype(cfg: Config, device: torch.device) -> torch.dtype | None:
     """The autocast dtype of ``train.precision`` on ``device`` (None: fp32)."""
     want = cfg.train.precision
     if want == "auto":
-        want = "bf16" if device.type == "cpu" and cpu_has_native_bf16() else "fp32"
-    return torch.bfloat16 if want == "bf16" else None
+        want = BF16 if device.type == "cpu" and cpu_has_native_bf16() else FP32
+    return torch.bfloat16 if want == BF16 else None
 
 
 def precision_name(dtype: torch.dtype | None) -> str:
-    """How a history record's training arithmetic is named: ``bf16`` (autocast) or ``fp32``. Every
+    """How a history record's training arithmetic is named: ``BF16`` (autocast) or ``FP32``. Every
     record carries it: ``train.precision=auto`` trains differently on different CPUs, and a run
     resumed on another machine may change it from one piece to the next."""
-    return "bf16" if dtype == torch.bfloat16 else "fp32"
+    return BF16 if dtype == torch.bfloat16 else FP32
 
 
 def _autocast(device: torch.device, dtype: torch.dtype | None):
