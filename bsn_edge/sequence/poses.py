@@ -6,11 +6,27 @@ Poses are camera-to-world ``T_wc`` 4x4 matrices, shape ``[N, 4, 4]``.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from bsn_edge.sequence.images import atomic_write_bytes
+
+
+def _number_lines(path: str | os.PathLike, kind: str, count: int, fields: str) -> Iterator[list[float]]:
+    """The numbers of every line of a pose file but blank and ``#`` lines; a line that is not
+    ``count`` numbers is a ``ValueError`` naming the file and the line."""
+    for lineno, line in enumerate(Path(path).read_text().splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            vals = [float(v) for v in line.split()]
+        except ValueError as e:
+            raise ValueError(f"{path}:{lineno}: not a number in {kind}: {e}") from None
+        if len(vals) != count:
+            raise ValueError(f"{path}:{lineno}: a {kind} has {count} numbers{fields}, found {len(vals)}")
+        yield vals
 
 
 def write_kitti_poses(path: str | os.PathLike, poses: np.ndarray) -> None:
@@ -25,15 +41,7 @@ def write_kitti_poses(path: str | os.PathLike, poses: np.ndarray) -> None:
 def read_kitti_poses(path: str | os.PathLike) -> np.ndarray:
     """Read a KITTI odometry pose file (12 numbers per line) into ``[N, 4, 4]``."""
     rows = []
-    for lineno, line in enumerate(Path(path).read_text().splitlines(), start=1):
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        try:
-            vals = [float(v) for v in line.split()]
-        except ValueError as e:
-            raise ValueError(f"{path}:{lineno}: not a number in KITTI pose line: {e}") from None
-        if len(vals) != 12:
-            raise ValueError(f"{path}:{lineno}: a KITTI pose line has 12 numbers, found {len(vals)}")
+    for vals in _number_lines(path, "KITTI pose line", 12, ""):
         T = np.eye(4)
         T[:3] = np.reshape(vals, (3, 4))
         rows.append(T)
@@ -84,16 +92,7 @@ def write_tum_poses(path: str | os.PathLike, stamps: np.ndarray, poses: np.ndarr
 def read_tum_poses(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Read a TUM trajectory; returns ``(timestamps [N], poses [N, 4, 4])``."""
     stamps, poses = [], []
-    for lineno, line in enumerate(Path(path).read_text().splitlines(), start=1):
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        try:
-            vals = [float(v) for v in line.split()]
-        except ValueError as e:
-            raise ValueError(f"{path}:{lineno}: not a number in TUM pose line: {e}") from None
-        if len(vals) != 8:
-            raise ValueError(f"{path}:{lineno}: a TUM line has 8 numbers (t tx ty tz qx qy qz qw), "
-                             f"found {len(vals)}")
+    for vals in _number_lines(path, "TUM line", 8, " (t tx ty tz qx qy qz qw)"):
         T = np.eye(4)
         T[:3, :3] = quat_to_rot(np.array(vals[4:8]))
         T[:3, 3] = vals[1:4]
