@@ -15,8 +15,10 @@ last fifth gained under 0.01). Every finished run goes into ``bsn_arch_ledger.js
 (:mod:`benchmarks.ledger`): the command can be stopped and run again, on any machine, and trains
 only what is missing, a run stopped part-way going on from its last tenth. ``--report NAME`` writes
 ``NAME.md`` and ``NAME_ledger.json`` instead, e.g. a table of two architectures (``--only``) that
-leaves the whole table as it is. ``--runs`` adds the IoU of runs trained elsewhere (e.g. the shipped
-model's).
+leaves the whole table as it is. The report has a row for every architecture of ``--only`` and every
+one its ledger holds, so a table trained one run per sitting (``--only small --seeds 0``, then
+``--only unet --seeds 0`` ...) shows every run finished so far. ``--runs`` adds the IoU of runs trained
+elsewhere (e.g. the shipped model's).
 """
 
 from __future__ import annotations
@@ -179,10 +181,14 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         teacher = train_seeds(args, ledger, Path(tmp)) if ledger is not None else None
-        for name in args.only:
+        # a table trained one run per sitting (--only, --seeds) reports every row its ledger has
+        trained = {k.split("/")[0] for k in ledger.runs} if ledger is not None else set()
+        names = [a for a in ARCHS if a in args.only or a in trained]
+        for name in names:
             row = measure(name, size, args.repeats, Path(tmp))
             if ledger is not None:
                 recs = {k.split("/")[1]: r for k, r in sorted(ledger.runs.items()) if k.startswith(f"{name}/seed")}
+                row["seeds"] = list(recs)
                 row["iou_seeds"] = [r["iou"] for r in recs.values()]
                 row["iou"] = fmt(row["iou_seeds"])
                 row["last_fifth_gain"] = {sd: r["curve"]["flattened"]["gain"] for sd, r in recs.items()
@@ -195,7 +201,8 @@ def main(argv: list[str] | None = None) -> int:
                 row["iou_run"] = held_out_iou(Path(runs[name]), Path(args.data), Path(tmp) / f"{name}.json")
             rows.append(row)
             print(row, flush=True)
-    budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size), "seeds": args.seeds,
+    seeds = sorted({int(k.split("/seed")[1]) for k in ledger.runs}) if ledger is not None else []
+    budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size), "seeds": seeds,
                "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
     res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget,
            "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()}}
@@ -206,8 +213,9 @@ def main(argv: list[str] | None = None) -> int:
                  "| IoU (own run) |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
+        each = f" ({', '.join(f'{v:.3f}' for v in r['iou_seeds'])})" if len(r.get("iou_seeds", [])) > 1 else ""
         lines.append(f"| {r['model']} | {r['params_m']} | {r['gmacs']} | {r['median_ms']} | {r['fps']} | "
-                     f"{r.get('iou', '-')} | {r.get('flat', '-')} | {r.get('iou_run', '-')} |")
+                     f"{r.get('iou', '-')}{each} | {r.get('flat', '-')} | {r.get('iou_run', '-')} |")
     if budget:
         lines += ["", f"IoU: inside V on the held-out clips, every model trained {budget['steps']} steps of batch 8 at "
                       f"{budget['size'][0]}x{budget['size'][1]} with one shared teacher, once per seed, and evaluated "
@@ -220,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
                              + ", ".join(f"{sd} {g:+.3f}" for sd, g in r["last_fifth_gain"].items())
                              + f"; trained in {' and '.join(r['precision'])}")
         figure = f"{args.report}_curves.png"
-        if plot_curves(ledger, args.only, Path(args.out) / figure):
+        if plot_curves(ledger, names, Path(args.out) / figure):
             lines += ["", f"![curves]({figure})"]
     if runs:
         lines += ["", "IoU (own run): " + "; ".join(f"`{k}` {run_budget(Path(v))}" for k, v in runs.items())

@@ -190,3 +190,31 @@ def test_the_architecture_table_draws_every_seeds_curve_of_the_architectures_ask
     assert plot_curves(led, ["small-light", "shared-light"], tmp_path / "c.png")
     assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not plot_curves(led, ["unet"], tmp_path / "none.png") and not (tmp_path / "none.png").exists()
+
+
+def test_an_architecture_table_trained_one_run_per_sitting_reports_every_row_its_ledger_holds(tmp_path, monkeypatch):
+    import benchmarks.bench_arch as arch
+    data, out = tmp_path / "clips", tmp_path / "results"
+    for clip in ("town_0", "urban_0"):
+        (data / clip).mkdir(parents=True)
+        (data / clip / "meta.json").write_text("{}")
+    experiment = {"steps": 12000, "batch_size": 8, "size": [128, 256], "clips": ["town_0", "urban_0"],
+                  "teacher": "teacher"}
+    led = Ledger(out / "heavy_ledger.json", experiment)
+    curve = {"steps": [1200, 2400, 12000], "val_iou": [0.2, 0.3, 0.305], "flattened": {"gain": 0.005}}
+    led.put("small/seed0", {"iou": 0.41, "curve": {**curve, "precision": ["bf16"]}})
+    led.put("small/seed2", {"iou": 0.43, "curve": {**curve, "precision": ["fp32"]}})
+    led.put("unet/seed1", {"iou": 0.30, "curve": {**curve, "precision": ["bf16"]}})
+    measured = []
+    monkeypatch.setattr(arch, "measure", lambda name, *a: measured.append(name) or {
+        "model": name, "params_m": 1.0, "gmacs": 2.0, "median_ms": 10.0, "fps": 100.0, "repeats": 1})
+    rc = arch.main(["--out", str(out), "--data", str(data), "--train-steps", "12000", "--teacher", "teacher",
+                    "--only", "small", "--seeds", "0", "--report", "heavy"])
+    assert rc == 0 and measured == ["unet", "small"]          # the ledger's rows too, in the table's order
+    res = json.loads((out / "heavy.json").read_text())
+    assert res["iou_training"]["seeds"] == [0, 1, 2]
+    small = next(r for r in res["rows"] if r["model"] == "small")
+    assert small["seeds"] == ["seed0", "seed2"] and small["precision"] == ["bf16", "fp32"]
+    md = (out / "heavy.md").read_text()
+    assert "| small | 1.0 | 2.0 | 10.0 | 100.0 | 0.420 +- 0.014 (0.410, 0.430) | 2 of 2 |" in md
+    assert "| unet | 1.0 | 2.0 | 10.0 | 100.0 | 0.300 (1 seed) | 1 of 1 |" in md
