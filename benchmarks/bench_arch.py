@@ -182,8 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         teacher = train_seeds(args, ledger, Path(tmp)) if ledger is not None else None
         # a table trained one run per sitting (--only, --seeds) reports every row its ledger has
-        trained = {k.split("/")[0] for k in ledger.runs} if ledger is not None else set()
-        names = [a for a in ARCHS if a in args.only or a in trained]
+        trained = [k.split("/seed") for k in ledger.runs] if ledger is not None else []
+        names = [a for a in ARCHS if a in args.only or a in {name for name, _ in trained}]
         for name in names:
             row = measure(name, size, args.repeats, Path(tmp))
             if ledger is not None:
@@ -201,8 +201,8 @@ def main(argv: list[str] | None = None) -> int:
                 row["iou_run"] = held_out_iou(Path(runs[name]), Path(args.data), Path(tmp) / f"{name}.json")
             rows.append(row)
             print(row, flush=True)
-    seeds = sorted({int(k.split("/seed")[1]) for k in ledger.runs}) if ledger is not None else []
-    budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size), "seeds": seeds,
+    budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size),
+               "seeds": sorted({int(seed) for _, seed in trained}),
                "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
     res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget,
            "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()}}

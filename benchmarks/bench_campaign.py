@@ -22,6 +22,7 @@ import matplotlib.pyplot as plt
 
 from benchmarks.common import write_result
 from bsn_edge.train import Run
+from bsn_edge.train.run import trained_precision
 
 FLAT_IOU = 0.01
 
@@ -50,7 +51,7 @@ def run_curve(run: Path, phase: str = "train", key: str = "val_iou") -> dict[str
     recs = [r for r in Run(run).history() if r.get("phase") == phase and key in r]
     return {"steps": [r["step"] for r in recs], key: [round(r[key], 4) for r in recs],
             "flattened": flattened(recs, key), "seconds": round(recs[-1]["seconds"]) if recs else None,
-            "precision": sorted(Run(run).history_precision(phase))}
+            "precision": sorted(trained_precision(recs))}
 
 
 def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> None:

@@ -24,6 +24,7 @@ import hashlib
 import io
 import json
 import pickle
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -71,6 +72,12 @@ def _read_state(path: Path, what: str) -> dict[str, Any]:
     if hashlib.sha256(state["weights"]).hexdigest() != state["weights_sha256"]:
         raise RunError(f"{path}: damaged (its weights' sha256 differs); --force starts the run again")
     return state
+
+
+def trained_precision(records: Iterable[dict[str, Any]]) -> set[str]:
+    """The arithmetic a run's history records name, step 0 left out (the start's own score, not a
+    piece of the run's training); ``UNRECORDED`` for records written before the trainer named it."""
+    return {r.get("precision", UNRECORDED) for r in records if r.get("step")}
 
 
 class Run:
@@ -163,7 +170,7 @@ class Run:
         trained = info.get("trained")
         # step 0 is the start's own score, not a piece of this run's training
         recs = [r for r in self.history() if r.get("phase") == "train" and r.get("step")]
-        kinds = set((trained or {}).get("precision", [])) or self.history_precision()
+        kinds = set((trained or {}).get("precision", [])) or trained_precision(recs)
         if trained is None:
             if not recs or not steps:
                 return None
@@ -270,12 +277,6 @@ class Run:
             if isinstance(rec, dict):
                 out.append(rec)
         return out
-
-    def history_precision(self, phase: str = "train") -> set[str]:
-        """The arithmetic the history's ``phase`` records name, step 0 left out (the start's own
-        score, not a piece of this run's training); ``UNRECORDED`` for records written before the
-        trainer named it."""
-        return {r.get("precision", UNRECORDED) for r in self.history() if r.get("phase") == phase and r.get("step")}
 
     @classmethod
     def of_teacher(cls, checkpoint: str | Path) -> Run:
