@@ -53,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     for line in summary.get("skipped_clips", []):
         print(f"{PROG}: skipped {line}", file=sys.stderr)
+    for path in summary.get("removed_torn_writes", []):
+        print(f"{PROG}: removed {path}, left by a save that was stopped part-way (the last whole save stands)",
+              file=sys.stderr)
     print(json.dumps({k: v for k, v in summary.items() if k != "final_loss"}, indent=1))
     if "stopped_at" in summary:
         print(f"{PROG}: stopped at step {summary['stopped_at']} of {summary['steps']} (--stop-after); the same "

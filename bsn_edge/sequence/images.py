@@ -23,12 +23,18 @@ MAX_DEPTH_M = 65535 / DEPTH_SCALE
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1]
 
 
+def _temp_affixes(path: Path) -> tuple[str, str]:
+    return f".{path.name}.", ".tmp"
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = False) -> None:
     """Write ``data`` to ``path`` through a temporary file and a rename, so readers never
-    see a half-written file and an interrupted run leaves nothing behind. ``durable`` also
-    fsyncs the data before the rename, so a power cut cannot leave an empty file in its place."""
+    see a half-written file and a write that fails leaves nothing behind (a killed process can
+    leave its temporary file: :func:`torn_writes` finds it). ``durable`` also fsyncs the data
+    before the rename, so a power cut cannot leave an empty file in its place."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    prefix, suffix = _temp_affixes(path)
+    fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -40,6 +46,18 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = Fal
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def torn_writes(path: str | os.PathLike) -> list[Path]:
+    """The temporary files that :func:`atomic_write_bytes` to ``path`` left when its process was
+    killed mid-write (never renamed into place, so never read as ``path``). A write in progress
+    looks the same: only the folder's one writer may remove them."""
+    path = Path(path)
+    prefix, suffix = _temp_affixes(path)
+    if not path.parent.is_dir():
+        return []
+    return sorted(p for p in path.parent.iterdir()
+                  if p.name.startswith(prefix) and p.name.endswith(suffix) and len(p.name) > len(prefix + suffix))
 
 
 def write_image(path: str | os.PathLike, image: np.ndarray, durable: bool = False) -> None:

@@ -32,7 +32,7 @@ import torch
 
 from bsn_edge.card import UNRECORDED, ModelCard, TrainingRecord
 from bsn_edge.models import BlindSpotNet, ModelSpec, build, create_teacher, weights_bytes
-from bsn_edge.sequence.images import atomic_write_bytes
+from bsn_edge.sequence.images import atomic_write_bytes, torn_writes
 from bsn_edge.train.config import TeacherConfig
 
 
@@ -126,6 +126,16 @@ class Run:
         """Whether anything of a run is already here."""
         return any(p.exists() for p in (self.model_path, self.checkpoint_path, self.state_path,
                                         self.teacher_state_path))
+
+    def remove_torn_writes(self) -> list[Path]:
+        """Remove the temporary files a killed save left beside the run's files (a ``state.pt``
+        is hundreds of MB) and return them. For the run's one writer, before it writes."""
+        files = (self.model_path, self.checkpoint_path, self.state_path, self.config_path, self.history_path,
+                 self.teacher_path, self.teacher_state_path)
+        torn = [t for f in files for t in torn_writes(f)]
+        for t in torn:
+            t.unlink(missing_ok=True)
+        return torn
 
     def finished(self) -> bool:
         """Whether the run's training has ended: its last checkpoint carries the decision threshold,

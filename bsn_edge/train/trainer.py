@@ -431,6 +431,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     piece_start = time.perf_counter()
     rank, world = _dist()
     run = prepare_run(out, resume, force) if rank == 0 else Run(out)
+    torn = run.remove_torn_writes() if rank == 0 and (resume or force) else []
     if world > 1:
         dist.barrier()
     torch.manual_seed(cfg.train.seed + rank)
@@ -532,7 +533,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     elapsed = time.perf_counter() - t0
     summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "steps_run": done - start,
                                "seconds": round(elapsed, 1), "final_loss": history[-1] if history else None,
-                               "skipped_clips": [f"{name}: {why}" for name, why in data.skipped]}
+                               "skipped_clips": [f"{name}: {why}" for name, why in data.skipped],
+                               "removed_torn_writes": [str(t) for t in torn]}
     if done < cfg.train.steps:
         summary["stopped_at"] = done
         if world > 1:

@@ -1,5 +1,9 @@
 """On-disk formats shared by every stage."""
 
+import signal
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -12,6 +16,7 @@ from bsn_edge.sequence import (
     read_mask,
     read_poses,
     read_tum_poses,
+    torn_writes,
     write_depth,
     write_kitti_poses,
     write_mask,
@@ -100,6 +105,28 @@ def test_atomic_write_leaves_nothing_on_failure(tmp_path):
     with pytest.raises(TypeError):
         atomic_write_bytes(tmp_path / "bad.bin", "not bytes")  # type: ignore[arg-type]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.bin"]
+
+
+def test_a_write_killed_part_way_leaves_a_temporary_file_that_torn_writes_finds(tmp_path):
+    """A child process SIGKILLed between writing and renaming: the target is untouched, and only
+    the file it left is found (not a neighbour's, not a user's look-alike)."""
+    child = (
+        "import os, signal, sys\n"
+        "from bsn_edge.sequence import atomic_write_bytes\n"
+        "os.replace = lambda a, b: os.kill(os.getpid(), signal.SIGKILL)\n"
+        "atomic_write_bytes(sys.argv[1], b'new')\n"
+    )
+    target = tmp_path / "state.pt"
+    target.write_bytes(b"old")
+    keep = [tmp_path / n for n in ("state.pt.tmp", ".state.pt.tmp", ".other.pt.x.tmp", ".state.pt.x.bak")]
+    for p in keep:
+        p.write_bytes(b"x")
+    done = subprocess.run([sys.executable, "-c", child, str(target)], check=False)
+    assert done.returncode == -signal.SIGKILL
+    left = set(tmp_path.iterdir()) - set(keep) - {target}
+    assert len(left) == 1 and next(iter(left)).read_bytes() == b"new" and target.read_bytes() == b"old"
+    assert torn_writes(target) == sorted(left)
+    assert torn_writes(tmp_path / "absent" / "state.pt") == []
 
 
 def test_intrinsics_scaling_is_one_place():

@@ -331,11 +331,16 @@ def test_a_resumed_run_is_the_uninterrupted_run(data, uninterrupted, tmp_path, m
         train_cli.main([*FAST, "--data", str(data), "--out", str(run)])
     monkeypatch.setattr(Run, "save", real)
     assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
+    torn, users = run / ".state.pt.k1ll3d.tmp", run / ".notes.tmp"  # a save killed mid-write; not the run's
+    torn.write_bytes(b"half a state")
+    users.write_bytes(b"mine")
     capsys.readouterr()
     assert train_cli.main([*FAST, "--data", str(data), "--out", str(run), "--resume"]) == 0
-    summary = json.loads(capsys.readouterr().out)
+    out = capsys.readouterr()
+    summary = json.loads(out.out)
     assert summary["resumed_from"] == 3 and summary["steps_run"] == 3
     assert_same_weights(run, uninterrupted)
+    assert not torn.exists() and users.read_bytes() == b"mine" and f"removed {torn}" in out.err
 
 
 def test_a_kill_between_weights_and_state_resumes_consistently(data, uninterrupted, tmp_path, monkeypatch, capsys):
