@@ -11,7 +11,7 @@ IoU: with ``--train-steps``, every architecture is trained on ``--data`` with on
 batch 8, ``--train-size``, one shared teacher, the 60/20/20 clip split of ``configs/quick.toml``)
 once per ``--seeds`` and evaluated inside V on the held-out clips, so the column compares
 architectures, not budgets: mean +- std over the seeds, with each run's validation curve (flat: its
-last fifth gained under 0.01). Every finished run goes into ``bsn_arch_ledger.json`` in ``--out``
+last fifth gained under 0.01), and which differences between architectures exceed the seeds' spread. Every finished run goes into ``bsn_arch_ledger.json`` in ``--out``
 (:mod:`benchmarks.ledger`): the command can be stopped and run again, on any machine, and trains
 only what is missing, a run stopped part-way going on from its last tenth. ``--report NAME`` writes
 ``NAME.md`` and ``NAME_ledger.json`` instead, e.g. a table of two architectures (``--only``) that
@@ -35,7 +35,7 @@ from torch.utils.flop_counter import FlopCounterMode
 
 from benchmarks.bench_campaign import run_curve
 from benchmarks.common import eval_run, records, summary, time_calls, train_run, write_result
-from benchmarks.ledger import Ledger, fmt
+from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
 from bsn_edge.camera import Intrinsics
 from bsn_edge.card import UNRECORDED
 from bsn_edge.cli.common import parse_size
@@ -111,6 +111,20 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
             if not args.keep_runs:
                 shutil.rmtree(run, ignore_errors=True)
     return teacher
+
+
+def differences(rows: list[dict]) -> list[dict]:
+    """Every pair of rows with seeds, higher mean IoU first: the difference of the means and whether
+    it exceeds the seeds' spread (None while a side has one seed)."""
+    seeded = [r for r in rows if r.get("iou_seeds")]
+    out = []
+    for i, a in enumerate(seeded):
+        for b in seeded[i + 1:]:
+            hi, lo = (a, b) if mean_std(a["iou_seeds"])[0] >= mean_std(b["iou_seeds"])[0] else (b, a)
+            out.append({"higher": hi["model"], "lower": lo["model"],
+                        "difference": round(mean_std(hi["iou_seeds"])[0] - mean_std(lo["iou_seeds"])[0], 4),
+                        "beyond_spread": exceeds_spread(hi["iou_seeds"], lo["iou_seeds"])})
+    return out
 
 
 def plot_curves(ledger: Ledger, names: list[str], path: Path) -> bool:
@@ -204,7 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size),
                "seeds": sorted({int(seed) for _, seed in trained}),
                "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
-    res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget,
+    diffs = differences(rows)
+    res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget, "differences": diffs,
            "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()}}
     title = "# Architectures (the paper's Table 3)" + (f", {budget['steps']:,} steps" if budget else "")
     lines = [title, "",
@@ -227,6 +242,13 @@ def main(argv: list[str] | None = None) -> int:
                 lines.append(f"- `{r['model']}`: last-fifth gain "
                              + ", ".join(f"{sd} {g:+.3f}" for sd, g in r["last_fifth_gain"].items())
                              + f"; trained in {' and '.join(r['precision'])}")
+        if diffs:
+            said = {True: "beyond the seeds' spread", False: "within the seeds' spread",
+                    None: "a side has one seed: not told apart yet"}
+            lines += ["", "Differences in mean IoU (beyond the spread: larger than the two standard deviations added):",
+                      ""]
+            lines += [f"- `{d['higher']}` - `{d['lower']}`: {d['difference']:+.3f}, {said[d['beyond_spread']]}"
+                      for d in diffs]
         figure = f"{args.report}_curves.png"
         if plot_curves(ledger, names, Path(args.out) / figure):
             lines += ["", f"![curves]({figure})"]

@@ -218,3 +218,15 @@ def test_an_architecture_table_trained_one_run_per_sitting_reports_every_row_its
     md = (out / "heavy.md").read_text()
     assert "| small | 1.0 | 2.0 | 10.0 | 100.0 | 0.420 +- 0.014 (0.410, 0.430) | 2 of 2 |" in md
     assert "| unet | 1.0 | 2.0 | 10.0 | 100.0 | 0.300 (1 seed) | 1 of 1 |" in md
+    assert "- `small` - `unet`: +0.120, a side has one seed: not told apart yet" in md
+
+
+def test_the_architecture_table_says_which_differences_exceed_the_seeds_spread():
+    from benchmarks.bench_arch import differences
+    rows = [{"model": "a", "iou_seeds": [0.40, 0.44, 0.48]}, {"model": "b", "iou_seeds": [0.37, 0.38, 0.39]},
+            {"model": "c", "iou_seeds": [0.40, 0.41, 0.42]}, {"model": "d", "iou_seeds": [0.50]},
+            {"model": "untrained"}]
+    got = {(d["higher"], d["lower"]): (d["difference"], d["beyond_spread"]) for d in differences(rows)}
+    # a - b: 0.06 against stds 0.04 + 0.01; a - c: 0.03 against 0.04 + 0.01; c - b: 0.03 against 0.01 + 0.01
+    assert got == {("a", "b"): (0.06, True), ("a", "c"): (0.03, False), ("d", "a"): (0.06, None),
+                   ("c", "b"): (0.03, True), ("d", "b"): (0.12, None), ("d", "c"): (0.09, None)}
