@@ -11,7 +11,8 @@ IoU: with ``--train-steps``, every architecture is trained on ``--data`` with on
 batch 8, ``--train-size``, one shared teacher, the 60/20/20 clip split of ``configs/quick.toml``)
 once per ``--seeds`` and evaluated inside V on the held-out clips, so the column compares
 architectures, not budgets: mean +- std over the seeds, with each run's validation curve (flat: its
-last fifth gained under 0.01), and which differences between architectures exceed the seeds' spread. Every finished run goes into ``bsn_arch_ledger.json`` in ``--out``
+last fifth gained under 0.01), and which differences between architectures exceed the seeds' spread.
+Every finished run goes into ``bsn_arch_ledger.json`` in ``--out``
 (:mod:`benchmarks.ledger`): the command can be stopped and run again, on any machine, and trains
 only what is missing, a run stopped part-way going on from its last tenth. ``--report NAME`` writes
 ``NAME.md`` and ``NAME_ledger.json`` instead, e.g. a table of two architectures (``--only``) that
