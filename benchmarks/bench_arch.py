@@ -117,13 +117,12 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
 def differences(rows: list[dict]) -> list[dict]:
     """Every pair of rows with seeds, higher mean IoU first: the difference of the means and whether
     it exceeds the seeds' spread (None while a side has one seed)."""
-    seeded = [r for r in rows if r.get("iou_seeds")]
+    seeded = [(r, mean_std(r["iou_seeds"])[0]) for r in rows if r.get("iou_seeds")]
     out = []
     for i, a in enumerate(seeded):
         for b in seeded[i + 1:]:
-            hi, lo = (a, b) if mean_std(a["iou_seeds"])[0] >= mean_std(b["iou_seeds"])[0] else (b, a)
-            out.append({"higher": hi["model"], "lower": lo["model"],
-                        "difference": round(mean_std(hi["iou_seeds"])[0] - mean_std(lo["iou_seeds"])[0], 4),
+            (hi, m_hi), (lo, m_lo) = (a, b) if a[1] >= b[1] else (b, a)
+            out.append({"higher": hi["model"], "lower": lo["model"], "difference": round(m_hi - m_lo, 4),
                         "beyond_spread": exceeds_spread(hi["iou_seeds"], lo["iou_seeds"])})
     return out
 
