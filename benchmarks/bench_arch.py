@@ -54,19 +54,36 @@ def count_gmacs(model: torch.nn.Module, size: tuple[int, int]) -> float:
     return fc.get_total_flops() / 2e9
 
 
-def measure(name: str, size: tuple[int, int], repeats: int, workdir: Path) -> dict:
+def measure(name: str, size: tuple[int, int], repeats: int, workdir: Path, timed: dict | None = None) -> dict:
+    """Parameters and GMACs of ``name``, and its fp32 ONNX model's median time at ``size``; with ``timed``
+    (a row of an earlier report) its time is taken from there instead of measured."""
     torch.manual_seed(0)
     m = create_model(name).eval()
-    params = sum(p.numel() for p in m.parameters())
-    gmacs = count_gmacs(m, size)
+    row = {"model": name, "params_m": round(sum(p.numel() for p in m.parameters()) / 1e6, 2),
+           "gmacs": round(count_gmacs(m, size), 2)}
+    if timed is not None:
+        return {**row, **{k: timed[k] for k in ("median_ms", "fps", "repeats")}}
     path = workdir / f"{name}.onnx"
     # timing only: any camera of the right size will do
     to_onnx(m, path, describe(name, m, Intrinsics.from_fov(size[1], size[0], 80.0)))
     sess = session(path, threads=2)
     frame = np.random.default_rng(0).integers(0, 256, (1, *size, 3), dtype=np.uint8)
     med = summary(time_calls(lambda _: sess.run(None, {"frame": frame}), repeats, warmup=5))["median_ms"] / 1e3
-    return {"model": name, "params_m": round(params / 1e6, 2), "gmacs": round(gmacs, 2),
-            "median_ms": round(1e3 * med, 2), "fps": round(1 / med, 2), "repeats": repeats}
+    return {**row, "median_ms": round(1e3 * med, 2), "fps": round(1 / med, 2), "repeats": repeats}
+
+
+def earlier_timing(path: Path, size: tuple[int, int]) -> tuple[dict[str, dict], dict]:
+    """The rows of an earlier report of this benchmark by architecture, and where their times were
+    measured (its own machine, or the report it took them from in turn)."""
+    res = json.loads(path.read_text())
+    if res.get("benchmark") is None or "rows" not in res:
+        raise ValueError(f"{path} is not a report of this benchmark (no 'benchmark' and 'rows')")
+    if res.get("size") != list(size) or res.get("threads") != 2:
+        raise ValueError(f"{path} timed at {res.get('size')} with {res.get('threads')} threads, not "
+                         f"{list(size)} with 2")
+    source = res.get("timing_from") or {"report": res["benchmark"], "measured_at": res["measured_at"],
+                                        "machine": res["machine"]}
+    return {r["model"]: r for r in res["rows"] if {"median_ms", "fps", "repeats"} <= r.keys()}, source
 
 
 def train_uniform(name: str, data: Path, work: Path, steps: int, size: tuple[int, int], teacher: Path | None,
@@ -176,12 +193,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--report", default="bsn_arch",
                    help="name of the report (and of its ledger, NAME_ledger.json) in --out; a table of a few "
                         "architectures under a name of its own leaves the whole table as it is")
+    p.add_argument("--timing-from", default=None, metavar="REPORT.json",
+                   help="take every row's ms and frames/s from an earlier report of this benchmark (e.g. the one "
+                        "being refreshed) instead of timing: a report refreshed from its ledger while the machine "
+                        "trains; parameters and GMACs are counted again")
     args = p.parse_args(argv)
     if (args.train_steps or args.runs) and not args.data:
         p.error("--train-steps and --runs need --data")
     torch.set_num_threads(2)
     size = (256, 512)
     runs = dict(r.split("=", 1) for r in args.runs)
+    timed, timing_from = {}, None
+    if args.timing_from:
+        try:
+            timed, timing_from = earlier_timing(Path(args.timing_from), size)
+        except (OSError, ValueError, KeyError) as e:
+            print(f"bench_arch: --timing-from: {e}")
+            return 2
     ledger = None
     if args.train_steps:
         clips = sorted(d.name for d in Path(args.data).iterdir() if (d / "meta.json").is_file())
@@ -192,6 +220,12 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as e:
             print(f"bench_arch: {e}")
             return 2
+    if timing_from is not None:
+        held = {k.split("/seed")[0] for k in ledger.runs} if ledger is not None else set()
+        if untimed := [a for a in ARCHS if (a in args.only or a in held) and a not in timed]:
+            print(f"bench_arch: --timing-from {args.timing_from} has no timed row for {', '.join(untimed)}: time them "
+                  "(without --timing-from) or leave them out of --only")
+            return 2
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         teacher = train_seeds(args, ledger, Path(tmp)) if ledger is not None else None
@@ -199,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
         trained = [k.split("/seed") for k in ledger.runs] if ledger is not None else []
         names = [a for a in ARCHS if a in args.only or a in {name for name, _ in trained}]
         for name in names:
-            row = measure(name, size, args.repeats, Path(tmp))
+            row = measure(name, size, args.repeats, Path(tmp), timed.get(name))
             if ledger is not None:
                 recs = {k.split("/")[1]: r for k, r in sorted(ledger.runs.items()) if k.startswith(f"{name}/seed")}
                 row["seeds"] = list(recs)
@@ -220,10 +254,14 @@ def main(argv: list[str] | None = None) -> int:
                "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
     diffs = differences(rows)
     res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget, "differences": diffs,
-           "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()}}
+           "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()},
+           **({"timing_from": timing_from} if timing_from else {})}
     title = "# Architectures (the paper's Table 3)" + (f", {budget['steps']:,} steps" if budget else "")
     lines = [title, "",
-             f"Fused D + B at {size[0]}x{size[1]}; frames/s of the fp32 ONNX model in onnxruntime with 2 threads.",
+             f"Fused D + B at {size[0]}x{size[1]}; frames/s of the fp32 ONNX model in onnxruntime with 2 threads"
+             + (f", taken from `{timing_from['report']}` (measured {timing_from['measured_at']} on "
+                f"{timing_from['machine']['cpu']} ({', '.join(timing_from['machine']['isa'])})), not timed again."
+                if timing_from else "."),
              "", "| model | params (M) | GMACs | ms | frames/s | IoU (mean +- std over seeds) | runs flat "
                  "| IoU (own run) |",
              "|---|---|---|---|---|---|---|---|"]
@@ -241,7 +279,8 @@ def main(argv: list[str] | None = None) -> int:
             if r.get("last_fifth_gain"):
                 lines.append(f"- `{r['model']}`: last-fifth gain "
                              + ", ".join(f"{sd} {g:+.3f}" for sd, g in r["last_fifth_gain"].items())
-                             + f"; trained in {' and '.join(r['precision'])}")
+                             + "; " + ("precision not recorded" if r["precision"] == [UNRECORDED]
+                                       else f"trained in {' and '.join(r['precision'])}"))
         if diffs:
             said = {True: "beyond the seeds' spread", False: "within the seeds' spread",
                     None: "a side has one seed: not told apart yet"}

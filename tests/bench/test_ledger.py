@@ -230,3 +230,46 @@ def test_the_architecture_table_says_which_differences_exceed_the_seeds_spread()
     # a - b: 0.06 against stds 0.04 + 0.01; a - c: 0.03 against 0.04 + 0.01; c - b: 0.03 against 0.01 + 0.01
     assert got == {("a", "b"): (0.06, True), ("a", "c"): (0.03, False), ("d", "a"): (0.06, None),
                    ("c", "b"): (0.03, True), ("d", "b"): (0.12, None), ("d", "c"): (0.09, None)}
+
+
+def test_an_architecture_report_refreshed_while_the_machine_trains_takes_its_times_from_an_earlier_one(
+        tmp_path, monkeypatch, capsys):
+    import torch
+
+    import benchmarks.bench_arch as arch
+    data, out = tmp_path / "clips", tmp_path / "results"
+    (data / "town_0").mkdir(parents=True)
+    (data / "town_0" / "meta.json").write_text("{}")
+    out.mkdir()
+    led = Ledger(out / "light_ledger.json", {"steps": 6000, "batch_size": 8, "size": [128, 256], "clips": ["town_0"],
+                                             "teacher": "teacher"})
+    for seed, iou in ((0, 0.30), (1, 0.32), (2, 0.34)):
+        led.put(f"shared-light/seed{seed}", {"iou": iou, "curve": {"steps": [600], "val_iou": [0.3]}})
+    machine = {"cpu": "Other CPU", "isa": ["AVX2"], "cores": 2, "python": "3.11", "platform": "x"}
+    earlier = {"benchmark": "light", "measured_at": "2026-11-01T10:00:00+0000", "machine": machine, "size": [256, 512],
+               "threads": 2, "rows": [{"model": "shared-light", "params_m": 9.0, "gmacs": 9.0, "median_ms": 7.5,
+                                       "fps": 133.33, "repeats": 30}]}
+    (out / "light.json").write_text(json.dumps(earlier))
+    monkeypatch.setattr(arch, "time_calls", lambda *a, **k: pytest.fail("timed while told not to"))
+    monkeypatch.setattr(arch, "create_model", lambda name: torch.nn.Linear(1000, 1000))   # 1,001,000 parameters
+    monkeypatch.setattr(arch, "count_gmacs", lambda m, size: 1.5)
+    argv = ["--out", str(out), "--data", str(data), "--train-steps", "6000", "--teacher", "teacher",
+            "--only", "shared-light", "--seeds", "0", "--report", "light", "--timing-from", str(out / "light.json")]
+    assert arch.main(argv) == 0
+    res = json.loads((out / "light.json").read_text())
+    assert res["timing_from"] == {"report": "light", "measured_at": "2026-11-01T10:00:00+0000", "machine": machine}
+    md = (out / "light.md").read_text()
+    assert "| shared-light | 1.0 | 1.5 | 7.5 | 133.33 | 0.320 +- 0.020 (0.300, 0.320, 0.340) |" in md
+    assert "taken from `light` (measured 2026-11-01T10:00:00+0000 on Other CPU (AVX2)), not timed again" in md
+    assert arch.main(argv) == 0     # refreshed again: the times still name where they were measured
+    assert json.loads((out / "light.json").read_text())["timing_from"]["machine"] == machine
+
+    led.put("small/seed0", {"iou": 0.4, "curve": {"steps": [600], "val_iou": [0.4]}})
+    before = (out / "light.md").read_text()
+    capsys.readouterr()
+    assert arch.main(argv) == 2     # a row the earlier report never timed
+    assert "has no timed row for small" in capsys.readouterr().out
+    assert (out / "light.md").read_text() == before
+    (out / "bad.json").write_text(json.dumps({**earlier, "size": [128, 256]}))
+    assert arch.main([*argv[:-1], str(out / "bad.json")]) == 2
+    assert "timed at [128, 256] with 2 threads, not [256, 512]" in capsys.readouterr().out
