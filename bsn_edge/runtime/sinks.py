@@ -8,7 +8,8 @@ opened refuses the run (the user asked for it); one that fails later degrades it
 
 An output that costs a frame's time (drawing and encoding the overlay, encoding the maps) is
 written on a thread of its own, ``behind`` frames at most behind the loop. From a file every frame
-is written (the loop waits when the sink is that far behind); from a camera the loop never waits:
+is written (the loop waits when the sink is that far behind, but an output stuck in one write for
+``GuardedSink.STUCK_AFTER_S`` is a fault, not a hang); from a camera the loop never waits:
 a frame the sink has no room for is left out of that output and counted (``dropped``), which is not
 a fault: the alerts had it.
 """
@@ -38,10 +39,11 @@ class GuardedSink:
     ``on_fault`` is called once, at the first failure (the loop counts it into the health), on the
     thread that wrote. ``behind`` > 0: writes run on a thread of the sink's own, at most that many
     frames behind; ``drop_when_full``: then a frame with no room is dropped instead of waited for.
-    Closing waits at most ``CLOSE_WAIT_S`` for that thread: an output stuck in a write (a hung disk)
-    is a failure, and the run still ends (its last word on the bus is not held up)."""
+    Waiting for room, and closing, wait at most ``STUCK_AFTER_S`` for that thread: an output stuck in
+    a write (a hung disk) is a failure, and the run goes on and ends (its alerts and its last word on
+    the bus are not held up)."""
 
-    CLOSE_WAIT_S = 10.0
+    STUCK_AFTER_S = 10.0
 
     def __init__(self, name: str, write: Callable[..., Any], close: Callable[[], Any] | None = None,
                  on_fault: Callable[[SinkFailure], None] | None = None, behind: int = 0,
@@ -91,7 +93,13 @@ class GuardedSink:
         if self._queue is None:
             return self._do(frame, args)
         if not self.drop_when_full:
-            self._queue.put((frame, args))
+            try:
+                self._queue.put((frame, args), timeout=self.STUCK_AFTER_S)
+            except queue.Full:
+                if self.ok:
+                    self._fail(frame, TimeoutError(f"no room for a frame after {self.STUCK_AFTER_S:g} s: the "
+                                                   "output is stuck in a write; given up"))
+                return False
             return True
         try:
             self._queue.put_nowait((frame, args))
@@ -109,11 +117,11 @@ class GuardedSink:
         self._closed = True
         if self._queue is not None and self._thread is not None:
             with contextlib.suppress(queue.Full):
-                self._queue.put(None, timeout=self.CLOSE_WAIT_S)
-            self._thread.join(timeout=self.CLOSE_WAIT_S)
+                self._queue.put(None, timeout=self.STUCK_AFTER_S)
+            self._thread.join(timeout=self.STUCK_AFTER_S)
             if self._thread.is_alive():
                 if self.ok:
-                    self._fail(frame, TimeoutError(f"still writing after {self.CLOSE_WAIT_S:g} s; given up"))
+                    self._fail(frame, TimeoutError(f"still writing after {self.STUCK_AFTER_S:g} s; given up"))
                 return
         if self._close is None:
             return

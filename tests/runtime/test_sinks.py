@@ -430,7 +430,7 @@ def test_an_output_stuck_in_a_write_does_not_hold_up_the_end_of_the_run(monkeypa
     import threading
 
     from bsn_edge.runtime.sinks import GuardedSink
-    monkeypatch.setattr(GuardedSink, "CLOSE_WAIT_S", 0.2)
+    monkeypatch.setattr(GuardedSink, "STUCK_AFTER_S", 0.2)
     hung, faults, closed = threading.Event(), [], []
     sink = GuardedSink("hung", lambda i: hung.wait(30), close=lambda: closed.append(True), on_fault=faults.append,
                        behind=1)
@@ -442,3 +442,26 @@ def test_an_output_stuck_in_a_write_does_not_hold_up_the_end_of_the_run(monkeypa
     assert time.monotonic() - t0 < 2.0
     assert not sink.ok and "given up" in sink.failure.error and len(faults) == 1 and not closed
     hung.set()
+
+
+def test_an_output_stuck_in_a_write_from_a_file_is_a_fault_and_the_loop_goes_on(monkeypatch):
+    import threading
+
+    from bsn_edge.runtime.sinks import GuardedSink
+    monkeypatch.setattr(GuardedSink, "STUCK_AFTER_S", 0.2)
+    hung, faults = threading.Event(), []
+    sink = GuardedSink("hung", lambda i: hung.wait(30), on_fault=faults.append, behind=1)
+    assert sink.write(0, 0)     # taken by the sink's thread, which hangs in it
+    time.sleep(0.05)
+    assert sink.write(1, 1)     # queued: the queue is now full
+    t0 = time.monotonic()
+    assert not sink.write(2, 2)     # a file's frame waits for room, but not for ever
+    assert 0.2 <= time.monotonic() - t0 < 2.0
+    assert not sink.ok and sink.failure.frame == 2 and "stuck in a write" in sink.failure.error
+    assert len(faults) == 1
+    t0 = time.monotonic()
+    assert not sink.write(3, 3)     # after the fault, no more waiting
+    assert time.monotonic() - t0 < 0.15
+    hung.set()
+    sink.close()
+    assert len(faults) == 1
