@@ -57,6 +57,7 @@ class GuardedSink:
         self._written = 0
         self._dropped = 0
         self._closed = False
+        self._stuck = False                    # a write found no room for STUCK_AFTER_S: the thread is hung
         self._queue: queue.Queue | None = None
         self._thread: threading.Thread | None = None
         if behind:
@@ -96,6 +97,7 @@ class GuardedSink:
             try:
                 self._queue.put((frame, args), timeout=self.STUCK_AFTER_S)
             except queue.Full:
+                self._stuck = True
                 if self.ok:
                     self._fail(frame, TimeoutError(f"no room for a frame after {self.STUCK_AFTER_S:g} s: the "
                                                    "output is stuck in a write; given up"))
@@ -115,6 +117,8 @@ class GuardedSink:
         if self._closed:
             return
         self._closed = True
+        if self._stuck:     # its thread is hung in a write: waiting for it again only holds up the end
+            return
         if self._queue is not None and self._thread is not None:
             with contextlib.suppress(queue.Full):
                 self._queue.put(None, timeout=self.STUCK_AFTER_S)

@@ -462,6 +462,6 @@ def test_an_output_stuck_in_a_write_from_a_file_is_a_fault_and_the_loop_goes_on(
     t0 = time.monotonic()
     assert not sink.write(3, 3)     # after the fault, no more waiting
     assert time.monotonic() - t0 < 0.15
+    sink.close()                    # nor at the end
+    assert time.monotonic() - t0 < 0.15 and len(faults) == 1
     hung.set()
-    sink.close()
-    assert len(faults) == 1
