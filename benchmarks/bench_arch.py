@@ -131,6 +131,13 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
     return teacher
 
 
+def table_rows(only: list[str], ledger: Ledger | None) -> list[str]:
+    """The architectures a report has a row for, in the table's order: those asked for and every one its
+    ledger holds (a table trained one run per sitting, ``--only`` and ``--seeds``, shows every run)."""
+    held = {key.split("/seed")[0] for key in ledger.runs} if ledger is not None else set()
+    return [a for a in ARCHS if a in only or a in held]
+
+
 def differences(rows: list[dict]) -> list[dict]:
     """Every pair of rows with seeds, higher mean IoU first: the difference of the means and whether
     it exceeds the seeds' spread (None while a side has one seed)."""
@@ -220,18 +227,14 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as e:
             print(f"bench_arch: {e}")
             return 2
-    if timing_from is not None:
-        held = {k.split("/seed")[0] for k in ledger.runs} if ledger is not None else set()
-        if untimed := [a for a in ARCHS if (a in args.only or a in held) and a not in timed]:
-            print(f"bench_arch: --timing-from {args.timing_from} has no timed row for {', '.join(untimed)}: time them "
-                  "(without --timing-from) or leave them out of --only")
-            return 2
+    if timing_from is not None and (untimed := [a for a in table_rows(args.only, ledger) if a not in timed]):
+        print(f"bench_arch: --timing-from {args.timing_from} has no timed row for {', '.join(untimed)}: time them "
+              "(without --timing-from) or leave them out of --only")
+        return 2
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         teacher = train_seeds(args, ledger, Path(tmp)) if ledger is not None else None
-        # a table trained one run per sitting (--only, --seeds) reports every row its ledger has
-        trained = [k.split("/seed") for k in ledger.runs] if ledger is not None else []
-        names = [a for a in ARCHS if a in args.only or a in {name for name, _ in trained}]
+        names = table_rows(args.only, ledger)
         for name in names:
             row = measure(name, size, args.repeats, Path(tmp), timed.get(name))
             if ledger is not None:
@@ -250,7 +253,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(row)
             print(row, flush=True)
     budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size),
-               "seeds": sorted({int(seed) for _, seed in trained}),
+               "seeds": sorted({int(key.split("/seed")[1]) for key in ledger.runs}),
                "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
     diffs = differences(rows)
     res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget, "differences": diffs,
