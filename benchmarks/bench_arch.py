@@ -121,7 +121,7 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
                                          f"teacher.eval_every={max(1, args.teacher_steps // 10)}"])
     for seed in args.seeds:
         for name in args.only:
-            key = f"{name}/seed{seed}"
+            key = run_key(name, seed)
             if key in ledger:
                 continue
             run = train_uniform(name, data, work, args.train_steps, args.train_size, teacher, seed)
@@ -131,10 +131,21 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
     return teacher
 
 
+def run_key(name: str, seed: int) -> str:
+    """The ledger's key of one architecture's run with one seed; ``split_key`` reads it back."""
+    return f"{name}/seed{seed}"
+
+
+def split_key(key: str) -> tuple[str, int]:
+    """Architecture and seed of a ledger key written by ``run_key``."""
+    name, seed = key.split("/seed")
+    return name, int(seed)
+
+
 def table_rows(only: list[str], ledger: Ledger | None) -> list[str]:
     """The architectures a report has a row for, in the table's order: those asked for and every one its
     ledger holds (a table trained one run per sitting, ``--only`` and ``--seeds``, shows every run)."""
-    held = {key.split("/seed")[0] for key in ledger.runs} if ledger is not None else set()
+    held = {split_key(key)[0] for key in ledger.runs} if ledger is not None else set()
     return [a for a in ARCHS if a in only or a in held]
 
 
@@ -160,14 +171,14 @@ def plot_curves(ledger: Ledger, names: list[str], path: Path) -> bool:
     import matplotlib.pyplot as plt
 
     runs = [(k, r["curve"]) for k, r in sorted(ledger.runs.items()) if r.get("curve", {}).get("steps")
-            and k.split("/")[0] in names]
+            and split_key(k)[0] in names]
     if not runs:
         return False
     fig, ax = plt.subplots(figsize=(6.5, 3.6))
     colours = {n: f"C{i}" for i, n in enumerate(names)}
     labelled: set[str] = set()
     for key, c in runs:
-        name = key.split("/")[0]
+        name = split_key(key)[0]
         ax.plot(c["steps"], c["val_iou"], color=colours[name], alpha=0.8, marker=".",
                 label=None if name in labelled else name)
         labelled.add(name)
@@ -238,7 +249,8 @@ def main(argv: list[str] | None = None) -> int:
         for name in names:
             row = measure(name, size, args.repeats, Path(tmp), timed.get(name))
             if ledger is not None:
-                recs = {k.split("/")[1]: r for k, r in sorted(ledger.runs.items()) if k.startswith(f"{name}/seed")}
+                keys = sorted((split_key(k), k) for k in ledger.runs)
+                recs = {f"seed{seed}": ledger.runs[k] for (arch, seed), k in keys if arch == name}
                 row["seeds"] = list(recs)
                 row["iou_seeds"] = [r["iou"] for r in recs.values()]
                 row["iou"] = fmt(row["iou_seeds"])
@@ -253,7 +265,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(row)
             print(row, flush=True)
     budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size),
-               "seeds": sorted({int(key.split("/seed")[1]) for key in ledger.runs}),
+               "seeds": sorted({split_key(key)[1] for key in ledger.runs}),
                "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
     diffs = differences(rows)
     res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget, "differences": diffs,
