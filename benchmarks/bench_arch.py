@@ -35,7 +35,7 @@ import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from benchmarks.bench_campaign import run_curve
-from benchmarks.common import eval_run, records, summary, time_calls, train_run, write_result
+from benchmarks.common import cpu_named, eval_run, machine, records, summary, time_calls, train_run, write_result
 from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
 from bsn_edge.camera import Intrinsics
 from bsn_edge.card import UNRECORDED
@@ -125,7 +125,9 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
             if key in ledger:
                 continue
             run = train_uniform(name, data, work, args.train_steps, args.train_size, teacher, seed)
-            ledger.put(key, {"iou": held_out_iou(run, data, tmp / f"{name}_{seed}.json"), "curve": run_curve(run)})
+            m = machine()
+            ledger.put(key, {"iou": held_out_iou(run, data, tmp / f"{name}_{seed}.json"), "curve": run_curve(run),
+                             "finished_on": {"cpu": m["cpu"], "isa": m["isa"]}})
             if not args.keep_runs:
                 shutil.rmtree(run, ignore_errors=True)
     return teacher
@@ -147,6 +149,18 @@ def table_rows(only: list[str], ledger: Ledger | None) -> list[str]:
     ledger holds (a table trained one run per sitting, ``--only`` and ``--seeds``, shows every run)."""
     held = {split_key(key)[0] for key in ledger.runs} if ledger is not None else set()
     return [a for a in ARCHS if a in only or a in held]
+
+
+def finished_on(ledger: Ledger, names: list[str]) -> list[str]:
+    """One line per machine that finished runs of ``names`` (the sitting that finished a run may differ
+    from the earlier ones), its runs listed; runs put in the ledger before it named the machine last."""
+    by: dict[str, list[str]] = {}
+    for key in sorted(ledger.runs):
+        name, seed = split_key(key)
+        if name in names:
+            m = ledger.runs[key].get("finished_on")
+            by.setdefault(cpu_named(m) if m else "", []).append(f"`{name}` seed {seed}")
+    return [f"- {cpu or 'not recorded'}: {', '.join(keys)}" for cpu, keys in sorted(by.items(), key=lambda i: not i[0])]
 
 
 def differences(rows: list[dict]) -> list[dict]:
@@ -275,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     lines = [title, "",
              f"Fused D + B at {size[0]}x{size[1]}; frames/s of the fp32 ONNX model in onnxruntime with 2 threads"
              + (f", taken from `{timing_from['report']}` (measured {timing_from['measured_at']} on "
-                f"{timing_from['machine']['cpu']} ({', '.join(timing_from['machine']['isa'])})), not timed again."
+                f"{cpu_named(timing_from['machine'])}), not timed again."
                 if timing_from else "."),
              "", "| model | params (M) | GMACs | ms | frames/s | IoU (mean +- std over seeds) | runs flat "
                  "| IoU (own run) |",
@@ -303,6 +317,7 @@ def main(argv: list[str] | None = None) -> int:
                       ""]
             lines += [f"- `{d['higher']}` - `{d['lower']}`: {d['difference']:+.3f}, {said[d['beyond_spread']]}"
                       for d in diffs]
+        lines += ["", "Runs finished on (the machine of a run's last sitting):", "", *finished_on(ledger, names)]
         figure = f"{args.report}_curves.png"
         if plot_curves(ledger, names, Path(args.out) / figure):
             lines += ["", f"![curves]({figure})"]

@@ -34,6 +34,11 @@ def machine() -> dict[str, Any]:
             "platform": platform.platform()}
 
 
+def cpu_named(m: dict[str, Any]) -> str:
+    """A machine record's CPU and the instruction sets it has that the results depend on."""
+    return m["cpu"] + (f" ({', '.join(m['isa'])})" if m["isa"] else "")
+
+
 def class_name(base: str) -> str:
     """A per-machine report's name for this CPU's int8 class: ``base`` with VNNI, ``base_avx2`` on an x86
     CPU without it, ``base_<arch>`` elsewhere (so one class's results never overwrite another's)."""
@@ -82,8 +87,7 @@ def write_result(out_dir: str | Path, name: str, result: dict[str, Any], markdow
     (out / f"{name}.json").write_text(portable(json.dumps(result, indent=2)) + "\n")
     markdown = portable(markdown)
     m = result["machine"]
-    isa = f" ({', '.join(m['isa'])})" if m["isa"] else ""
-    (out / f"{name}.md").write_text(markdown.rstrip() + f"\n\nMeasured on {m['cpu']}{isa}, "
+    (out / f"{name}.md").write_text(markdown.rstrip() + f"\n\nMeasured on {cpu_named(m)}, "
                                     f"{m['cores']} cores, Python {m['python']}.\n")
     return out / f"{name}.json"
 

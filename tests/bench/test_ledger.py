@@ -221,6 +221,31 @@ def test_an_architecture_table_trained_one_run_per_sitting_reports_every_row_its
     assert "- `small` - `unet`: +0.120, a side has one seed: not told apart yet" in md
 
 
+def test_a_run_trained_here_names_the_machine_that_finished_it_and_older_runs_say_not_recorded(tmp_path, monkeypatch):
+    import benchmarks.bench_arch as arch
+    data, out = tmp_path / "clips", tmp_path / "results"
+    (data / "town_0").mkdir(parents=True)
+    (data / "town_0" / "meta.json").write_text("{}")
+    experiment = {"steps": 12000, "batch_size": 8, "size": [128, 256], "clips": ["town_0"], "teacher": "teacher"}
+    curve = {"steps": [1200, 2400, 12000], "val_iou": [0.2, 0.3, 0.305], "flattened": {"gain": 0.005}}
+    Ledger(out / "heavy_ledger.json", experiment).put("small/seed0", {"iou": 0.41, "curve": curve})
+    here = {"cpu": "Some Xeon", "isa": ["AVX-512", "AMX"], "cores": 2, "python": "3.11", "platform": "x"}
+    trained = []
+    monkeypatch.setattr(arch, "machine", lambda: here)
+    monkeypatch.setattr(arch, "train_uniform", lambda name, *a: trained.append(name) or tmp_path / name)
+    monkeypatch.setattr(arch, "held_out_iou", lambda run, data, report: 0.45)
+    monkeypatch.setattr(arch, "run_curve", lambda run: curve)
+    monkeypatch.setattr(arch, "measure", lambda name, *a: {
+        "model": name, "params_m": 1.0, "gmacs": 2.0, "median_ms": 10.0, "fps": 100.0, "repeats": 1})
+    rc = arch.main(["--out", str(out), "--data", str(data), "--train-steps", "12000", "--teacher", "teacher",
+                    "--only", "unet", "--seeds", "1", "--report", "heavy"])
+    assert rc == 0 and trained == ["unet"]
+    assert Ledger.read(out / "heavy_ledger.json").runs["unet/seed1"]["finished_on"] == {
+        "cpu": "Some Xeon", "isa": ["AVX-512", "AMX"]}      # what the run needs of the record, not the whole of it
+    md = (out / "heavy.md").read_text()
+    assert "- Some Xeon (AVX-512, AMX): `unet` seed 1\n- not recorded: `small` seed 0\n" in md
+
+
 def test_the_architecture_table_says_which_differences_exceed_the_seeds_spread():
     from benchmarks.bench_arch import differences
     rows = [{"model": "a", "iou_seeds": [0.40, 0.44, 0.48]}, {"model": "b", "iou_seeds": [0.37, 0.38, 0.39]},
