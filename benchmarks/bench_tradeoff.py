@@ -26,7 +26,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from benchmarks.bench_floor import conv_kinds
-from benchmarks.common import class_name, machine, write_result
+from benchmarks.common import class_name, cpu_named, machine, write_result
 from bsn_edge.runtime.engine import Engine
 
 
@@ -90,11 +90,10 @@ def main(argv: list[str] | None = None) -> int:
         rows.append({"model": name, "file": str(path), "variant": engines[name].card.variant, "gmacs": gmacs(path),
                      "median_ms": ms, "fps": 1e3 / ms, "kernels": engines[name].kernels,
                      "iou": {s: acc[s]["iou"] for s in sets if s in acc}})
-    m = machine()
     report = class_name("tradeoff")
     figure = f"{report}.png"
     Path(args.out).mkdir(parents=True, exist_ok=True)
-    plot(rows, sets, Path(args.out) / figure, f"{m['cpu']} ({', '.join(m['isa'])}), 2 cores")
+    plot(rows, sets, Path(args.out) / figure, f"{cpu_named(machine())}, 2 cores")
     lines = ["# Held-out IoU against model-only frames/s", "",
              f"Every model as `bsn-run` opens it, 2 intra-op threads, {args.runs} rounds of one inference each "
              "in alternation (median); held-out IoU from `bench_cameras` (`cameras.md`).", "",
