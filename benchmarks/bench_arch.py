@@ -18,8 +18,10 @@ only what is missing, a run stopped part-way going on from its last tenth. ``--r
 ``NAME.md`` and ``NAME_ledger.json`` instead, e.g. a table of two architectures (``--only``) that
 leaves the whole table as it is. The report has a row for every architecture of ``--only`` and every
 one its ledger holds, so a table trained one run per sitting (``--only small --seeds 0``, then
-``--only unet --seeds 0`` ...) shows every run finished so far. ``--runs`` adds the IoU of runs trained
-elsewhere (e.g. the shipped model's).
+``--only unet --seeds 0`` ...) shows every run finished so far. ``--stop-after MINUTES`` ends a sitting
+with the run in progress saved at the step it reached (the same command goes on from there), so a
+sitting of known length loses no training. ``--runs`` adds the IoU of runs trained elsewhere (e.g.
+the shipped model's).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import argparse
 import json
 import shutil
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +46,7 @@ from bsn_edge.cli.common import parse_size
 from bsn_edge.export import to_onnx
 from bsn_edge.models import create_model, describe
 from bsn_edge.runtime.model_file import session
+from bsn_edge.train.run import Run
 
 ARCHS = ("unet", "small", "small-light", "shared-light", "medium", "large")
 
@@ -87,15 +91,20 @@ def earlier_timing(path: Path, size: tuple[int, int]) -> tuple[dict[str, dict], 
 
 
 def train_uniform(name: str, data: Path, work: Path, steps: int, size: tuple[int, int], teacher: Path | None,
-                  seed: int = 0) -> Path:
-    """Train ``name`` on ``data`` with the benchmark's budget into ``work/name`` (``work/seedN/name`` for
-    seeds after the first; reused if done), validation IoU every tenth of the steps."""
+                  seed: int = 0, stop_after: float | None = None) -> Path:
+    """Train ``name`` on ``data`` with the benchmark's budget into its ``run_folder`` (reused if done),
+    validation IoU every tenth of the steps; ``stop_after`` (minutes) as for ``train_run``."""
     sets = [f"model.name={name}", f"data.size=[{size[0]}, {size[1]}]", "data.val_fraction=0.2",
             "data.test_fraction=0.2", f"train.steps={steps}", "train.batch_size=8", *records(steps),
             f"train.seed={seed}", "train.eval_frames=128"]
     if teacher is not None:
         sets.append(f"teacher.checkpoint={teacher}")
-    return train_run(data, (work / name) if seed == 0 else (work / f"seed{seed}" / name), sets)
+    return train_run(data, run_folder(work, name, seed), sets, stop_after)
+
+
+def run_folder(work: Path, name: str, seed: int) -> Path:
+    """Where ``train_uniform`` trains ``name`` with ``seed``: ``work/name``, ``work/seedN/name`` after seed 0."""
+    return (work / name) if seed == 0 else (work / f"seed{seed}" / name)
 
 
 def run_budget(run: Path) -> str:
@@ -110,10 +119,19 @@ def held_out_iou(run: Path, data: Path, report: Path) -> float:
     return round(eval_run(run, data, report, "--no-baselines")["overall"]["BSN"]["iou"], 4)
 
 
-def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
-    """Train every (seed, architecture) missing from ``ledger``, seeds outermost; returns the teacher."""
+def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> tuple[Path, Path | None]:
+    """Train every (seed, architecture) missing from ``ledger``, seeds outermost; returns the teacher, and
+    the run folder left part-way when ``args.stop_after`` ended the sitting first (else None)."""
     data, work = Path(args.data), Path(args.work)
     teacher = Path(args.teacher) if args.teacher else work / "teacher" / "teacher"
+    deadline = None if args.stop_after is None else time.monotonic() + 60.0 * args.stop_after
+
+    def minutes_left() -> float | None:
+        return None if deadline is None else (deadline - time.monotonic()) / 60.0
+
+    def stopped(run: Path) -> bool:
+        return deadline is not None and not Run(run).finished()
+
     if not args.teacher:
         train_run(data, teacher.parent, [f"data.size=[{args.train_size[0]}, {args.train_size[1]}]",
                                          "data.val_fraction=0.2", "data.test_fraction=0.2", "train.steps=1",
@@ -124,13 +142,18 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> Path:
             key = run_key(name, seed)
             if key in ledger:
                 continue
-            run = train_uniform(name, data, work, args.train_steps, args.train_size, teacher, seed)
+            left = minutes_left()
+            if left is not None and left <= 0:
+                return teacher, run_folder(work, name, seed)
+            run = train_uniform(name, data, work, args.train_steps, args.train_size, teacher, seed, left)
+            if stopped(run):
+                return teacher, run
             m = machine()
             ledger.put(key, {"iou": held_out_iou(run, data, tmp / f"{name}_{seed}.json"), "curve": run_curve(run),
                              "finished_on": {"cpu": m["cpu"], "isa": m["isa"]}})
             if not args.keep_runs:
                 shutil.rmtree(run, ignore_errors=True)
-    return teacher
+    return teacher, None
 
 
 def run_key(name: str, seed: int) -> str:
@@ -220,6 +243,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--teacher-steps", type=int, default=300, help="steps of the teacher trained first")
     p.add_argument("--work", default="benchmarks/scratch/arch", help="runs trained by --train-steps are kept here")
     p.add_argument("--keep-runs", action="store_true", help="keep every trained run folder")
+    p.add_argument("--stop-after", type=float, default=None, metavar="MINUTES",
+                   help="end this sitting's training after about MINUTES, the run in progress saved at the step "
+                        "it reached (not only at its last tenth); the same command goes on from there. The report "
+                        "is written as usual, with the runs finished so far")
     p.add_argument("--fresh", action="store_true", help="start a new ledger (the finished runs are forgotten)")
     p.add_argument("--only", nargs="*", choices=ARCHS, default=list(ARCHS), help="architectures to measure")
     p.add_argument("--report", default="bsn_arch",
@@ -232,6 +259,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if (args.train_steps or args.runs) and not args.data:
         p.error("--train-steps and --runs need --data")
+    if args.stop_after is not None and not (args.stop_after > 0 and args.train_steps):
+        p.error(f"--stop-after needs --train-steps and a positive number of minutes, got {args.stop_after:g}")
     torch.set_num_threads(2)
     size = (256, 512)
     runs = dict(r.split("=", 1) for r in args.runs)
@@ -258,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        teacher = train_seeds(args, ledger, Path(tmp)) if ledger is not None else None
+        teacher, stopped = train_seeds(args, ledger, Path(tmp)) if ledger is not None else (None, None)
         names = table_rows(args.only, ledger)
         for name in names:
             row = measure(name, size, args.repeats, Path(tmp), timed.get(name))
@@ -326,6 +355,9 @@ def main(argv: list[str] | None = None) -> int:
                   + "; evaluated at its own training size."]
     path = write_result(args.out, args.report, res, "\n".join(lines))
     print(f"wrote {path}")
+    if stopped is not None:
+        print(f"bench_arch: --stop-after {args.stop_after:g} reached with {stopped} unfinished; the same command "
+              "goes on from where it stopped", flush=True)
     return 0
 
 

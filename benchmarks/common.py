@@ -99,9 +99,10 @@ def records(steps: int, n: int = 10) -> list[str]:
     return [f"train.eval_every={every}", f"train.checkpoint_every={every}"]
 
 
-def train_run(data: Path, out: Path, sets: list[str]) -> Path:
+def train_run(data: Path, out: Path, sets: list[str], stop_after: float | None = None) -> Path:
     """``bsn-train --data data --out out --set ...`` in this process; a finished run is reused, one
-    stopped part-way goes on from its last saved state (``--resume``)."""
+    stopped part-way goes on from its last saved state (``--resume``). ``stop_after`` (minutes) ends
+    this piece with its state saved, the run then not ``finished()`` (bsn-train's ``--stop-after``)."""
     from bsn_edge.cli import train as train_cli
     from bsn_edge.train.run import Run
 
@@ -117,6 +118,8 @@ def train_run(data: Path, out: Path, sets: list[str]) -> Path:
         print(f"{out}: training", flush=True)
     for s in sets:
         argv += ["--set", s]
+    if stop_after is not None:
+        argv += ["--stop-after", f"{stop_after:g}"]
     t0 = time.perf_counter()
     if train_cli.main(argv):
         raise RuntimeError(f"training {out} failed")

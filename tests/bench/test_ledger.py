@@ -246,6 +246,58 @@ def test_a_run_trained_here_names_the_machine_that_finished_it_and_older_runs_sa
     assert "- Some Xeon (AVX-512, AMX): `unet` seed 1\n- not recorded: `small` seed 0\n" in md
 
 
+def test_a_sitting_of_known_length_ends_inside_a_run_with_its_state_saved_and_the_next_goes_on(
+        tmp_path, monkeypatch, capsys):
+    from types import SimpleNamespace
+
+    import benchmarks.bench_arch as arch
+    data, out = tmp_path / "clips", tmp_path / "results"
+    (data / "town_0").mkdir(parents=True)
+    (data / "town_0" / "meta.json").write_text("{}")
+    clock = [0.0]
+    calls = []
+
+    def train_run(data, folder, sets, stop_after=None):
+        # each call trains 10 minutes; it ends the run only when it was given at least that long
+        calls.append((folder.name, stop_after))
+        clock[0] += 600.0
+        if stop_after is None or stop_after >= 10:
+            folder.mkdir(parents=True, exist_ok=True)
+            (folder / "checkpoint.json").write_text(json.dumps({"card": {"threshold": 0.3}}))
+        return folder
+
+    monkeypatch.setattr(arch, "time", SimpleNamespace(monotonic=lambda: clock[0]))
+    monkeypatch.setattr(arch, "train_run", train_run)
+    monkeypatch.setattr(arch, "held_out_iou", lambda run, data, report: 0.4)
+    monkeypatch.setattr(arch, "run_curve", lambda run: {"steps": [10], "val_iou": [0.4]})
+    monkeypatch.setattr(arch, "measure", lambda name, *a: {
+        "model": name, "params_m": 1.0, "gmacs": 2.0, "median_ms": 10.0, "fps": 100.0, "repeats": 1})
+    argv = ["--out", str(out), "--data", str(data), "--train-steps", "100", "--teacher", "teacher",
+            "--only", "small", "unet", "--seeds", "0", "--report", "r", "--work", str(tmp_path / "work")]
+    assert arch.main([*argv, "--stop-after", "15"]) == 0
+    assert calls == [("small", 15.0), ("unet", 5.0)]       # the second run gets what is left of the sitting
+    assert sorted(Ledger.read(out / "r_ledger.json").runs) == ["small/seed0"]
+    said = capsys.readouterr().out
+    assert f"{tmp_path / 'work' / 'unet'} unfinished" in said
+    assert "| small | 1.0 | 2.0 | 10.0 | 100.0 | 0.400 (1 seed) |" in (out / "r.md").read_text()
+
+    calls.clear()
+    assert arch.main([*argv, "--stop-after", "15"]) == 0
+    assert calls == [("unet", 15.0)]
+    assert sorted(Ledger.read(out / "r_ledger.json").runs) == ["small/seed0", "unet/seed0"]
+    assert "--stop-after" not in capsys.readouterr().out
+
+    calls.clear()
+    argv[argv.index("0")] = "1"
+    assert arch.main([*argv, "--stop-after", "10"]) == 0
+    assert calls == [("small", 10.0)]                      # the sitting is used up: unet seed 1 is not begun
+    assert "small/seed1" in Ledger.read(out / "r_ledger.json").runs
+    assert f"{tmp_path / 'work' / 'seed1' / 'unet'} unfinished" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        arch.main([*argv, "--stop-after", "0"])
+    assert "--stop-after needs --train-steps and a positive number of minutes, got 0" in capsys.readouterr().err
+
+
 def test_the_architecture_table_says_which_differences_exceed_the_seeds_spread():
     from benchmarks.bench_arch import differences
     rows = [{"model": "a", "iou_seeds": [0.40, 0.44, 0.48]}, {"model": "b", "iou_seeds": [0.37, 0.38, 0.39]},
