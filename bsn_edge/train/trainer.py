@@ -496,7 +496,9 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
                disable=True if (not progress or rank) else None)
     history: list[list[float]] = []
-    since: list[list[float]] = []
+    # losses since the last record, kept in the saved state: a record after a stop between records
+    # averages the same steps as the uninterrupted run's
+    since: list[list[float]] = [list(x) for x in state.get("since", [])] if state is not None else []
     t0 = time.perf_counter()
     done = start
     net.train()
@@ -525,7 +527,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps or out_of_time):
             _save(run, model, cfg, data, done, threshold=None,
                   resume_state={**optim.state_dict(), "step": done,
-                                "torch_rng": torch.get_rng_state(), "seconds": seconds, "precision": kinds},
+                                "torch_rng": torch.get_rng_state(), "seconds": seconds, "precision": kinds,
+                                "since": since},
                   trained={"samples": done * cfg.train.batch_size * world, "seconds": round(seconds, 1),
                            "precision": kinds})
         if out_of_time:

@@ -412,6 +412,24 @@ def test_a_training_in_pieces_is_the_uninterrupted_run(data, uninterrupted, tmp_
     assert_same_weights(run, uninterrupted)
 
 
+def test_a_record_after_a_stop_between_records_averages_the_steps_of_the_uninterrupted_run(data, tmp_path):
+    """Pieces stopped at steps 1 and 2 of a run recorded every 3 steps: the record at step 3 averages
+    steps 1-3 as the uninterrupted run's does, not only the step trained after the last stop."""
+    from bsn_edge.train.trainer import train
+    cfg = load_config(SMOKE, ["data.label=\"T2s\"", "train.distill_weight=0", "train.steps=6",
+                              "train.checkpoint_every=3", "train.eval_every=3"])
+    whole, pieces = tmp_path / "whole", tmp_path / "pieces"
+    train(cfg, data, whole, progress=False)
+    assert train(cfg, data, pieces, progress=False, stop_after=1e-9)["stopped_at"] == 1
+    assert train(cfg, data, pieces, resume=True, progress=False, stop_after=1e-9)["stopped_at"] == 2
+    train(cfg, data, pieces, resume=True, progress=False)
+    a, b = ([r for r in Run(run).history() if r["phase"] == "train"] for run in (whole, pieces))
+    assert [r["step"] for r in a] == [r["step"] for r in b] == [3, 6]
+    for ra, rb in zip(a, b, strict=True):
+        for k in ("loss", "bce", "kd", "depth"):
+            assert rb[k] == pytest.approx(ra[k], rel=1e-5), (ra["step"], k)
+
+
 @pytest.mark.parametrize("precision, native, named", [("fp32", True, "fp32"), ("auto", True, "bf16"),
                                                         ("auto", False, "fp32")])
 def test_every_history_record_names_the_arithmetic_it_trained_in(data, tmp_path, monkeypatch, precision, native,
