@@ -499,6 +499,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     # losses since the last record, kept in the saved state: a record after a stop between records
     # averages the same steps as the uninterrupted run's
     since: list[list[float]] = [list(x) for x in state.get("since", [])] if state is not None else []
+    first: list[float] | None = state.get("first_loss") if state is not None else None   # the run's step 1
     t0 = time.perf_counter()
     done = start
     net.train()
@@ -508,6 +509,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         optim.step(loss)
         history.append([loss.item(), l_bce.item(), l_kd.item(), l_depth.item()])
         since.append(history[-1])
+        first = first or history[-1]
         bar.set_postfix(loss=f"{loss.item():.3f}", bce=f"{l_bce.item():.3f}", kd=f"{l_kd.item():.4f}",
                         depth=f"{l_depth.item():.3f}")
         done = step + 1
@@ -528,7 +530,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             _save(run, model, cfg, data, done, threshold=None,
                   resume_state={**optim.state_dict(), "step": done,
                                 "torch_rng": torch.get_rng_state(), "seconds": seconds, "precision": kinds,
-                                "since": since},
+                                "since": since, "first_loss": first},
                   trained={"samples": done * cfg.train.batch_size * world, "seconds": round(seconds, 1),
                            "precision": kinds})
         if out_of_time:
@@ -549,7 +551,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             threshold, val = choose_threshold(model, data.val_ds)
         else:
             summary["threshold_note"] = f"no validation clips: threshold left at {UNCHOSEN_THRESHOLD}"
-        card = _save(run, model, cfg, data, cfg.train.steps, threshold=threshold, val=val, history=history)
+        card = _save(run, model, cfg, data, cfg.train.steps, threshold=threshold, val=val,
+                     loss_first_last=[first, history[-1]] if history else None)
         summary.update(threshold=threshold, val=val, weights_sha256=card.weights_sha256)
     if world > 1:
         dist.barrier()
@@ -557,7 +560,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
 
 
 def _save(run: Run, model, cfg: Config, data: Datasets, step: int, threshold: float | None,
-          val: dict | None = None, history: list | None = None,
+          val: dict | None = None, loss_first_last: list | None = None,
           resume_state: dict[str, Any] | None = None, trained: dict[str, Any] | None = None) -> ModelCard:
     """A checkpoint of ``model`` with its card; ``threshold`` None keeps the previous one (if any).
     ``trained``: samples seen and seconds spent up to ``step`` (None keeps the previous record)."""
@@ -586,6 +589,6 @@ def _save(run: Run, model, cfg: Config, data: Datasets, step: int, threshold: fl
         info["trained"] = trained
     if (start := prev.get(Run.INIT_RECORD) or run.init_record(cfg.train.init)) is not None:
         info[Run.INIT_RECORD] = start
-    if history:
-        info["loss_first_last"] = [history[0], history[-1]]
+    if loss_first_last:
+        info["loss_first_last"] = loss_first_last
     return run.save(model, card_fields, info, resume_state)

@@ -428,6 +428,9 @@ def test_a_record_after_a_stop_between_records_averages_the_steps_of_the_uninter
     for ra, rb in zip(a, b, strict=True):
         for k in ("loss", "bce", "kd", "depth"):
             assert rb[k] == pytest.approx(ra[k], rel=1e-5), (ra["step"], k)
+    # the card's first and last losses are the run's, not the last piece's
+    fa, fb = ([x for step in Run(run).info()["loss_first_last"] for x in step] for run in (whole, pieces))
+    assert fb == pytest.approx(fa, rel=1e-5)
 
 
 @pytest.mark.parametrize("precision, native, named", [("fp32", True, "fp32"), ("auto", True, "bf16"),
