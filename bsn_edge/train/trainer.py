@@ -495,7 +495,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
                                                                       cl).items()}})
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
                disable=True if (not progress or rank) else None)
-    history: list[list[float]] = []
+    last: list[float] | None = None                      # this piece's latest step
     # losses since the last record, kept in the saved state: a record after a stop between records
     # averages the same steps as the uninterrupted run's
     since: list[list[float]] = [list(x) for x in state.get("since", [])] if state is not None else []
@@ -507,9 +507,9 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         b = next(batches)
         loss, l_bce, l_kd, l_depth = losses(net, b, teacher, cfg, dtype)
         optim.step(loss)
-        history.append([loss.item(), l_bce.item(), l_kd.item(), l_depth.item()])
-        since.append(history[-1])
-        first = first or history[-1]
+        last = [loss.item(), l_bce.item(), l_kd.item(), l_depth.item()]
+        since.append(last)
+        first = first or last
         bar.set_postfix(loss=f"{loss.item():.3f}", bce=f"{l_bce.item():.3f}", kd=f"{l_kd.item():.4f}",
                         depth=f"{l_depth.item():.3f}")
         done = step + 1
@@ -537,7 +537,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             break
     elapsed = time.perf_counter() - t0
     summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "steps_run": done - start,
-                               "seconds": round(elapsed, 1), "final_loss": history[-1] if history else None,
+                               "seconds": round(elapsed, 1), "final_loss": last,
                                "skipped_clips": [f"{name}: {why}" for name, why in data.skipped],
                                "removed_torn_writes": [str(t) for t in torn]}
     if done < cfg.train.steps:
@@ -552,7 +552,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         else:
             summary["threshold_note"] = f"no validation clips: threshold left at {UNCHOSEN_THRESHOLD}"
         card = _save(run, model, cfg, data, cfg.train.steps, threshold=threshold, val=val,
-                     loss_first_last=[first, history[-1]] if history else None)
+                     loss_first_last=[first, last] if last else None)
         summary.update(threshold=threshold, val=val, weights_sha256=card.weights_sha256)
     if world > 1:
         dist.barrier()
