@@ -510,8 +510,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         last = [loss.item(), l_bce.item(), l_kd.item(), l_depth.item()]
         since.append(last)
         first = first or last
-        bar.set_postfix(loss=f"{loss.item():.3f}", bce=f"{l_bce.item():.3f}", kd=f"{l_kd.item():.4f}",
-                        depth=f"{l_depth.item():.3f}")
+        bar.set_postfix(loss=f"{last[0]:.3f}", bce=f"{last[1]:.3f}", kd=f"{last[2]:.4f}", depth=f"{last[3]:.3f}")
         done = step + 1
         seconds = seconds_before + time.perf_counter() - t0
         out_of_time = stop_after is not None and time.perf_counter() - piece_start >= stop_after \
