@@ -20,8 +20,10 @@ leaves the whole table as it is. The report has a row for every architecture of 
 one its ledger holds, so a table trained one run per sitting (``--only small --seeds 0``, then
 ``--only unet --seeds 0`` ...) shows every run finished so far. ``--stop-after MINUTES`` ends a sitting
 with the run in progress saved at the step it reached (the same command goes on from there), so a
-sitting of known length loses no training. ``--runs`` adds the IoU of runs trained elsewhere (e.g.
-the shipped model's).
+sitting of known length loses no training. A sitting on a CPU whose ``train.precision=auto`` picks
+another arithmetic than the ledger's runs were trained in (fp32 where they are bf16) is refused before
+it trains, unless ``--mixed-arithmetic``. ``--runs`` adds the IoU of runs trained elsewhere (e.g. the
+shipped model's).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import json
 import shutil
 import tempfile
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +49,9 @@ from bsn_edge.cli.common import parse_size
 from bsn_edge.export import to_onnx
 from bsn_edge.models import create_model, describe
 from bsn_edge.runtime.model_file import session
+from bsn_edge.train.config import load_config
 from bsn_edge.train.run import Run
+from bsn_edge.train.trainer import autocast_dtype, precision_name
 
 ARCHS = ("unet", "small", "small-light", "shared-light", "medium", "large")
 
@@ -167,6 +172,24 @@ def split_key(key: str) -> tuple[str, int]:
     return name, int(seed)
 
 
+def trained_in(records: Iterable[dict]) -> list[str]:
+    """The arithmetic the ledger ``records`` were trained in, sorted (``UNRECORDED`` for a run from
+    before the history named it)."""
+    return sorted({p for r in records for p in r["curve"].get("precision", [UNRECORDED])})
+
+
+def arithmetic_clash(ledger: Ledger, here: str) -> str | None:
+    """Why training with this CPU's arithmetic ``here`` would mix arithmetic into ``ledger``'s table
+    (its runs were all trained in another), or None when it would not."""
+    before = [p for p in trained_in(ledger.runs.values()) if p != UNRECORDED]
+    if not before or here in before:
+        return None
+    return (f"this CPU trains in {here} (train.precision=auto; bf16 needs AMX or AVX-512 BF16) and the "
+            f"ledger's runs were trained in {' and '.join(before)}: a run trained here would mix arithmetic "
+            "in one table. Train on a CPU with the ledger's arithmetic, or pass --mixed-arithmetic to train "
+            "here anyway")
+
+
 def table_rows(only: list[str], ledger: Ledger | None) -> list[str]:
     """The architectures a report has a row for, in the table's order: those asked for and every one its
     ledger holds (a table trained one run per sitting, ``--only`` and ``--seeds``, shows every run)."""
@@ -248,6 +271,9 @@ def main(argv: list[str] | None = None) -> int:
                         "it reached (not only at its last tenth); the same command goes on from there. The report "
                         "is written as usual, with the runs finished so far")
     p.add_argument("--fresh", action="store_true", help="start a new ledger (the finished runs are forgotten)")
+    p.add_argument("--mixed-arithmetic", action="store_true",
+                   help="train here even where this CPU's arithmetic (fp32, or bf16 where it is native) differs "
+                        "from the ledger's runs'; without it such a sitting is refused before it trains")
     p.add_argument("--only", nargs="*", choices=ARCHS, default=list(ARCHS), help="architectures to measure")
     p.add_argument("--report", default="bsn_arch",
                    help="name of the report (and of its ledger, NAME_ledger.json) in --out; a table of a few "
@@ -285,6 +311,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bench_arch: --timing-from {args.timing_from} has no timed row for {', '.join(untimed)}: time them "
               "(without --timing-from) or leave them out of --only")
         return 2
+    missing = [] if ledger is None else [k for k in (run_key(n, sd) for sd in args.seeds for n in args.only)
+                                         if k not in ledger]
+    if missing and not args.mixed_arithmetic:
+        why = arithmetic_clash(ledger, precision_name(autocast_dtype(load_config(), torch.device("cpu"))))
+        if why:
+            print(f"bench_arch: {why} ({', '.join(missing)} left to train)")
+            return 2
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         teacher, stopped = train_seeds(args, ledger, Path(tmp)) if ledger is not None else (None, None)
@@ -301,8 +334,7 @@ def main(argv: list[str] | None = None) -> int:
                                           if r["curve"].get("flattened")}
                 gains = row["last_fifth_gain"].values()
                 row["flat"] = f"{sum(g < 0.01 for g in gains)} of {len(gains)}"
-                row["precision"] = sorted({p for r in recs.values()
-                                           for p in r["curve"].get("precision", [UNRECORDED])})
+                row["precision"] = trained_in(recs.values())
             if name in runs:
                 row["iou_run"] = held_out_iou(Path(runs[name]), Path(args.data), Path(tmp) / f"{name}.json")
             rows.append(row)
