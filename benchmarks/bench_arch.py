@@ -142,23 +142,25 @@ def train_seeds(args: argparse.Namespace, ledger: Ledger, tmp: Path) -> tuple[Pa
                                          "data.val_fraction=0.2", "data.test_fraction=0.2", "train.steps=1",
                                          "train.checkpoint_every=1", f"teacher.steps={args.teacher_steps}",
                                          f"teacher.eval_every={max(1, args.teacher_steps // 10)}"])
-    for seed in args.seeds:
-        for name in args.only:
-            key = run_key(name, seed)
-            if key in ledger:
-                continue
-            left = minutes_left()
-            if left is not None and left <= 0:
-                return teacher, run_folder(work, name, seed)
-            run = train_uniform(name, data, work, args.train_steps, args.train_size, teacher, seed, left)
-            if stopped(run):
-                return teacher, run
-            m = machine()
-            ledger.put(key, {"iou": held_out_iou(run, data, tmp / f"{name}_{seed}.json"), "curve": run_curve(run),
-                             "finished_on": {"cpu": m["cpu"], "isa": m["isa"]}})
-            if not args.keep_runs:
-                shutil.rmtree(run, ignore_errors=True)
+    for key in runs_left(args, ledger):
+        name, seed = split_key(key)
+        left = minutes_left()
+        if left is not None and left <= 0:
+            return teacher, run_folder(work, name, seed)
+        run = train_uniform(name, data, work, args.train_steps, args.train_size, teacher, seed, left)
+        if stopped(run):
+            return teacher, run
+        m = machine()
+        ledger.put(key, {"iou": held_out_iou(run, data, tmp / f"{name}_{seed}.json"), "curve": run_curve(run),
+                         "finished_on": {"cpu": m["cpu"], "isa": m["isa"]}})
+        if not args.keep_runs:
+            shutil.rmtree(run, ignore_errors=True)
     return teacher, None
+
+
+def runs_left(args: argparse.Namespace, ledger: Ledger) -> list[str]:
+    """The ledger keys of ``--seeds`` x ``--only`` not in ``ledger`` yet, seeds outermost (the order they train in)."""
+    return [k for k in (run_key(name, seed) for seed in args.seeds for name in args.only) if k not in ledger]
 
 
 def run_key(name: str, seed: int) -> str:
@@ -311,8 +313,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bench_arch: --timing-from {args.timing_from} has no timed row for {', '.join(untimed)}: time them "
               "(without --timing-from) or leave them out of --only")
         return 2
-    missing = [] if ledger is None else [k for k in (run_key(n, sd) for sd in args.seeds for n in args.only)
-                                         if k not in ledger]
+    missing = [] if ledger is None else runs_left(args, ledger)
     if missing and not args.mixed_arithmetic:
         why = arithmetic_clash(ledger, precision_name(autocast_dtype(load_config(), torch.device("cpu"))))
         if why:
