@@ -60,15 +60,26 @@ def _from_bytes(data: bytes, what: Path) -> Any:
 
 
 def _state_bytes(data: bytes, sha: str, resume_state: dict[str, Any]) -> bytes:
-    """A training state in one file: what resuming needs, the weights' bytes and their sha256."""
-    return _to_bytes({**resume_state, "weights": data, "weights_sha256": sha})
+    """A training state in one file: what resuming needs, the weights' bytes and their sha256.
+
+    The bytes go in as a uint8 tensor, a record of the file's own: as a pickled byte string
+    (torch pickles with protocol 2) they would be re-encoded, larger and several times slower to
+    write and to read."""
+    weights = torch.frombuffer(bytearray(data), dtype=torch.uint8)
+    return _to_bytes({**resume_state, "weights": weights, "weights_sha256": sha})
 
 
 def _read_state(path: Path, what: str) -> dict[str, Any]:
-    """A training state written by :func:`_state_bytes`, verified; its ``weights`` still as bytes."""
+    """A training state written by :func:`_state_bytes`, verified; its ``weights`` still as bytes
+    (states written before the weights were a tensor hold a byte string: read the same)."""
     state = _from_bytes(path.read_bytes(), path)
     if not isinstance(state, dict) or not {"weights", "weights_sha256", "optimizer", "step"} <= set(state):
         raise RunError(f"{path}: not a {what} of this version")
+    weights = state["weights"]
+    if isinstance(weights, torch.Tensor) and weights.dtype == torch.uint8 and weights.dim() == 1:
+        state["weights"] = weights.numpy().tobytes()
+    elif not isinstance(weights, bytes):
+        raise RunError(f"{path}: not a {what} of this version (its weights are neither bytes nor a byte tensor)")
     if hashlib.sha256(state["weights"]).hexdigest() != state["weights_sha256"]:
         raise RunError(f"{path}: damaged (its weights' sha256 differs); --force starts the run again")
     return state

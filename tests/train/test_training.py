@@ -371,6 +371,25 @@ def test_a_kill_between_weights_and_state_resumes_consistently(data, uninterrupt
     assert_same_weights(run, uninterrupted)
 
 
+def test_a_state_holds_the_weights_as_a_record_and_one_written_as_a_byte_string_still_resumes(uninterrupted,
+                                                                                               tmp_path):
+    """state.pt holds model.pt's exact bytes as a uint8 tensor (a byte string, as states were once
+    written, is pickled re-encoded by torch: larger and slower); a state of that older form reads the same."""
+    run = tmp_path / "run"
+    shutil.copytree(uninterrupted, run)
+    model_bytes = (run / Run.MODEL).read_bytes()
+    raw = torch.load(run / Run.STATE, weights_only=True)
+    assert raw["weights"].dtype == torch.uint8 and raw["weights"].numpy().tobytes() == model_bytes
+    new = Run(run).load_state()
+    old = {**raw, "weights": model_bytes}
+    torch.save(old, run / Run.STATE)
+    again = Run(run).load_state()
+    assert again["step"] == new["step"] == 6 and again["weights"].keys() == new["weights"].keys()
+    assert all(torch.equal(again["weights"][k], new["weights"][k]) for k in new["weights"])
+    want = torch.load(run / Run.MODEL, weights_only=True)
+    assert all(torch.equal(want[k], new["weights"][k]) for k in want)
+
+
 def test_resume_refuses_damaged_or_foreign_weights(data, uninterrupted, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(uninterrupted, run)
