@@ -27,7 +27,9 @@ def frames(clip):
     return [cv2.imread(str(p)) for p in sorted((clip / "rgb").glob("*.png"))]
 
 
-@pytest.mark.parametrize("online", [False, True], ids=["tracking", "online"])
+# the online estimator's pitch and yaw against the truth are in the default run through bsn-run
+# (test_bsn_run_leaves_calibrating_and_saves_the_camera_file); its twin here with -m slow
+@pytest.mark.parametrize("online", [False, pytest.param(True, marks=pytest.mark.slow)], ids=["tracking", "online"])
 def test_pitch_and_yaw_from_the_focus_of_expansion(drive, online):
     """The tracking estimator (bsn-calibrate --mount) and the runtime's lighter online one alike."""
     from bsn_edge.runtime.calibrator import ONLINE_FIT
@@ -133,6 +135,7 @@ def long_drive(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow     # the thread's estimate against the truth is in the default run, through bsn-run (below)
 def test_online_calibration_on_its_thread_is_the_estimate_of_the_same_frames_inline(long_drive):
     """The runtime's calibrator runs off the frame path; fed the same frames it reaches the same
     estimate as the estimator run inline, and that estimate is the clip's true mounting."""
