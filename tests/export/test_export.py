@@ -85,10 +85,17 @@ def int8_error(model: torch.nn.Module, path, frames: np.ndarray) -> tuple[float,
     return float(np.mean(dp)), float(np.median(dd))
 
 
-def test_fused_graph_contract_parity_and_metadata(run, tmp_path):
+@pytest.fixture(scope="module")
+def exported(run, tmp_path_factory):
+    """The run exported fp32 by bsn-export at its card's size."""
+    out = tmp_path_factory.mktemp("exported") / "m.onnx"
+    assert export_main(["--checkpoint", str(run[0]), "--out", str(out)]) == 0
+    return out
+
+
+def test_fused_graph_contract_parity_and_metadata(run, exported):
     path, clip, model = run
-    out = tmp_path / "m.onnx"
-    assert export_main(["--checkpoint", str(path), "--out", str(out), "--size", "64x128"]) == 0
+    out = exported
     m = onnx.load(str(out))
     onnx.checker.check_model(m)
     (inp,) = m.graph.input
@@ -155,11 +162,8 @@ def test_int8_on_a_tiny_calibration_set_keeps_heads_float(spread, cli_int8):
     assert out.stat().st_size < 0.5 * summary["fp32_bytes"]
 
 
-def test_head_nodes_walk_back_to_the_first_convolution(run, tmp_path):
-    _, _, model = run
-    p = tmp_path / "m.onnx"
-    to_onnx(model, p, card_for(SIZE))
-    heads = head_nodes(onnx.load(str(p)))
+def test_head_nodes_walk_back_to_the_first_convolution(exported):
+    heads = head_nodes(onnx.load(str(exported)))
     kinds = sorted({why.split()[0] for why in heads.values()})
     assert "Conv" in kinds and "Sigmoid" in kinds and "Exp" in kinds
     assert sum(why.startswith("Conv") for why in heads.values()) == 2, "one head conv per output"
@@ -291,15 +295,13 @@ def test_opencv_dnn_runs_the_fp32_model(run, tmp_path):
     np.testing.assert_allclose(outs["depth"].reshape(d_ref.shape), d_ref, rtol=1e-3)
 
 
-def test_the_seal_digest_and_metadata_agree_with_onnx_itself(run, tmp_path):
+def test_the_seal_digest_and_metadata_agree_with_onnx_itself(exported):
     """The runtime's protobuf walk (no onnx package) against onnx's own serializer and parser."""
     import hashlib
 
     from bsn_edge.runtime.model_file import ModelFile
 
-    path, _, _ = run
-    out = tmp_path / "m.onnx"
-    assert export_main(["--checkpoint", str(path), "--out", str(out)]) == 0
+    out = exported
     m = onnx.load(str(out))
     props = {p.key: p.value for p in m.metadata_props}
     del m.metadata_props[:]
