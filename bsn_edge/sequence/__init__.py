@@ -4,6 +4,7 @@ See the README's "Data formats" section for the layout.
 """
 
 from bsn_edge.sequence.images import (
+    atomic_write,
     atomic_write_bytes,
     read_depth,
     read_mask,
@@ -23,6 +24,7 @@ from bsn_edge.sequence.poses import (
 
 __all__ = [
     "SequenceMeta",
+    "atomic_write",
     "atomic_write_bytes",
     "read_depth",
     "read_kitti_poses",

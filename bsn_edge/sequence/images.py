@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import BinaryIO
 
 import cv2
 import numpy as np
@@ -27,9 +29,9 @@ def _temp_affixes(path: Path) -> tuple[str, str]:
     return f".{path.name}.", ".tmp"
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = False) -> None:
-    """Write ``data`` to ``path`` through a temporary file and a rename, so readers never
-    see a half-written file and a write that fails leaves nothing behind (a killed process can
+def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], object], durable: bool = False) -> None:
+    """Write ``path`` through a temporary file, filled by ``write(file)``, and a rename, so readers
+    never see a half-written file and a write that fails leaves nothing behind (a killed process can
     leave its temporary file: :func:`torn_writes` finds it). ``durable`` also fsyncs the data
     before the rename, so a power cut cannot leave an empty file in its place."""
     path = Path(path)
@@ -37,7 +39,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = Fal
     fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            write(f)
             if durable:
                 f.flush()
                 os.fsync(f.fileno())
@@ -46,6 +48,11 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = Fal
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = False) -> None:
+    """:func:`atomic_write` of ``data``."""
+    atomic_write(path, lambda f: f.write(data), durable)
 
 
 def torn_writes(path: str | os.PathLike) -> list[Path]:

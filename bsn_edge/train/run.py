@@ -32,7 +32,7 @@ import torch
 
 from bsn_edge.card import UNRECORDED, ModelCard, TrainingRecord
 from bsn_edge.models import BlindSpotNet, ModelSpec, build, create_teacher, weights_bytes
-from bsn_edge.sequence.images import atomic_write_bytes, torn_writes
+from bsn_edge.sequence.images import atomic_write, atomic_write_bytes, torn_writes
 from bsn_edge.train.config import TeacherConfig
 
 
@@ -59,18 +59,19 @@ def _from_bytes(data: bytes, what: Path) -> Any:
         raise RunError(f"{what}: not a weights-only torch file, or damaged ({first[:160]})") from None
 
 
-def _state_bytes(data: bytes, sha: str, resume_state: dict[str, Any]) -> bytes:
-    """A training state in one file: what resuming needs, the weights' bytes and their sha256.
+def _write_state(path: Path, data: bytes, sha: str, resume_state: dict[str, Any]) -> None:
+    """A training state in one file, written atomically: what resuming needs, the weights' bytes
+    and their sha256.
 
     The bytes go in as a uint8 tensor, a record of the file's own: as a pickled byte string
     (torch pickles with protocol 2) they would be re-encoded, larger and several times slower to
-    write and to read."""
+    write and to read. The state streams to the file, never held whole in memory."""
     weights = torch.frombuffer(bytearray(data), dtype=torch.uint8)
-    return _to_bytes({**resume_state, "weights": weights, "weights_sha256": sha})
+    atomic_write(path, lambda f: torch.save({**resume_state, "weights": weights, "weights_sha256": sha}, f))
 
 
 def _read_state(path: Path, what: str) -> dict[str, Any]:
-    """A training state written by :func:`_state_bytes`, verified; its ``weights`` still as bytes
+    """A training state written by :func:`_write_state`, verified; its ``weights`` still as bytes
     (states written before the weights were a tensor hold a byte string: read the same)."""
     state = _from_bytes(path.read_bytes(), path)
     if not isinstance(state, dict) or not {"weights", "weights_sha256", "optimizer", "step"} <= set(state):
@@ -415,7 +416,7 @@ class Run:
         one atomic file with the weights' sha256."""
         self.teacher_state_path.parent.mkdir(parents=True, exist_ok=True)
         data = _to_bytes({k: v.detach().cpu().contiguous() for k, v in weights.items()})
-        atomic_write_bytes(self.teacher_state_path, _state_bytes(data, hashlib.sha256(data).hexdigest(), resume_state))
+        _write_state(self.teacher_state_path, data, hashlib.sha256(data).hexdigest(), resume_state)
 
     def load_teacher_progress(self) -> dict[str, Any] | None:
         """The unfinished teacher's state (``weights``, ``optimizer``, ``step``...), verified; None if none."""
@@ -436,7 +437,7 @@ class Run:
         sha = hashlib.sha256(data).hexdigest()
         card = ModelCard(**card_fields, weights_sha256=sha)
         if resume_state is not None:
-            atomic_write_bytes(self.state_path, _state_bytes(data, sha, resume_state))
+            _write_state(self.state_path, data, sha, resume_state)
         atomic_write_bytes(self.model_path, data)
         record = {"card": card.to_dict(), **{k: v for k, v in info.items() if k != "card"}}
         atomic_write_bytes(self.checkpoint_path, (json.dumps(record, indent=2) + "\n").encode())

@@ -348,20 +348,25 @@ def test_a_kill_between_weights_and_state_resumes_consistently(data, uninterrupt
     import bsn_edge.train.run as run_mod
 
     run = tmp_path / "run"
-    real = run_mod.atomic_write_bytes
+    real_stream, real_bytes = run_mod.atomic_write, run_mod.atomic_write_bytes
     states = []
 
-    def write(path, data_):
+    def stream(path, write, durable=False):
         if Path(path).name == Run.STATE:
             states.append(path)
-        elif Path(path).name == Run.MODEL and len(states) == 2:
-            raise KilledError
-        return real(path, data_)
+        return real_stream(path, write, durable)
 
-    monkeypatch.setattr(run_mod, "atomic_write_bytes", write)
+    def write_bytes(path, data_, durable=False):
+        if Path(path).name == Run.MODEL and len(states) == 2:
+            raise KilledError
+        return real_bytes(path, data_, durable)
+
+    monkeypatch.setattr(run_mod, "atomic_write", stream)
+    monkeypatch.setattr(run_mod, "atomic_write_bytes", write_bytes)
     with pytest.raises(KilledError):
         train_cli.main([*FAST, "--data", str(data), "--out", str(run)])
-    monkeypatch.setattr(run_mod, "atomic_write_bytes", real)
+    monkeypatch.undo()
+    assert len(states) == 2
     assert torch.load(run / Run.STATE, weights_only=True)["step"] == 6
     assert json.loads((run / "checkpoint.json").read_text())["step"] == 3
     capsys.readouterr()
