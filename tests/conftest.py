@@ -39,6 +39,26 @@ def _sample_cache_in_tmp(tmp_path_factory) -> None:
     os.environ["BSN_EDGE_CACHE"] = str(tmp_path_factory.mktemp("sample-cache"))
 
 
+@pytest.fixture(scope="session")
+def small_light_onnx(tmp_path_factory):
+    """An untrained ``small-light`` (seed 0) exported fp32, once per size for the whole run:
+    ``small_light_onnx((h, w)) -> path``. Shared: read it, never change it."""
+    import torch
+
+    from bsn_edge.export import to_onnx
+    from bsn_edge.models import create_model
+    from tests.cards import card_for
+    made = {}
+
+    def exported(size: tuple[int, int]):
+        if size not in made:
+            torch.manual_seed(0)
+            made[size] = tmp_path_factory.mktemp("small_light") / "m.onnx"
+            to_onnx(create_model("small-light").eval(), made[size], card_for(size))
+        return made[size]
+    return exported
+
+
 def noise_video(path, frames: int, width: int, height: int, fps: float = 25.0, seed: int = 0):
     """An MPEG-4 file of ``frames`` frames of uniform noise (nothing to calibrate on, everything to decode)."""
     import cv2

@@ -160,23 +160,17 @@ def test_online_calibration_on_its_thread_is_the_estimate_of_the_same_frames_inl
     assert abs(m.pitch_deg - truth.mounting.pitch_deg) < 0.3 and abs(m.yaw_deg - truth.mounting.yaw_deg) < 0.3
 
 
-def test_bsn_run_leaves_calibrating_and_saves_the_camera_file(long_drive, tmp_path):
+def test_bsn_run_leaves_calibrating_and_saves_the_camera_file(long_drive, small_light_onnx, tmp_path):
     """Online calibration through the product: CALIBRATING on the bus until the estimate converges,
     then not; --save-calib writes the camera file with the estimate, near the clip's true mounting."""
     import can
-    import torch
 
     from bsn_edge.alerts import SystemState
     from bsn_edge.alerts.can_codec import decode
     from bsn_edge.cli import run as run_cli
-    from bsn_edge.export import to_onnx
-    from bsn_edge.models import create_model
-    from tests.cards import card_for
     truth = Calibration.read(long_drive / "calibration.json")
     Calibration.of(truth.intrinsics, truth.dist, None).write(tmp_path / "intrinsics.json")
-    torch.manual_seed(0)
-    model = tmp_path / "m.onnx"
-    to_onnx(create_model("small-light").eval(), model, card_for((128, 256)))
+    model = small_light_onnx((128, 256))
     saved = tmp_path / "cam.json"
     with can.Bus(interface="virtual", channel="bsn-calib-run") as rx:
         assert run_cli.main(["--model", str(model), "--source", str(long_drive / "rgb"), "--calib",

@@ -6,11 +6,9 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from bsn_edge.export import to_onnx
 from bsn_edge.export.upsample import ShuffleUpsample, bilinear_taps, chained_taps, with_shuffle_upsampling
 from bsn_edge.models import create_model
 from bsn_edge.models.upsample import Upsample
-from tests.cards import card_for
 
 
 @pytest.mark.parametrize("factor", [2, 4, 8])
@@ -48,10 +46,8 @@ def test_model_copy_swaps_every_upsampler_and_keeps_outputs():
             torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-5)
 
 
-def test_exported_graph_upsamples_without_resize(tmp_path):
-    torch.manual_seed(0)
-    to_onnx(create_model("small-light").eval(), tmp_path / "m.onnx", card_for((64, 128)))
-    g = onnx.load(str(tmp_path / "m.onnx"))
+def test_exported_graph_upsamples_without_resize(small_light_onnx):
+    g = onnx.load(str(small_light_onnx((64, 128))))
     ops = [n.op_type for n in g.graph.node]
     assert ops.count("DepthToSpace") == 4, "two per head: the head's x4 and the frame's x2"
     assert "Pad" not in ops and "ConstantOfShape" not in [n.op_type for n in g.graph.node if "up" in n.name]

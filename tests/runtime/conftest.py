@@ -1,24 +1,18 @@
 """One small exported model and one short synthetic clip, shared by the runtime tests."""
 
 import pytest
-import torch
 
 from bsn_edge.calibration import Calibration
-from bsn_edge.export import to_onnx
-from bsn_edge.models import create_model
 from bsn_edge.synth import SynthConfig, write_clip
-from tests.cards import card_for
 
 SIZE = (128, 256)
 
 
 @pytest.fixture(scope="session")
-def setup(tmp_path_factory):
+def setup(tmp_path_factory, small_light_onnx):
     """(an untrained small-light model exported at 128x256, a 15-frame 96x192 clip with its video)."""
     root = tmp_path_factory.mktemp("rt")
-    torch.manual_seed(0)
-    model = root / "m.onnx"
-    to_onnx(create_model("small-light").eval(), model, card_for(SIZE))
+    model = small_light_onnx(SIZE)
     clip = root / "clip"
     write_clip(SynthConfig(frames=15, height=96, width=192, seed=2), clip)
     return model, clip

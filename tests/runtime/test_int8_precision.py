@@ -78,19 +78,12 @@ def test_seven_bit_weights_are_exact_on_the_fast_kernels():
     np.testing.assert_allclose(got, want, atol=Y_SCALE * 1.01)
 
 
-def test_the_engine_asks_for_exact_kernels_only_for_8_bit_weights(tmp_path):
+def test_the_engine_asks_for_exact_kernels_only_for_8_bit_weights(small_light_onnx, tmp_path):
     """The card of a 7-bit model lets the runtime use the fast kernels; any other int8 model gets
     the exact ones (and the self-test checks the answer either way)."""
-    import torch
-
-    from bsn_edge.export import to_onnx
-    from bsn_edge.models import create_model
     from bsn_edge.runtime import Engine
-    from tests.cards import card_for
 
-    torch.manual_seed(0)
-    path = tmp_path / "m.onnx"
-    to_onnx(create_model("small-light").eval(), path, card_for((64, 128)))
+    path = small_light_onnx((64, 128))
     fp32 = Engine(path)
     assert not fp32.card.seven_bit_weights
     assert fp32.sess.get_session_options().get_session_config_entry("session.x64quantprecision") == "1"
