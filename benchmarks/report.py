@@ -19,7 +19,7 @@ from benchmarks.common import machine
 from benchmarks.ledger import mean_std
 
 ORDER = ("synth", "labels", "train_step", "train_step_avx2_research", "train_step_avx2_shared",
-         "train_step_avx512_research", "train_step_archs",
+         "train_step_avx512_research", "train_step_archs", "train_step_archs_avx2", "checkpoint_state_avx2",
          "bsn_accuracy", "bsn_accuracy_shared-light", "bsn_accuracy_shared-light_rescore",
          "bsn_accuracy_shared-light_coverage", "bsn_accuracy_shared-light_depth_role", "bsn_arch", "bsn_arch_light",
          "bsn_arch_light_6k", "bsn_arch_light_12k", "bsn_arch_light_24k", "bsn_arch_heavy_12k",
