@@ -56,7 +56,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = Fal
 
 
 def torn_writes(path: str | os.PathLike) -> list[Path]:
-    """The temporary files that :func:`atomic_write_bytes` to ``path`` left when its process was
+    """The temporary files that :func:`atomic_write` to ``path`` left when its process was
     killed mid-write (never renamed into place, so never read as ``path``). A write in progress
     looks the same: only the folder's one writer may remove them."""
     path = Path(path)

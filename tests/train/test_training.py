@@ -20,7 +20,7 @@ from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
 from bsn_edge.export import read_card
 from bsn_edge.metrics import THRESHOLDS
 from bsn_edge.models import BlindSpotNet
-from bsn_edge.train import Run, load_config
+from bsn_edge.train import Run, RunError, load_config
 from bsn_edge.train.losses import masked_bce
 from bsn_edge.train.trainer import cpu_has_native_bf16
 
@@ -393,6 +393,9 @@ def test_a_state_holds_the_weights_as_a_record_and_one_written_as_a_byte_string_
     assert all(torch.equal(again["weights"][k], new["weights"][k]) for k in new["weights"])
     want = torch.load(run / Run.MODEL, weights_only=True)
     assert all(torch.equal(want[k], new["weights"][k]) for k in want)
+    torch.save({**raw, "weights": raw["weights"].float()}, run / Run.STATE)      # neither form: named
+    with pytest.raises(RunError, match="neither bytes nor a byte tensor"):
+        Run(run).load_state()
 
 
 def test_resume_refuses_damaged_or_foreign_weights(data, uninterrupted, tmp_path, capsys):
@@ -517,7 +520,6 @@ def taught(data, tmp_path_factory):
 
 def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tmp_path, capsys):
     from bsn_edge.cli import export as export_cli
-    from bsn_edge.train import RunError
     shipped = tmp_path / "default"
     out = tmp_path / "m.onnx"
     assert export_cli.main(["--checkpoint", str(taught), "--out", str(out), "--ship-run", str(shipped)]) == 0
