@@ -8,7 +8,7 @@ the weights as a byte string inside ``torch.save``'s pickle (protocol 2, which r
 built whole in memory, then written; it now holds them as a uint8 tensor, a record of the file's
 own, streamed to the file. Both forms, in one run, alternating, for the architecture's weights and
 the Adam state of one step: seconds to write (with the atomic rename) and to read back and verify
-(:meth:`Run.load_state` for the current form, the same steps on the earlier one), and the file's size.
+(:meth:`Run.load_state`, which reads both), and the file's size.
 """
 
 from __future__ import annotations
@@ -38,14 +38,6 @@ def _earlier_write(path: Path, data: bytes, sha: str, resume_state: dict[str, An
     atomic_write_bytes(path, buf.getvalue())
 
 
-def _earlier_read(path: Path) -> dict[str, Any]:
-    state = torch.load(io.BytesIO(path.read_bytes()), map_location="cpu", weights_only=True)
-    if hashlib.sha256(state["weights"]).hexdigest() != state["weights_sha256"]:
-        raise RuntimeError("damaged")
-    state["weights"] = torch.load(io.BytesIO(state["weights"]), map_location="cpu", weights_only=True)
-    return state
-
-
 def run(model_name: str, rounds: int = ROUNDS) -> dict[str, Any]:
     torch.manual_seed(0)
     model = create_model(model_name)
@@ -57,15 +49,15 @@ def run(model_name: str, rounds: int = ROUNDS) -> dict[str, Any]:
     data = weights_bytes(model)
     sha = hashlib.sha256(data).hexdigest()
     times: dict[str, dict[str, list[float]]] = {k: {"write": [], "read": []} for k in ("earlier", "current")}
-    sizes = {}
     with tempfile.TemporaryDirectory() as tmp:
-        current = Run(Path(tmp) / "run")
-        current.path.mkdir()
-        atomic_write_bytes(current.model_path, data)
-        earlier = Path(tmp) / "earlier.pt"
-        forms = {"earlier": (lambda: _earlier_write(earlier, data, sha, resume), lambda: _earlier_read(earlier)),
+        earlier, current = Run(Path(tmp) / "earlier"), Run(Path(tmp) / "current")
+        for r in (earlier, current):
+            r.path.mkdir()
+            atomic_write_bytes(r.model_path, data)
+        # Run.load_state reads both forms: the earlier one's read is what it always was
+        forms = {"earlier": (lambda: _earlier_write(earlier.state_path, data, sha, resume), earlier.load_state),
                  "current": (lambda: _write_state(current.state_path, data, sha, resume), current.load_state)}
-        for r in range(rounds + 1):                   # the first round warms up and is not counted
+        for k in range(rounds + 1):                   # the first round warms up and is not counted
             for name, (write, read) in forms.items():
                 t0 = time.perf_counter()
                 write()
@@ -73,10 +65,10 @@ def run(model_name: str, rounds: int = ROUNDS) -> dict[str, Any]:
                 got = read()
                 t2 = time.perf_counter()
                 assert got["step"] == 1 and set(got["weights"]) == set(model.state_dict())
-                if r:
+                if k:
                     times[name]["write"].append(t1 - t0)
                     times[name]["read"].append(t2 - t1)
-        sizes = {"earlier": earlier.stat().st_size, "current": current.state_path.stat().st_size}
+        sizes = {name: r.state_path.stat().st_size for name, r in (("earlier", earlier), ("current", current))}
     rows = [{"form": name, "write_s": statistics.median(t["write"]), "read_s": statistics.median(t["read"]),
              "mb": sizes[name] / 1e6, "n": len(t["write"])} for name, t in times.items()]
     return {"model": model_name, "weights_mb": len(data) / 1e6, "rounds": rounds, "rows": rows}
