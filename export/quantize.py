@@ -12,12 +12,13 @@ the frame itself, and the float frame is never made.
 from __future__ import annotations
 
 import tempfile
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import onnx
+import onnx.numpy_helper
 from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
@@ -42,8 +43,9 @@ class QuantConfig:
     per_channel: bool = True
     keep_heads_float: bool = True
     # 7-bit weights ([-64, 63]): x86 CPUs without VNNI then run uint8 x int8 without saturating,
-    # at full speed, where 8-bit weights fall back to slower uint8 x uint8 (the runtime's session)
-    reduce_range: bool = False
+    # at full speed, where 8-bit weights fall back to slower uint8 x uint8 (the runtime's session);
+    # the default, as the shipped model is made (benchmarks/results/int8_cpu.md)
+    reduce_range: bool = True
     # the frame's normalisation as an exact integer convolution on the uint8 frame, where it applies
     integer_input: bool = True
 
@@ -55,9 +57,31 @@ class QuantConfig:
                 raise ValueError(f"unknown quantized type {k!r}; valid: {', '.join(TYPES)}")
 
     def scheme(self) -> str:
+        """The card's words for this scheme (``quantize`` writes them with the weights' granularity
+        read from the graph it made)."""
         return (f"static QDQ, activations {self.activations}, weights {self.weights}"
                 f"{' ' + SEVEN_BIT_WEIGHTS if self.reduce_range else ''}{' per-channel' if self.per_channel else ''}, "
                 f"{self.method} calibration")
+
+
+def conv_weight_scales(model: onnx.ModelProto) -> dict[str, tuple[int, np.ndarray]]:
+    """Each quantized convolution weight of a QDQ graph: ``{conv name: (output channels, scale)}``,
+    the scale as its ``DequantizeLinear`` holds it (one value per tensor, or one per output channel)."""
+    inits = {i.name: i for i in model.graph.initializer}
+    producer = {o: n for n in model.graph.node for o in n.output}
+    out: dict[str, tuple[int, np.ndarray]] = {}
+    for n in model.graph.node:
+        dq = producer.get(n.input[1]) if n.op_type == "Conv" and len(n.input) > 1 else None
+        if dq is None or dq.op_type != "DequantizeLinear" or dq.input[0] not in inits:
+            continue
+        out[n.name] = (int(inits[dq.input[0]].dims[0]), onnx.numpy_helper.to_array(inits[dq.input[1]]))
+    return out
+
+
+def weights_per_channel(model: onnx.ModelProto) -> bool:
+    """True when every quantized convolution weight has one scale per output channel."""
+    scales = conv_weight_scales(model)
+    return bool(scales) and all(s.ndim == 1 and s.shape[0] == c for c, s in scales.values())
 
 
 class FrameReader(CalibrationDataReader):
@@ -145,7 +169,9 @@ def quantize(fp32: str | Path, out: str | Path, frames: np.ndarray, cfg: QuantCo
                 onnx.save(q, str(out))
                 for name in rewritten.replaced:
                     excluded.pop(name, None)
-    scheme = cfg.scheme() + (f", {INTEGER_INPUT}" if rewritten is not None else "")
+    # the card says what the graph holds, whatever was asked
+    made = replace(cfg, per_channel=weights_per_channel(onnx.load(str(out))))
+    scheme = made.scheme() + (f", {INTEGER_INPUT}" if rewritten is not None else "")
     sealed = seal(out, card.replace(quantization=scheme))
     return {"config": asdict(cfg), "scheme": scheme, "float_nodes": excluded,
             "integer_input": asdict(rewritten) if rewritten is not None else None,

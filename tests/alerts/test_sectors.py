@@ -47,3 +47,29 @@ def test_nearer_is_more_hazardous():
 def test_config_is_validated():
     with pytest.raises(ValueError):
         SectorConfig(left_edge_deg=10, right_edge_deg=-10)
+
+
+def test_an_off_centre_principal_point_moves_the_sector_edges_with_it():
+    """A camera whose principal point sits at 30 % of the width: straight ahead is column 60, not
+    100, and the edges lie where tan(edge) * fx from it says (fx = 100: +-10 degrees at 17.6 px)."""
+    k = Intrinsics(100.0, 100.0, 60.0, 50.0, 200, 100)
+    g = SectorGeometry(k, SectorConfig(left_edge_deg=-10, right_edge_deg=10))
+    edge_px = 100.0 * np.tan(np.radians(10.0))
+    for u in range(200):
+        expected = 0 if u < 60 - edge_px else 2 if u > 60 + edge_px else 1
+        assert g.column_sector[u] == expected, u
+    mask = np.zeros((100, 200), bool)
+    mask[60:70, 55:66] = True          # straight ahead of this camera: left of the picture's middle
+    left, centre, right = g.read(mask, np.full((100, 200), 8.0, np.float32))
+    assert centre.distance_m == pytest.approx(8.0) and left.distance_m is None and right.distance_m is None
+
+
+def test_blind_spot_pixels_without_depth_give_no_distance():
+    """Depth 0 is 'no depth' (the on-disk convention): such pixels are no obstacle at 0 m."""
+    g = SectorGeometry(K)
+    mask = np.ones((100, 200), bool)
+    depth = np.zeros((100, 200), np.float32)
+    assert all(r.score == 0 and r.distance_m is None for r in g.read(mask, depth))
+    depth[80:90, 150:160] = 6.0        # one patch with depth: only it counts
+    left, centre, right = g.read(mask, depth)
+    assert right.distance_m == pytest.approx(6.0) and left.distance_m is None and centre.distance_m is None

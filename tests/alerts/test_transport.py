@@ -1,5 +1,6 @@
 """CAN on python-can's virtual bus and serial on pyserial's loop://: round trips, E2E checks, faults."""
 
+import binascii
 import itertools
 import shutil
 import subprocess
@@ -130,3 +131,17 @@ def test_only_a_full_transmit_queue_counts_as_full():
     assert not transmit_buffer_full(can.CanOperationError("Failed to transmit: Network is down",
                                                           error_code=errno.ENETDOWN))
     assert not transmit_buffer_full(can.CanOperationError("bus off"))
+
+
+def test_a_frame_with_a_good_crc_but_a_wrong_magic_byte_is_an_error():
+    """The CRC covers the magic byte, so a frame of another protocol on the same port can pass it:
+    the decoder refuses it by its magic (CRC-16/CCITT-FALSE from the standard library's crc_hqx)."""
+    for magic in (b"A", b"\x00", b"\xff"):
+        body = magic + (7).to_bytes(2, "little") + b"\x01\x02\x03"
+        wire = cobs_encode(body + binascii.crc_hqx(body, 0xFFFF).to_bytes(2, "little")) + b"\x00"
+        dec = FrameDecoder()
+        assert list(dec.feed(wire)) == [] and dec.errors == 1, magic
+    body = b"B" + (7).to_bytes(2, "little") + b"\x01\x02\x03"      # the same frame with the right magic
+    dec = FrameDecoder()
+    wire = cobs_encode(body + binascii.crc_hqx(body, 0xFFFF).to_bytes(2, "little")) + b"\x00"
+    assert list(dec.feed(wire)) == [(7, b"\x01\x02\x03")] and dec.errors == 0

@@ -135,7 +135,7 @@ def cli_int8(run, spread, tmp_path_factory):
     _, clip, _ = run
     out = tmp_path_factory.mktemp("cli_int8") / "q.onnx"
     assert export_main(["--checkpoint", str(spread[0]), "--out", str(out), "--size", "64x128", "--int8",
-                        "--calib", str(clip), "--calib-frames", "6", "--reduce-range"]) == 0
+                        "--calib", str(clip), "--calib-frames", "6"]) == 0
     return out
 
 
@@ -240,7 +240,7 @@ def spread_int8(run, spread, tmp_path_factory):
     fp32 = root / "m.onnx"
     to_onnx(spread[1], fp32, card_for(SIZE))
     q = root / "q.onnx"
-    return fp32, q, quantize(fp32, q, load_frames(clip, SIZE, 4), QuantConfig())
+    return fp32, q, quantize(fp32, q, load_frames(clip, SIZE, 4), QuantConfig(reduce_range=False))
 
 
 def test_quantize_directly_reports_its_scheme(spread, spread_int8):
@@ -256,8 +256,8 @@ def test_quantize_directly_reports_its_scheme(spread, spread_int8):
 
 
 def test_reduced_range_keeps_every_weight_within_seven_bits(spread_int8, cli_int8):
-    """--reduce-range: int8 weights in [-64, 64], so uint8 x int8 pairs stay inside int16 on x86
-    CPUs without VNNI (255 * 64 * 2 = 32640); the default uses the whole int8 range."""
+    """bsn-export's default, 7-bit weights: int8 weights in [-64, 64], so uint8 x int8 pairs stay inside
+    int16 on x86 CPUs without VNNI (255 * 64 * 2 = 32640); with 8-bit weights the whole int8 range."""
     spans = {}
     for reduce, out in ((False, spread_int8[1]), (True, cli_int8)):
         weights = [numpy_helper.to_array(i) for i in onnx.load(str(out)).graph.initializer
@@ -266,6 +266,24 @@ def test_reduced_range_keeps_every_weight_within_seven_bits(spread_int8, cli_int
         assert ("7-bit" in read_card(out).quantization) == reduce
     assert spans[True][0] >= -64 and spans[True][1] <= 64
     assert spans[False][0] < -64 or spans[False][1] > 64
+
+
+def test_per_channel_weights_are_in_the_graph_and_the_card_says_so(spread_int8, cli_int8):
+    """Every quantized convolution weight has one scale per output channel (a 1-D scale as long as
+    the weight's first axis), read off the graph's own initializers; and the card's scheme is the
+    graph's, not the configuration's."""
+    for out in (spread_int8[1], cli_int8):
+        g = onnx.load(str(out)).graph
+        inits = {i.name: i for i in g.initializer}
+        producer = {o: n for n in g.node for o in n.output}
+        convs = [n for n in g.node if n.op_type == "Conv" and producer.get(n.input[1]) is not None
+                 and producer[n.input[1]].op_type == "DequantizeLinear"]
+        assert len(convs) > 5
+        for n in convs:
+            dq = producer[n.input[1]]
+            c_out = inits[dq.input[0]].dims[0]
+            assert list(inits[dq.input[1]].dims) == [c_out], n.name
+        assert "per-channel" in read_card(out).quantization
 
 
 @pytest.mark.slow     # a second runtime, not the product's
@@ -331,7 +349,7 @@ def test_the_calibration_method_and_activation_type_reach_the_graph(run, spread,
     to_onnx(spread[1], fp32, card_for(SIZE, threshold=0.5))
     frames = load_frames(clip, SIZE, 4)
     q = {}
-    for name, cfg in (("minmax", QuantConfig()), ("signed", QuantConfig(activations="int8")),
+    for name, cfg in (("minmax", QuantConfig()), ("signed", QuantConfig(activations="int8", reduce_range=False)),
                       ("pct", QuantConfig(method="percentile")),
                       ("signed7", QuantConfig(activations="int8", reduce_range=True))):
         quantize(fp32, tmp_path / f"{name}.onnx", frames, cfg)
@@ -346,7 +364,7 @@ def test_the_calibration_method_and_activation_type_reach_the_graph(run, spread,
     assert all(q["pct"][k][0] <= q["minmax"][k][0] * 1.0001 for k in shared)
     assert min(q["pct"][k][0] / q["minmax"][k][0] for k in shared) < 0.99
     out = tmp_path / "cli.onnx"
-    with pytest.warns(RuntimeWarning, match="--reduce-range"):   # said, not hidden
+    with pytest.warns(RuntimeWarning, match="--weight-bits 7"):   # said, not hidden
         assert export_main(["--checkpoint", str(spread[0]), "--size", "64x128", "--int8", "--calib", str(clip),
                             "--calib-frames", "2", "--out", str(out), "--activations", "int8",
                             "--method", "percentile"]) == 0

@@ -29,6 +29,22 @@ def test_angles_turn_the_optical_axis_the_documented_way():
         Mounting(1.3, pitch_deg=45.0)
 
 
+@pytest.mark.parametrize("pitch", [-6.0, -1.5, 2.0, 7.0])
+@pytest.mark.parametrize("yaw", [-9.0, 0.0, 4.0])
+def test_from_forward_inverts_the_rotation_for_either_sign(pitch, yaw):
+    """The car's forward axis as a pitched and yawed camera sees it gives back that pitch and yaw.
+    Alone each against the picture's geometry (a camera looking down by p sees straight ahead p
+    above its centre; one turned right by y sees it y to the left), together through ``rotation``."""
+    p, y = math.radians(pitch), math.radians(yaw)
+    alone = Mounting.from_forward(np.array([0.0, -math.sin(p), math.cos(p)]), 1.3)
+    assert alone.pitch_deg == pytest.approx(pitch) and alone.yaw_deg == pytest.approx(0.0, abs=1e-9)
+    alone = Mounting.from_forward(np.array([-math.sin(y), 0.0, math.cos(y)]), 1.3)
+    assert alone.yaw_deg == pytest.approx(yaw) and alone.pitch_deg == pytest.approx(0.0, abs=1e-9)
+    seen = Mounting(1.3, pitch, yaw).rotation() @ np.array([0.0, 0.0, 1.0])
+    both = Mounting.from_forward(seen * 3.0, 1.3)      # any length
+    assert both.pitch_deg == pytest.approx(pitch) and both.yaw_deg == pytest.approx(yaw)
+
+
 def level_ray(model: Intrinsics, m: Mounting, u: float, v: float) -> np.ndarray:
     ray = np.linalg.solve(model.K, [u, v, 1.0])
     return m.rotation().T @ ray

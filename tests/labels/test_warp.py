@@ -159,3 +159,22 @@ def test_look_agrees_compares_patches_where_warped_road_landed():
     assert not look_agrees(here, np.stack([smooth_grey(brighter), nowhere]), 8.0).any()
     half = look_agrees(here, np.where(np.isfinite(warped), smooth_grey(here), np.nan).astype(np.float32), 8.0)
     assert half[:, :30].all() and not half[:, 30:].any(), "only where road landed"
+
+
+def test_pixels_without_depth_are_not_visible(straight_road):
+    """V is sky or depth in (0, vis_range): a patch with no depth (0 on disk) outside the sky, on near
+    road that is otherwise visible, drops out of V, and nothing else changes."""
+    intr, frames, poses = drive(straight_road, Boxes.empty())
+    full = labels_for(intr, frames, poses)
+    f0 = frames[0]
+    holed = f0.depth.copy()
+    holed[100:120, 100:150] = 0.0
+    assert full.visibility[100:120, 100:150].all() and not (f0.semantic[100:120, 100:150] == sm.SKY).any()
+    w = Warper(intr, poses[0, :3, 3])
+    clouds = [w.cloud(f.depth, sm.is_traversable(f.semantic), p) for f, p in zip(frames, poses, strict=True)]
+    lab = label_frame(w, clouds[1:], holed, sm.is_traversable(f0.semantic), f0.semantic == sm.SKY, poses[0],
+                      LabelConfig(depth_tol=1.0, vis_range=16.0, min_area=0))
+    assert not lab.visibility[100:120, 100:150].any()
+    outside = np.ones(holed.shape, bool)
+    outside[100:120, 100:150] = False
+    assert (lab.visibility[outside] == full.visibility[outside]).all()
