@@ -35,9 +35,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--activations", choices=sorted(TYPES), default="uint8", help="activation type (default uint8)")
     p.add_argument("--weights", choices=sorted(TYPES), default="int8", help="weight type (default int8)")
     p.add_argument("--per-tensor", action="store_true", help="per-tensor weights instead of per-channel")
-    p.add_argument("--reduce-range", action="store_true",
-                   help="7-bit weights: exact at full speed on x86 CPUs without VNNI (AVX2), where 8-bit "
-                        "weights run exact but slower")
+    p.add_argument("--weight-bits", type=int, choices=(7, 8), default=7,
+                   help="7 (default): weights in [-64, 63], exact at full speed on every x86 CPU; 8: the whole "
+                        "int8 range, a little finer, but on x86 CPUs without VNNI (most AVX2 ones) the runtime "
+                        "must then run slower exact kernels")
+    p.add_argument("--reduce-range", dest="weight_bits", action="store_const", const=7,
+                   help=argparse.SUPPRESS)   # the earlier spelling of --weight-bits 7
     p.add_argument("--quantize-heads", action="store_true",
                    help="quantize the output heads too (by default they stay float)")
     p.add_argument("--reseal", metavar="MODEL.onnx",
@@ -130,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, f"--ship-run {args.ship_run} already holds a run; pass --force to replace it")
     try:
         qcfg = QuantConfig(args.method, args.activations, args.weights, not args.per_tensor, not args.quantize_heads,
-                           args.reduce_range)
+                           args.weight_bits == 7)
         summary = export_run(args.checkpoint, out, args.size, args.int8, args.calib, args.calib_frames, qcfg)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))

@@ -179,6 +179,6 @@ def session(model: str | Path | bytes, threads: int = 2, spinning: bool = True,
     # quantized, exact where its weights fit in 7 bits or the CPU has VNNI; the self-test checks it
     warnings.warn(f"{'the model' if isinstance(model, bytes) else model}: onnxruntime's exact uint8 x uint8 kernels do "
                   "not take signed int8 activations; on x86 CPUs without VNNI such a model is exact only with 7-bit "
-                  "weights (bsn-export --reduce-range)", RuntimeWarning, stacklevel=2)
+                  "weights (bsn-export --weight-bits 7, the default)", RuntimeWarning, stacklevel=2)
     so = _options(threads, spinning, profile_prefix, exact_x64=False)
     return ort.InferenceSession(src, so, providers=["CPUExecutionProvider"])
