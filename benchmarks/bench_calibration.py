@@ -2,12 +2,13 @@
 
     python -m benchmarks.bench_calibration [--model MODEL.onnx] \\
         --clip ../shared/data/real/udacity_test_video.mp4 --clip ../shared/data/real/dashcam_highway.mp4 \\
-        --synthetic 5 --out benchmarks/results
+        --clip ../shared/data/real/mountain_highway.mp4 --synthetic 5 --out benchmarks/results
 
 Each clip is fed frame by frame to the runtime's camera state (``CameraState``, no camera file:
 online calibration, as ``bsn-run`` does without ``--calib``), once per setting of the estimator
-(:data:`SETTINGS`): the tracking estimator of ``bsn-calibrate --mount`` on every frame, the same at
-the share the runtime fed it before, and the runtime's online estimator at its share now. Which
+(:data:`SETTINGS`): the tracking estimator of ``bsn-calibrate --mount`` on every frame, the runtime's
+online estimator at its share, and the same with the essential matrix fitted by plain RANSAC (the
+estimator before USAC_ACCURATE refined each pair's direction of travel). Which
 frames reach the estimator and the frame at which the mounting is adopted depend on the frame
 count only (``OnlineCalibrator``), so those are exact counts. The estimator's CPU time (the thread's
 own, on the caller's thread) until it converged, per second of video, is a timing: its share of one
@@ -22,6 +23,7 @@ import argparse
 import statistics
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -40,12 +42,12 @@ from bsn_edge.synth import SynthConfig, write_clip
 SYNTH_FRAMES = 500
 SYNTH_FPS = 25.0                # a dashcam's rate: the runtime then feeds one frame in 2
 SYNTH_SEEDS = (971, 972, 973, 974, 975)
-BEFORE_HZ = 8.0                 # the runtime's share before the online estimator
-# (name, estimator, frames a second fed to it: None = every frame)
-SETTINGS: tuple[tuple[str, MountFitConfig, float | None], ...] = (
-    ("tracking, every frame", MountFitConfig(), None),
-    (f"tracking, {BEFORE_HZ:g}/s (before)", MountFitConfig(), BEFORE_HZ),
-    (f"online, {CameraState.CALIBRATE_HZ:g}/s (runtime)", ONLINE_FIT, CameraState.CALIBRATE_HZ),
+# (short name, name, estimator, frames a second fed to it: None = every frame)
+SETTINGS: tuple[tuple[str, str, MountFitConfig, float | None], ...] = (
+    ("every", "tracking, every frame", MountFitConfig(), None),
+    ("online", f"online, {CameraState.CALIBRATE_HZ:g}/s (runtime)", ONLINE_FIT, CameraState.CALIBRATE_HZ),
+    ("ransac", f"online, {CameraState.CALIBRATE_HZ:g}/s, RANSAC (before)", replace(ONLINE_FIT, essential="ransac"),
+     CameraState.CALIBRATE_HZ),
 )
 
 
@@ -91,12 +93,6 @@ def converge(card, video: Path, estimator: MountFitConfig, hz: float | None,
     return out
 
 
-def _short(setting: str) -> str:
-    """A setting's name on the command line: 'every' for the tracking estimator on every frame, else
-    the name's first word."""
-    return "every" if setting.endswith("every frame") else setting.split(",")[0]
-
-
 def _median(values: list[float]) -> float:
     return statistics.median(values) if values else float("nan")
 
@@ -110,13 +106,14 @@ def main(argv: list[str] | None = None) -> int:
                    help="synthetic clips with known mountings (0: none)")
     p.add_argument("--cache", help="keep the synthetic clips in this folder and reuse them (default: rendered "
                                    "into a temporary folder each run)")
-    p.add_argument("--setting", choices=[_short(name) for name, _, _ in SETTINGS],
-                   action="append", help="only these settings of the estimator (default: all; 'tracking' is the "
-                                         "tracking estimator at its earlier share, 'every' on every frame)")
+    p.add_argument("--setting", choices=[short for short, _, _, _ in SETTINGS],
+                   action="append", help="only these settings of the estimator (default: all; 'every' is the "
+                                         "tracking estimator on every frame, 'ransac' the online one with the "
+                                         "essential matrix's earlier fit)")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--name", default="calibration", help="the report's name in --out")
     args = p.parse_args(argv)
-    chosen = tuple(s for s in SETTINGS if not args.setting or _short(s[0]) in args.setting)
+    chosen = tuple(s[1:] for s in SETTINGS if not args.setting or s[0] in args.setting)
     card = Engine(args.model).card
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:

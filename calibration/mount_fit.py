@@ -29,6 +29,7 @@ from bsn_edge.mounting import Mounting, angles_of
 from bsn_edge.tracks import MAX_CORNERS, WINDOW_PX, detect, track
 
 MAX_ROLL_DEG = 15.0        # a camera rolled further is not mounted for driving
+ESSENTIAL_FITS = {"usac": cv2.USAC_ACCURATE, "ransac": cv2.RANSAC}
 SLOW_ROAD = 0.4            # a low corner moving slower than this share of the median road rate is not road
 
 
@@ -47,6 +48,10 @@ class MountFitConfig:
     work_width:     frames are tracked at about this width (wider frames are shrunk first)
     max_corners:    corners tracked per pair at most (the cost of a pair grows with them)
     window_px:      the optical flow's window (the cost of a corner grows with its area)
+    essential:      the essential matrix's robust fit: ``usac`` (OpenCV's USAC_ACCURATE, GC-RANSAC
+                    with local optimisation, which refines the direction of travel on its inliers) or
+                    ``ransac`` (the best minimal sample's; pair to pair its pitch and yaw scatter about
+                    4x wider, benchmarks/results/calibration.md)
     """
 
     min_flow_px: float = 1.0
@@ -58,8 +63,11 @@ class MountFitConfig:
     work_width: int = 640
     max_corners: int = MAX_CORNERS
     window_px: int = WINDOW_PX
+    essential: str = "usac"
 
     def __post_init__(self) -> None:
+        if self.essential not in ESSENTIAL_FITS:
+            raise ValueError(f"essential must be one of {', '.join(ESSENTIAL_FITS)}, got {self.essential!r}")
         if self.min_flow_px <= 0 or self.max_turn_deg <= 0 or self.min_inliers < 8 or self.min_pairs < 3:
             raise ValueError("min_flow_px and max_turn_deg must be positive, min_inliers >= 8, min_pairs >= 3")
         if self.work_width < 160 or self.max_corners < 2 * self.min_inliers or not 5 <= self.window_px <= 41:
@@ -119,7 +127,8 @@ class MountFit:
         d = np.asarray(self.dist, np.float64) if self.dist else None
         n0 = cv2.undistortPoints(p0[:, None].astype(np.float64), self._K, d).reshape(-1, 2)
         n1 = cv2.undistortPoints(p1[:, None].astype(np.float64), self._K, d).reshape(-1, 2)
-        E, mask = cv2.findEssentialMat(n0, n1, np.eye(3), cv2.RANSAC, 0.999, 1.0 / self._K[0, 0])
+        E, mask = cv2.findEssentialMat(n0, n1, np.eye(3), ESSENTIAL_FITS[self.cfg.essential], 0.999,
+                                       1.0 / self._K[0, 0])
         if E is None or E.shape != (3, 3):
             return "no essential matrix"
         n, R, t, mask = cv2.recoverPose(E, n0, n1, np.eye(3), mask=mask)
