@@ -129,7 +129,10 @@ class Health:
             return SystemState.UNAVAILABLE
         if self._calibrating:
             return SystemState.CALIBRATING
-        slow = self._fps(wall) < self.cfg.fps_floor
+        # the rate is judged once a floor's interval has passed since the first inference in the window:
+        # before that even one inference is on time (the first frame of a run is not DEGRADED)
+        judged = bool(self._work) and wall - self._work[0] >= 1.0 / max(self.cfg.fps_floor, 1e-9)
+        slow = judged and self._fps(wall) < self.cfg.fps_floor
         return SystemState.DEGRADED if slow or any(self._faults[f] for f in DEGRADING) else SystemState.OK
 
     def state(self, t: float, wall: float | None = None) -> SystemState:

@@ -57,8 +57,8 @@ def calibrate(source: str | os.PathLike, board: tuple[int, int] = (9, 6), square
             size = gray.shape[::-1]
         elif gray.shape[::-1] != size:
             # another size means another (resampled) camera matrix: never mixed in
-            skipped.append({"view": name, "reason": f"size {gray.shape[0]}x{gray.shape[1]} differs from "
-                                                    f"{size[1]}x{size[0]}"})
+            skipped.append({"view": name, "reason": f"size {gray.shape[1]}x{gray.shape[0]} (width x height) "
+                                                    f"differs from {size[0]}x{size[1]}"})
             continue
         flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
         found, corners = cv2.findChessboardCorners(gray, (cols, rows), flags)

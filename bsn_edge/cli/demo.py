@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from bsn_edge.cli import run as run_cli
@@ -62,8 +63,21 @@ def main(argv: list[str] | None = None) -> int:
           f"{s['model']['variant']} ({s['model']['quantization']})")
     for name in ("overlay.mp4", "alerts.jsonl", "alerts.log", "summary.json", "contact_sheet.png"):
         print(f"  {out / name}")
-    print(f"  decode the CAN log: bsn-listen --can-log {out / 'alerts.log'}")
+    print(f"  decode the CAN log: {_beside_python('bsn-listen')} --can-log {out / 'alerts.log'}")
     return 0
+
+
+def _beside_python(command: str) -> str:
+    """``command`` as the user can type it: the script beside this Python (``.venv/bin/bsn-listen``
+    in the README's set-up, relative to the working folder when it lies below it), or its bare name
+    when it is not there."""
+    script = Path(sys.executable).parent / command
+    if not script.exists():
+        return command
+    try:
+        return str(script.relative_to(Path.cwd()))
+    except ValueError:
+        return str(script)
 
 
 if __name__ == "__main__":

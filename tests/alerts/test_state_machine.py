@@ -96,3 +96,13 @@ def test_health_unavailable_after_deadline_and_degraded_when_slow():
     assert h.faults["nan_outputs"] == 1
     with pytest.raises(KeyError):
         h.fault("gremlins")
+
+
+def test_the_first_inference_is_on_time_until_the_floor_says_otherwise():
+    """One inference alone says nothing of the rate until 1 / fps_floor has passed without a second."""
+    h = Health(HealthConfig(deadline_s=0.5, fps_floor=8.0, window_s=1.0))
+    h.valid(10.0)
+    assert h.state(10.0) == SystemState.OK and h.state(10.1) == SystemState.OK
+    assert h.state(10.2) == SystemState.DEGRADED          # no second inference in 0.2 s: under 8 per second
+    h.valid(10.21)
+    assert h.state(10.21) == SystemState.DEGRADED         # two in 0.21 s: still under 8 per second
