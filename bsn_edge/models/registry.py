@@ -13,6 +13,7 @@ from bsn_edge.camera import Intrinsics
 from bsn_edge.card import ModelCard
 from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, DepthNet
 from bsn_edge.models.deeplab import EncoderDecoder
+from bsn_edge.models.encoders import encoder_info, make_encoder
 from bsn_edge.models.resnet import ResNetEncoder
 from bsn_edge.models.shared import SharedEncoderBSN
 from bsn_edge.models.unet import UNet
@@ -27,8 +28,11 @@ class ModelSpec:
     encoder_depth: ResNet depth of B. decoder_width / separable: B's decoder (256 dense is the
     paper's; 64 separable is the light one). use_depth: B sees D's depth. distill: trained with
     the teacher's pairwise-similarity loss (lambda = 1) or without (lambda = 0). shared_encoder:
-    D and B read one ResNet-18 encoder (:class:`~bsn_edge.models.shared.SharedEncoderBSN`) instead
-    of one each. oracle_depth: B reads the ground-truth depth given with the frame instead of D's,
+    D and B read one encoder (:class:`~bsn_edge.models.shared.SharedEncoderBSN`) instead of one
+    ResNet each. encoder: that shared encoder, a name of :data:`~bsn_edge.models.encoders.ENCODERS`
+    (``resnet``: ResNet-18; ``efficientnet-lite0``). pretrained: ``imagenet`` when training starts
+    from the encoder's ImageNet weights (the card then names the encoder), else ``''``.
+    oracle_depth: B reads the ground-truth depth given with the frame instead of D's,
     a research arm that says how much better depth would help B (no camera has that depth, so
     such a model is not exported or adapted).
     """
@@ -44,12 +48,23 @@ class ModelSpec:
     input_scale: float = 1.0    # both networks run on the frame resized by this
     shared_encoder: bool = False
     oracle_depth: bool = False
+    encoder: str = "resnet"
+    pretrained: str = ""
 
     def __post_init__(self) -> None:
         if self.arch not in ("deeplab", "unet"):
             raise ValueError(f"unknown arch {self.arch!r}; valid: deeplab, unet")
         if self.shared_encoder and (self.arch != "deeplab" or self.encoder_depth != 18):
             raise ValueError("a shared encoder is D's ResNet-18: it needs arch 'deeplab' and encoder_depth 18")
+        info = encoder_info(self.encoder)
+        if self.encoder != "resnet" and not self.shared_encoder:
+            raise ValueError(f"encoder {self.encoder!r} is built as the one encoder D and B share (shared_encoder)")
+        if self.output_stride not in info.output_strides:
+            raise ValueError(f"encoder {self.encoder!r} runs at output stride "
+                             f"{' or '.join(map(str, info.output_strides))}, not {self.output_stride}")
+        if self.pretrained not in ("", "imagenet") or (self.pretrained and info.load_pretrained is None):
+            raise ValueError(f"pretrained must be '' or 'imagenet' for an encoder that has ImageNet weights; got "
+                             f"{self.pretrained!r} for {self.encoder!r}")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -73,6 +88,8 @@ MODELS: dict[str, ModelSpec] = {
     "shared-light-d": ModelSpec(shared_encoder=True, use_depth=False, **_LIGHT),
     "shared-light-kd": ModelSpec(shared_encoder=True, distill=False, **_LIGHT),
     "shared-light-oracle": ModelSpec(shared_encoder=True, oracle_depth=True, **_LIGHT),
+    # D and B on one EfficientNet-Lite0 that starts from ImageNet: features learnt on real photographs
+    "lite-light": ModelSpec(shared_encoder=True, encoder="efficientnet-lite0", pretrained="imagenet", **_LIGHT),
 }
 
 
@@ -83,10 +100,14 @@ def get_spec(name: str) -> ModelSpec:
         raise ValueError(f"unknown model {name!r}; valid: {', '.join(MODELS)}") from None
 
 
-def build(spec: ModelSpec) -> BlindSpotNet:
+def build(spec: ModelSpec, pretrained: bool = False) -> BlindSpotNet:
+    """The network ``spec`` describes, initialised at random, or with ``pretrained`` its encoder's
+    ImageNet weights where ``spec.pretrained`` says it starts from them (training does; a model whose
+    trained weights are loaded next does not need them)."""
     if spec.shared_encoder:
+        enc = make_encoder(spec.encoder, 3, spec.output_stride, pretrained=pretrained and bool(spec.pretrained))
         return SharedEncoderBSN(spec.encoder_depth, spec.output_stride, spec.decoder_width, spec.depth_width,
-                                spec.separable, spec.use_depth, spec.input_scale, spec.oracle_depth)
+                                spec.separable, spec.use_depth, spec.input_scale, spec.oracle_depth, encoder=enc)
     in_ch = 4 if spec.use_depth else 3
     if spec.arch == "unet":
         b: nn.Module = UNet(in_ch, 1)
@@ -97,9 +118,10 @@ def build(spec: ModelSpec) -> BlindSpotNet:
     return BlindSpotNet(b, d, spec.use_depth, spec.input_scale, spec.oracle_depth)
 
 
-def create_model(name: str) -> BlindSpotNet:
-    """A fresh BlindSpotNet for a registry name (``small``, ``small-light``, ``medium``, ...)."""
-    return build(get_spec(name))
+def create_model(name: str, pretrained: bool = False) -> BlindSpotNet:
+    """A fresh BlindSpotNet for a registry name (``small``, ``small-light``, ``lite-light``, ...);
+    ``pretrained``: its encoder's ImageNet weights loaded, for a variant that starts from them."""
+    return build(get_spec(name), pretrained)
 
 
 def start_from(model: BlindSpotNet, name: str, source: BlindSpotNet, source_name: str) -> str:

@@ -27,7 +27,7 @@ class SharedDepth(nn.Module):
     Log-depth is held to D's range at the decoder's stride and then interpolated, which keeps it
     in range, so every resizing after that is linear in log-depth."""
 
-    def __init__(self, encoder: ResNetEncoder, width: int, separable: bool = True) -> None:
+    def __init__(self, encoder: nn.Module, width: int, separable: bool = True) -> None:
         super().__init__()
         self.encoder = encoder
         self.decoder = DeepLabV3PlusDecoder(encoder.out_channels, width, separable=separable,
@@ -82,14 +82,15 @@ class SharedEncoderBSN(BlindSpotNet):
 
     def __init__(self, encoder_depth: int = 18, output_stride: int = 32, decoder_width: int = 64,
                  depth_width: int = 32, separable: bool = True, use_depth: bool = True,
-                 input_scale: float = 1.0, oracle_depth: bool = False) -> None:
-        encoder = ResNetEncoder(encoder_depth, 3, output_stride)
+                 input_scale: float = 1.0, oracle_depth: bool = False, encoder: nn.Module | None = None) -> None:
+        # ``encoder``: any module publishing out_channels and strides (default: a ResNet of encoder_depth)
+        encoder = encoder if encoder is not None else ResNetEncoder(encoder_depth, 3, output_stride)
         d = SharedDepth(encoder, depth_width)       # D's decoder is separable in both layouts
         b = DepthAwareDecoder(encoder.out_channels, encoder.strides, decoder_width, separable, use_depth)
         super().__init__(b, d, use_depth, input_scale, oracle_depth)
 
     @property
-    def frame_encoder(self) -> ResNetEncoder:
+    def frame_encoder(self) -> nn.Module:
         """The one module that reads the network's input (B reads only its features)."""
         return self.depth_net.encoder
 

@@ -83,6 +83,7 @@ class TrainConfig:
     device: str = "cpu"                      # cpu, cuda or auto (cuda when torch sees a GPU)
     checkpoint_every: int = 100
     init: str = ""                           # start from this run's weights (fine-tuning)
+    encoder_lr: float = 1.0                  # share of lr for an encoder that starts from ImageNet weights
     # arithmetic of the forward and backward passes: fp32, bf16 (autocast; weights and losses stay
     # fp32) or auto (bf16 where the CPU has native bf16: AMX or AVX-512 BF16; CUDA: fp32)
     precision: str = "auto"
@@ -95,6 +96,8 @@ class TrainConfig:
             raise ValueError("train.steps and train.batch_size must be >= 1")
         if not self.lr > 0 or self.distill_weight < 0 or self.depth_weight < 0:
             raise ValueError("train.lr must be positive, the loss weights non-negative")
+        if not 0 < self.encoder_lr <= 1:
+            raise ValueError(f"train.encoder_lr must be in (0, 1], got {self.encoder_lr}")
         if self.depth_object_weight <= 0 or not 0 <= self.depth_grad_scales <= 6:
             raise ValueError("train.depth_object_weight must be positive, train.depth_grad_scales in 0..6")
         if self.device not in ("cpu", "cuda", "auto"):

@@ -420,6 +420,17 @@ def validate(model: torch.nn.Module, cache: SampleCache, frames: int, dtype: tor
             "road_abs_rel": road_err / road_n if road_n else float("nan")}
 
 
+def param_groups(model: torch.nn.Module, lr: float, encoder_share: float) -> list[dict]:
+    """Adam's parameter groups: the frame encoder of a shared-encoder model at ``encoder_share`` of
+    ``lr`` (a pretrained encoder keeps more of what it learnt on real photographs), the rest at ``lr``."""
+    encoder = getattr(model, "frame_encoder", None)
+    if encoder is None or encoder_share == 1.0:
+        return [{"params": list(model.parameters())}]
+    own = {id(p) for p in encoder.parameters()}
+    return [{"params": list(encoder.parameters()), "lr": lr * encoder_share},
+            {"params": [p for p in model.parameters() if id(p) not in own]}]
+
+
 def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = False,
           progress: bool = True, force: bool = False, stop_after: float | None = None) -> dict[str, Any]:
     """Train per ``cfg`` on the labelled clips under ``data_dir``; write the run to ``out``.
@@ -461,7 +472,9 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         cache.attach_teacher(teacher, cfg.teacher.scale, cfg.train.distill_grid, progress=show,
                              resize=lambda x, sc: _layout(scaled(x, sc), cl), dtype=dtype)
 
-    model = create_model(cfg.model.name)
+    spec = get_spec(cfg.model.name)
+    # a fresh run starts from the encoder's ImageNet weights where the variant says so
+    model = create_model(cfg.model.name, pretrained=bool(spec.pretrained) and not cfg.train.init and state is None)
     if cfg.train.init:
         init, init_card = Run(cfg.train.init).load_model()
         try:
@@ -470,7 +483,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             raise ValueError(f"train.init {cfg.train.init}: {e}") from None
     model.to(dev)
     start, seconds_before = 0, 0.0
-    optim = Optimizer(model.parameters(), cfg.train.lr, cfg.train.steps, cfg.train)
+    optim = Optimizer(param_groups(model, cfg.train.lr, cfg.train.encoder_lr if spec.pretrained else 1.0),
+                      cfg.train.lr, cfg.train.steps, cfg.train)
     if state is not None:
         model.load_state_dict(state["weights"])
         optim.load_state_dict(state)
