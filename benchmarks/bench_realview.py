@@ -62,13 +62,17 @@ def sources() -> list[Source]:
     pair = REAL / "manydepth_pair"
     if (pair / "target.jpg").is_file():
         imgs = [cv2.imread(str(pair / n)) for n in ("source.jpg", "target.jpg")]
-        k = json.loads((pair / "intrinsics_normalised.json").read_text())
-        K = np.array(k["K"] if isinstance(k, dict) and "K" in k else k, dtype=float)
-        h, w = imgs[0].shape[:2]
-        intr = Intrinsics(K[0, 0] * w, K[1, 1] * h, K[0, 2] * w, K[1, 2] * h, w, h)
-        out.append(Source("city pair", imgs, [0, 1], Calibration.of(intr, (), None),
+        out.append(Source("city pair", imgs, [0, 1], city_pair_camera(imgs[0].shape[:2]),
                           "published intrinsics, model camera's mounting"))
     return out
+
+
+def city_pair_camera(size_hw: tuple[int, int]) -> Calibration:
+    """The city pair's camera file: its published (normalised) intrinsics at ``size_hw``, no mounting."""
+    k = json.loads((REAL / "manydepth_pair" / "intrinsics_normalised.json").read_text())
+    K = np.array(k["K"] if isinstance(k, dict) and "K" in k else k, dtype=float)
+    h, w = size_hw
+    return Calibration.of(Intrinsics(K[0, 0] * w, K[1, 1] * h, K[0, 2] * w, K[1, 2] * h, w, h), (), None)
 
 
 def run_model(engine: Engine, src: Source) -> list[np.ndarray]:

@@ -15,7 +15,7 @@ PROG = "bsn-bench"
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "footprint",
-         "realcam", "realview", "adapt")
+         "realcam", "realview", "realboxes", "adapt")
 ADAPT_SOURCE, ADAPT_TARGET = "suburb", "urban"
 ADAPT_EVAL_SEEDS = (1300, 1301)   # held-out target clips: seeds no training clip has
 SEEDS = (0, 1, 2)                 # training seeds of the paper's tables
@@ -109,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
             _py("-m", "benchmarks.bench_realcam", "--out", out)
         if "realview" in names:
             _py("-m", "benchmarks.bench_realview", "--out", out)
+        if "realboxes" in names:
+            _py("-m", "benchmarks.bench_realboxes", "--out", out)
         if "floor" in names:
             _py("-m", "benchmarks.bench_floor", "--out", out)
         if "int8_cpu" in names:

