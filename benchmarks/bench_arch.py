@@ -47,8 +47,8 @@ from bsn_edge.camera import Intrinsics
 from bsn_edge.card import UNRECORDED
 from bsn_edge.cli.common import parse_size
 from bsn_edge.export import to_onnx
+from bsn_edge.modelfile.read import session
 from bsn_edge.models import create_model, describe
-from bsn_edge.runtime.model_file import session
 from bsn_edge.train.config import load_config
 from bsn_edge.train.run import Run
 from bsn_edge.train.trainer import autocast_dtype, precision_name

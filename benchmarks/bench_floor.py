@@ -43,8 +43,8 @@ from benchmarks.common import class_name, machine, write_result
 from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
 from bsn_edge.export.seal import read_card
+from bsn_edge.modelfile.read import session
 from bsn_edge.models import create_model
-from bsn_edge.runtime.model_file import session
 
 CHECKOUT = Path(__file__).resolve().parents[1]
 # (channels, stride below the input) of dense 3x3 stacks: ResNet stages at 1/4 to 1/32

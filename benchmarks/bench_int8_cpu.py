@@ -28,9 +28,9 @@ from bsn_edge.card import ModelCard
 from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.export import quantize, to_onnx
 from bsn_edge.export.quantize import QuantConfig
+from bsn_edge.modelfile import selftest
+from bsn_edge.modelfile.read import ModelFile, session
 from bsn_edge.models import create_model
-from bsn_edge.runtime import selftest
-from bsn_edge.runtime.model_file import ModelFile, session
 
 SHIPPED = DEFAULT_MODEL
 ROUNDS, CALLS = 6, 20

@@ -23,7 +23,7 @@ from bsn_edge.data import find_clips
 from bsn_edge.export import QuantConfig, quantize, to_onnx
 from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.metrics import Counts
-from bsn_edge.runtime.model_file import session
+from bsn_edge.modelfile.read import session
 from bsn_edge.sequence import read_mask
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.frames import read_rgb
@@ -35,7 +35,7 @@ BAR_SPEEDUP, BAR_FPS, GOAL_FPS = 2.5, 60.0, 100.0
 
 def latency(path: Path, frame: np.ndarray, runs: int, exact_x64: bool = True) -> float:
     """Median seconds per run of the model at ``path`` on ``frame``, after warm-up (``exact_x64``: see
-    :func:`bsn_edge.runtime.model_file.session`)."""
+    :func:`bsn_edge.modelfile.read.session`)."""
     s = session(path, threads=2, exact_x64=exact_x64)
     return summary(time_calls(lambda _: s.run(None, {"frame": frame}), runs, warmup=10))["median_ms"] / 1e3
 

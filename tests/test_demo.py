@@ -6,7 +6,7 @@ import pytest
 
 from bsn_edge.card import ModelCard
 from bsn_edge.cli import demo
-from bsn_edge.runtime.model_file import ModelFile
+from bsn_edge.modelfile.read import ModelFile
 
 SHIPPED_RUN = demo.DEFAULT_MODEL.parent / "default"
 

@@ -1,22 +1,25 @@
 """The packages are layers: each imports only from layers below it, so no import cycle can come back.
 
 Lowest first. A module imports from its own package or from a lower layer, never from its own layer's
-other packages or from above (imports inside functions count too).
+other packages or from above: ``import bsn_edge.x``, ``from bsn_edge.x import y``, ``from bsn_edge
+import x`` and ``importlib.import_module("bsn_edge.x")`` alike, at the top or inside functions.
+This file is the one place that says which packages are torch-free (:data:`TORCH_FREE`): the car's
+side, which ``bsn-run``, ``bsn-listen`` and ``bsn-calibrate`` load.
 """
 
 import ast
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
-# where the packages of bsn_edge live in the checkout (see pyproject's package-dir)
-FOLDERS = {"bsn_edge": ROOT / "bsn_edge", "export": ROOT / "export", "alerts": ROOT / "alerts",
-           "calibration": ROOT / "calibration"}
+PACKAGE = ROOT / "bsn_edge"
 LAYERS = [
     ("fields",),
     ("camera",),
     ("mounting",),
     ("semantics", "sequence", "tracks", "metrics", "card", "model_frame"),
-    ("calibration",),
+    ("modelfile", "calibration"),
     ("synth", "alerts"),
     ("runtime",),
     ("labels",),
@@ -29,6 +32,10 @@ LAYERS = [
     ("cli",),
 ]
 LEVEL = {pkg: i for i, layer in enumerate(LAYERS) for pkg in layer}
+# the car's side: never torch, onnx or the quantization tools, even on a path taken only sometimes
+TORCH_FREE = ("fields", "camera", "mounting", "semantics", "sequence", "tracks", "metrics", "card",
+              "model_frame", "modelfile", "calibration", "synth", "alerts", "runtime")
+HEAVY = ("torch", "onnx", "onnxruntime.quantization", "matplotlib")
 
 
 def unit(module: str) -> str | None:
@@ -37,34 +44,87 @@ def unit(module: str) -> str | None:
     return parts[1] if parts[0] == "bsn_edge" and len(parts) > 1 else None
 
 
-def modules():
-    for name, folder in FOLDERS.items():
-        for f in sorted(folder.rglob("*.py")):
-            rel = f.relative_to(folder)
-            if name == "bsn_edge":
-                pkg = rel.parts[0].removesuffix(".py") if rel.parts[0] != "__init__.py" else None
-            else:
-                pkg = name
-            yield f, pkg
+def modules(root: Path = PACKAGE):
+    """Every module of the package below ``root`` and the package (first folder or module) it is in."""
+    for f in sorted(root.rglob("*.py")):
+        rel = f.relative_to(root)
+        yield f, rel.parts[0].removesuffix(".py") if rel.parts[0] != "__init__.py" else None
+
+
+def imported(tree: ast.AST) -> list[tuple[int, str]]:
+    """``(line, module)`` of every import in ``tree``: ``from bsn_edge import x`` names ``bsn_edge.x``,
+    and a call of ``import_module`` or ``__import__`` with a literal name names that module."""
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.append((node.lineno, node.module))
+            if node.module == "bsn_edge":
+                out += [(node.lineno, f"bsn_edge.{a.name}") for a in node.names]
+        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
+                and isinstance(node.args[0].value, str):
+            f = node.func
+            name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+            if name in ("import_module", "__import__"):
+                out.append((node.lineno, node.args[0].value))
+    return out
+
+
+def upward_imports(root: Path = PACKAGE) -> list[str]:
+    bad = []
+    for f, pkg in modules(root):
+        if pkg is None:
+            continue
+        for line, name in imported(ast.parse(f.read_text())):
+            target = unit(name)
+            if target is None or target == pkg:
+                continue
+            if target not in LEVEL or LEVEL[target] >= LEVEL[pkg]:
+                bad.append(f"{f.relative_to(root.parent)}:{line} ({pkg}) imports {name} ({target})")
+    return bad
+
+
+def heavy_imports(root: Path = PACKAGE) -> list[str]:
+    bad = []
+    for f, pkg in modules(root):
+        if pkg not in TORCH_FREE:
+            continue
+        for line, name in imported(ast.parse(f.read_text())):
+            if any(name == h or name.startswith(h + ".") for h in HEAVY):
+                bad.append(f"{f.relative_to(root.parent)}:{line} ({pkg}, torch-free) imports {name}")
+    return bad
 
 
 def test_every_package_has_a_layer():
     pkgs = {pkg for _, pkg in modules() if pkg is not None}
     assert pkgs == set(LEVEL), f"place these in LAYERS: {sorted(pkgs - set(LEVEL))}; gone: {sorted(set(LEVEL) - pkgs)}"
+    assert set(TORCH_FREE) <= set(LEVEL)
 
 
 def test_no_package_imports_from_its_own_layer_or_above():
-    bad = []
-    for f, pkg in modules():
-        if pkg is None:
-            continue
-        for node in ast.walk(ast.parse(f.read_text())):
-            names = [node.module] if isinstance(node, ast.ImportFrom) and node.module else \
-                [a.name for a in node.names] if isinstance(node, ast.Import) else []
-            for name in names:
-                target = unit(name)
-                if target is None or target == pkg:
-                    continue
-                if LEVEL[target] >= LEVEL[pkg]:
-                    bad.append(f"{f.relative_to(ROOT)}:{node.lineno} ({pkg}) imports {name} ({target})")
+    bad = upward_imports()
     assert not bad, "\n".join(bad)
+
+
+def test_no_torch_free_package_names_a_training_tool():
+    bad = heavy_imports()
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize(("module", "line"), [
+    ("alerts/state_machine.py", "from bsn_edge import runtime"),
+    ("alerts/state_machine.py", "importlib.import_module('bsn_edge.runtime')"),
+    ("camera.py", "from bsn_edge import mounting"),
+    ("runtime/loop.py", "from bsn_edge.train import trainer"),
+    ("calibration/camera_file.py", "import torch"),
+])
+def test_the_checks_catch_each_way_of_importing_upwards(tmp_path, module, line):
+    """Each form, written into a copy of the package, is found (and the copy is clean without it)."""
+    import shutil
+    copy = tmp_path / "bsn_edge"
+    shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    assert upward_imports(copy) == [] and heavy_imports(copy) == []
+    target = copy / module
+    target.write_text(target.read_text() + f"\n\ndef _probe():\n    import importlib\n    {line}\n")
+    assert upward_imports(copy) + heavy_imports(copy), f"{line} in {module} was not caught"

@@ -218,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
             maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
             trust = None
             if args.trust:
-                from bsn_edge.runtime.trust import load_public_keys
+                from bsn_edge.modelfile.trust import load_public_keys
                 trust = load_public_keys(args.trust)
             cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.in_turn, in_flight=args.in_flight)
             threads = cfg.engine_threads if args.threads is None else args.threads

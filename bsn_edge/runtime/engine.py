@@ -3,7 +3,7 @@
 At load, in this order, any failure raising :class:`ModelError` (the runtime then refuses to
 start): the file is read in chunks; its model card is read and validated; the digest of the
 graph and weights is compared with the card's; with trusted keys, the signature over both
-digests is checked (:mod:`bsn_edge.runtime.trust`); the session is built from the file; its
+digests is checked (:mod:`bsn_edge.modelfile.trust`); the session is built from the file; its
 input and outputs are checked against the card; the self-test frame is run and compared with the
 answer stored at export.
 """
@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 
 from bsn_edge.card import CARD_SHA_KEY, FP32, ModelCard
-from bsn_edge.runtime import selftest
-from bsn_edge.runtime.model_file import ModelFile, session
-from bsn_edge.runtime.trust import UntrustedModelError, verify
+from bsn_edge.modelfile import selftest
+from bsn_edge.modelfile.read import ModelFile, session
+from bsn_edge.modelfile.trust import UntrustedModelError, verify
 
 
 class ModelError(ValueError):
@@ -31,7 +31,7 @@ class Engine:
 
     def __init__(self, model: str | Path, threads: int = 2, spinning: bool = False,
                  trust: Mapping[str, Any] | None = None) -> None:
-        """``trust``: public keys by id (:func:`bsn_edge.runtime.trust.load_public_keys`); with them, a
+        """``trust``: public keys by id (:func:`bsn_edge.modelfile.trust.load_public_keys`); with them, a
         model not signed by one of them is refused (``signer`` says which key signed). ``spinning``:
         onnxruntime's idle threads spin-wait for the next work; off by default, because between two
         inferences the loop decodes, warps and calibrates on the same cores, which spinning threads

@@ -15,8 +15,8 @@ from bsn_edge.cli.export import main as export_main
 from bsn_edge.export import FusedModel, check_parity, head_nodes, quantize, read_card, to_onnx
 from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.export.quantize import QuantConfig
+from bsn_edge.modelfile.read import session
 from bsn_edge.models import create_model
-from bsn_edge.runtime.model_file import session
 from bsn_edge.synth import SynthConfig, write_clip
 from bsn_edge.train.run import Run
 from tests.cards import card_for
@@ -317,7 +317,7 @@ def test_the_seal_digest_and_metadata_agree_with_onnx_itself(exported):
     """The runtime's protobuf walk (no onnx package) against onnx's own serializer and parser."""
     import hashlib
 
-    from bsn_edge.runtime.model_file import ModelFile
+    from bsn_edge.modelfile.read import ModelFile
 
     out = exported
     m = onnx.load(str(out))

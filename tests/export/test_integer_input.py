@@ -17,8 +17,8 @@ from bsn_edge.export.fused import normalisation
 from bsn_edge.export.integer_input import MAX_WEIGHT, _integer_weights, integer_input
 from bsn_edge.export.quantize import QuantConfig
 from bsn_edge.export.space_to_depth import SpaceToDepthInput
+from bsn_edge.modelfile.read import ModelFile, session
 from bsn_edge.models import create_model
-from bsn_edge.runtime.model_file import ModelFile, session
 from bsn_edge.synth import SynthConfig, write_clip
 from tests.cards import card_for
 

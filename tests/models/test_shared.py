@@ -8,8 +8,8 @@ import torch
 
 from benchmarks.bench_arch import count_gmacs
 from bsn_edge.export import FusedModel, to_onnx
+from bsn_edge.modelfile.read import session
 from bsn_edge.models import create_model, get_spec, start_from
-from bsn_edge.runtime.model_file import session
 from tests.cards import card_for
 
 

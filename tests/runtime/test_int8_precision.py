@@ -12,7 +12,7 @@ import pytest
 onnx = pytest.importorskip("onnx")
 from onnx import TensorProto, helper, numpy_helper  # noqa: E402
 
-from bsn_edge.runtime.model_file import session  # noqa: E402
+from bsn_edge.modelfile.read import session  # noqa: E402
 
 C_IN, C_OUT, SIZE = 64, 8, 6
 X_SCALE, W_SCALE, Y_SCALE = 1 / 255, 1 / 127, 1.5

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from bsn_edge.runtime import selftest
-from bsn_edge.runtime.selftest import TOLERANCE, SelfTestError
+from bsn_edge.modelfile import selftest
+from bsn_edge.modelfile.selftest import TOLERANCE, SelfTestError
 
 SIZE = (64, 128)
 

@@ -223,8 +223,8 @@ def test_a_sealed_graph_with_the_wrong_output_ranks_is_refused_at_load(setup, tm
     import onnx
     from onnx import TensorProto, helper
 
-    from bsn_edge.runtime.model_file import graph_digest
-    from export.seal import read_card, set_metadata
+    from bsn_edge.export.seal import read_card, set_metadata
+    from bsn_edge.modelfile.read import graph_digest
     model, clip = setup
     card = read_card(model)
     h, w = card.input_size

@@ -13,9 +13,9 @@ from bsn_edge.alerts.can_codec import decode
 from bsn_edge.card import CARD_SHA_KEY, card_digest
 from bsn_edge.cli import export as export_cli
 from bsn_edge.cli import run as run_cli
+from bsn_edge.modelfile.trust import SIGNATURE_KEY, load_public_keys
 from bsn_edge.runtime import Engine
 from bsn_edge.runtime.engine import ModelError
-from bsn_edge.runtime.trust import SIGNATURE_KEY, load_public_keys
 
 
 @pytest.fixture
@@ -110,7 +110,7 @@ def test_the_shipped_default_is_signed_with_the_projects_key():
 def test_reseal_turns_a_model_from_before_seals_into_one_the_runtime_runs(setup, tmp_path):
     """A model exported before models were sealed (no graph digest, no self-test answer) is refused;
     bsn-export --reseal records both, and the resealed file runs with the same card."""
-    from export.seal import read_card, set_metadata
+    from bsn_edge.export.seal import read_card, set_metadata
     model, _ = setup
     card = read_card(model)
     m = onnx.load(str(model))

@@ -25,7 +25,7 @@ class OnnxImageModel:
     """One onnxruntime session and the pre-processing its input asks for."""
 
     def __init__(self, path: str | Path, threads: int = 2) -> None:
-        from bsn_edge.runtime.model_file import session
+        from bsn_edge.modelfile.read import session
 
         self.path = Path(path)
         if not self.path.is_file():

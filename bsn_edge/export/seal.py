@@ -12,8 +12,8 @@ from pathlib import Path
 import onnx
 
 from bsn_edge.card import ModelCard
-from bsn_edge.runtime import selftest
-from bsn_edge.runtime.model_file import ModelFile, graph_digest, session
+from bsn_edge.modelfile import selftest
+from bsn_edge.modelfile.read import ModelFile, graph_digest, session
 from bsn_edge.sequence.images import atomic_write_bytes
 
 

@@ -1,4 +1,4 @@
-"""Signing exported models with an Ed25519 key (the check is :mod:`bsn_edge.runtime.trust`).
+"""Signing exported models with an Ed25519 key (the check is :mod:`bsn_edge.modelfile.trust`).
 
 ``new_key`` writes a key pair: the private key (PEM, readable by its owner only) and, beside it,
 ``.pub`` to hand to every ``bsn-run --trust``. ``sign`` adds the signature over a sealed model's
@@ -17,8 +17,8 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from bsn_edge.card import CARD_SHA_KEY
-from bsn_edge.runtime.model_file import graph_digest
-from bsn_edge.runtime.trust import SIGNATURE_KEY, key_id, signed_message
+from bsn_edge.modelfile.read import graph_digest
+from bsn_edge.modelfile.trust import SIGNATURE_KEY, key_id, signed_message
 from bsn_edge.sequence.images import atomic_write_bytes
 
 

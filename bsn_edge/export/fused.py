@@ -21,7 +21,7 @@ from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
 from bsn_edge.export.seal import seal, set_metadata
 from bsn_edge.export.space_to_depth import SpaceToDepthInput, block_conv, fits
 from bsn_edge.export.upsample import ShuffleUpsample, with_shuffle_upsampling
-from bsn_edge.runtime.model_file import session
+from bsn_edge.modelfile.read import session
 
 OPSET = 17
 PARITY_ATOL = 1e-3      # fp32 onnxruntime vs torch, on probabilities
