@@ -4,7 +4,8 @@ No ``onnx`` package: the file is a protobuf ``ModelProto`` whose top-level field
 here (wire format only). ``graph_sha256`` is the sha256 of every top-level field except
 ``metadata_props`` (field 14), in file order: the graph, its weights, opsets and producer, so
 the digest can be stored inside the file's own metadata. The export computes it with this same
-code. The runtime reads the file in chunks (the weights are never held twice in memory).
+code. The runtime reads the file once: the bytes it hashed and verified are the bytes onnxruntime
+builds its session from.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import hashlib
 import io
 import warnings
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
@@ -106,24 +107,27 @@ def read_metadata(data: bytes) -> dict[str, str]:
 
 @dataclass(frozen=True)
 class ModelFile:
-    """A model file's metadata and the digest of everything else, read in chunks. The session is
-    then built from the same path; the self-test checks what was loaded."""
+    """A model file's bytes, read once, with their metadata and the digest of everything else.
+
+    The session is built from ``data``, the bytes that were hashed and verified, never from the
+    path again: a file replaced after the check cannot be the one that runs."""
 
     path: Path
     metadata: dict[str, str]
     graph_sha256: str
+    data: bytes = field(default=b"", repr=False, compare=False)
 
     @classmethod
     def read(cls, path: str | Path) -> ModelFile:
         p = Path(path)
         if not p.is_file():
             raise FileNotFoundError(f"model {p} not found")
+        data = p.read_bytes()
         try:
-            with open(p, "rb") as f:
-                metadata, digest = _scan(f, p.stat().st_size)
+            metadata, digest = _scan(io.BytesIO(data), len(data))
         except ValueError as e:
             raise ValueError(f"{p}: not an ONNX model file ({e})") from None
-        return cls(p, metadata, digest)
+        return cls(p, metadata, digest, data)
 
 
 # what onnxruntime says when its exact x86 kernels (session.x64quantprecision) meet signed activations

@@ -59,7 +59,8 @@ class Engine:
                 raise ModelError(str(e)) from None
         try:
             # 7-bit weights are exact on every x86 CPU's fast kernels; 8-bit ones need the exact ones
-            self.sess = session(mf.path, threads, spinning, exact_x64=not self.card.seven_bit_weights)
+            # from the bytes that were verified, not the path: the file may have changed since
+            self.sess = session(mf.data, threads, spinning, exact_x64=not self.card.seven_bit_weights)
         except Exception as e:
             raise ModelError(f"{self.path}: onnxruntime cannot load it: {e}") from None
         self._check_io()

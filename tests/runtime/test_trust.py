@@ -123,3 +123,30 @@ def test_reseal_turns_a_model_from_before_seals_into_one_the_runtime_runs(setup,
     engine = Engine(tmp_path / "new.onnx")
     assert engine.card.graph_sha256 == card.graph_sha256 and engine.card.threshold == card.threshold
     assert engine.self_test["max_abs_prob"] < 1e-5, "its own answer, recorded at reseal"
+
+
+def test_a_file_swapped_after_the_check_is_not_what_runs(setup, tmp_path, keys, monkeypatch):
+    """The model is read once: the bytes that were hashed and whose signature was checked are the bytes
+    onnxruntime runs. Here the file is replaced by another between the check and the session; the
+    engine still runs the verified model, frame for frame."""
+    import numpy as np
+
+    import bsn_edge.runtime.engine as engine_mod
+    from bsn_edge.modelfile.read import session as real_session
+    model, _ = setup
+    ours, _ = keys
+    signed = signed_copy(model, tmp_path, ours)
+    original = signed.read_bytes()
+    other = tmp_path / "other.onnx"
+    assert export_cli.main(["--reseal", str(model), "--out", str(other)]) == 0   # valid, unsigned, same graph
+
+    def swap_then_open(src, *args, **kwargs):
+        signed.write_bytes(b"\x08\x07" + other.read_bytes()[2:-7])      # anything but the verified file
+        return real_session(src, *args, **kwargs)
+    monkeypatch.setattr(engine_mod, "session", swap_then_open)
+    engine = Engine(signed, trust=load_public_keys(f"{ours}.pub"))
+    assert signed.read_bytes() != original
+    frame = np.random.default_rng(0).integers(0, 256, (1, *engine.card.input_size, 3), np.uint8)
+    want = real_session(original, 2, False, exact_x64=not engine.card.seven_bit_weights).run(None, {"frame": frame})
+    got = engine.infer(frame)
+    assert all(np.allclose(a, b, atol=1e-6) for a, b in zip(want, got, strict=True))
