@@ -182,8 +182,9 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
     lines.append("  faults: " + (", ".join(f"{k} {v}" for k, v in faults.items()) if faults else "none"))
     m = summary["camera"]["mounting"]
     if camera.calibrating:
-        lines.append(f"  camera: still {camera.progress()}; online calibration needs about a minute of "
-                     "forward driving (or run bsn-calibrate --mount once and pass --calib)")
+        lines.append(f"  camera: still {camera.progress()}; online calibration needs a few seconds of straight "
+                     "forward driving, longer with turns, stops or little texture (or run bsn-calibrate --mount once "
+                     "and pass --calib)")
     elif m is not None:
         lines.append(f"  camera: height {m['height_m']:.2f} m, pitch {m['pitch_deg']:+.2f}, yaw {m['yaw_deg']:+.2f}, "
                      f"roll {m['roll_deg']:+.2f} deg ({summary['camera']['calibration'].get('source', 'camera file')})")
