@@ -10,7 +10,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from bsn_edge.alerts.can_codec import decode, invalid_fields, to_alert_text
-from bsn_edge.alerts.e2e import counter_gap
+from bsn_edge.alerts.e2e import COUNTER_MOD, counter_gap
 from bsn_edge.alerts.serial_codec import FrameDecoder
 from bsn_edge.cli.common import fail
 
@@ -56,6 +56,10 @@ class Printer:
             note = f"  (undefined {', '.join(bad)})"
         if not d.crc_ok:
             self.bad_crc += 1   # its counter cannot be trusted: the counter state stays
+        elif not 0 <= d.counter < COUNTER_MOD:
+            # outside the DBC's 0..14 (15 is 'invalid'): flagged, and no loss is counted from it
+            self.bad_fields += 1
+            note += f"  (counter {d.counter} outside 0-{COUNTER_MOD - 1})"
         else:
             prev = self.last.get(d.name)
             if prev == d.counter:
@@ -82,6 +86,13 @@ class Printer:
                 f"{self.bad_fields} with an undefined field, {self.bad_lines} unreadable lines")
 
 
+ECHO_CHARS = 60     # of a bad line or message echoed back: enough to recognise it, never a whole megabyte
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= ECHO_CHARS else f"{text[:ECHO_CHARS]}... ({len(text)} characters)"
+
+
 def candump_lines(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]:
     """Frames of a candump log; comment, malformed and truncated lines are reported and skipped."""
     with open(path, errors="replace") as f:
@@ -93,11 +104,11 @@ def candump_lines(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]
                 continue
             m = CANDUMP.match(text)
             if m is None:
-                show.bad_line(f"{path}:{n}", f"not a candump line: {text[:60]!r}")
+                show.bad_line(f"{path}:{n}", f"not a candump line: {_short(text)!r}")
                 continue
             payload = m.group(3)
             if len(payload) % 2 or len(payload) > 16:
-                show.bad_line(f"{path}:{n}", f"truncated or oversized data {payload!r}")
+                show.bad_line(f"{path}:{n}", f"truncated or oversized data {_short(payload)!r}")
                 continue
             yield int(m.group(2), 16), bytes.fromhex(payload), f"{path}:{n}"
 
@@ -108,14 +119,18 @@ PYTHON_CAN_LOGS = (".asc", ".blf", ".csv", ".db", ".mf4", ".trc")
 def python_can_log(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]:
     import can
 
-    reader = iter(can.LogReader(str(path)))
+    try:
+        reader = iter(can.LogReader(str(path)))
+    except Exception as e:  # not a log of that kind at all: an unreadable file, as a damaged record is
+        show.bad_line(str(path), f"unreadable ({type(e).__name__}: {_short(str(e))})")
+        return
     while True:
         try:
             msg = next(reader)
         except StopIteration:
             return
         except Exception as e:  # a damaged record: python-can cannot go on after it
-            show.bad_line(str(path), f"unreadable from here on ({type(e).__name__}: {e})")
+            show.bad_line(str(path), f"unreadable from here on ({type(e).__name__}: {_short(str(e))})")
             return
         yield msg.arbitration_id, bytes(msg.data), str(path)
 

@@ -211,3 +211,35 @@ def test_listen_on_a_serial_port_counts_lost_frames(monkeypatch, capsys):
     assert opened == ["loop://"]
     assert "16 frames, 0 with a bad CRC, 4 lost, 0 repeated" in out.err
     assert out.out.count("(2 lost)") == 2 and out.out.count("status #") == 8
+
+
+def test_a_counter_outside_the_dbcs_range_is_flagged_and_moves_no_counter(tmp_path, capsys):
+    """Alive counters run 0-14 (the DBC's range; 15 is reserved as invalid). A frame with a good CRC and
+    a counter of 15 is flagged and moves no counter state: the counters around it count the one
+    frame it stood in for as lost (9 -> 11), not the 20 that counting from 15 and back would make."""
+    from bsn_edge.alerts.e2e import e2e_crc
+    fs = frames(25)
+    hid, data = fs[20]                        # frame 10's hazard message
+    bad = bytearray(data)
+    bad[6] |= 0xF0                            # Hazard_Counter (bits 52-55) = 15
+    bad[7] = e2e_crc(bytes(bad[:7]), hid)
+    fs[20] = (hid, bytes(bad))
+    log = tmp_path / "c15.log"
+    log.write_text("".join(candump(f, d, i * 0.05) for i, (f, d) in enumerate(fs)))
+    assert listen_cli.main(["--can-log", str(log)]) == 1
+    out = capsys.readouterr()
+    assert "(counter 15 outside 0-14)" in out.out
+    assert "1 lost" in out.err and "1 with an undefined field" in out.err
+
+
+def test_a_huge_bad_line_is_echoed_short_and_a_file_of_another_kind_exits_1(tmp_path, capsys):
+    log = tmp_path / "big.log"
+    log.write_text("x" * 1_000_000 + "\n" + "(1.000000) vcan0 500#" + "00" * 400_000 + "\n")
+    assert listen_cli.main(["--can-log", str(log)]) == 1
+    err = capsys.readouterr().err
+    assert len(err) < 2000 and "1000000 characters" in err and "2 unreadable lines" in err
+    blf = tmp_path / "random.blf"
+    blf.write_bytes(bytes(range(256)) * 40)
+    assert listen_cli.main(["--can-log", str(blf)]) == 1          # as documented: something was wrong
+    err = capsys.readouterr().err
+    assert "unreadable" in err and "0 frames" in err
