@@ -72,7 +72,7 @@ class Health:
         self._lock = threading.Lock()
 
     def calibrating(self, on: bool) -> None:
-        """While on, a state that would be OK or DEGRADED reads CALIBRATING."""
+        """While on, a state that would be OK reads CALIBRATING (a fault still reads as the fault)."""
         with self._lock:
             self._calibrating = bool(on)
 
@@ -125,15 +125,17 @@ class Health:
         return (len(recent) - 1) / span if span < self.cfg.window_s else len(recent) / self.cfg.window_s
 
     def _state(self, t: float, wall: float) -> SystemState:
+        # precedence: a fault outranks calibrating (UNAVAILABLE > DEGRADED > CALIBRATING > OK), so a
+        # fault while the camera is still being calibrated shows as the fault
         if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
             return SystemState.UNAVAILABLE
-        if self._calibrating:
-            return SystemState.CALIBRATING
         # the rate is judged once a floor's interval has passed since the first inference in the window:
         # before that even one inference is on time (the first frame of a run is not DEGRADED)
         judged = bool(self._work) and wall - self._work[0] >= 1.0 / max(self.cfg.fps_floor, 1e-9)
         slow = judged and self._fps(wall) < self.cfg.fps_floor
-        return SystemState.DEGRADED if slow or any(self._faults[f] for f in DEGRADING) else SystemState.OK
+        if slow or any(self._faults[f] for f in DEGRADING):
+            return SystemState.DEGRADED
+        return SystemState.CALIBRATING if self._calibrating else SystemState.OK
 
     def state(self, t: float, wall: float | None = None) -> SystemState:
         with self._lock:

@@ -106,3 +106,23 @@ def test_the_first_inference_is_on_time_until_the_floor_says_otherwise():
     assert h.state(10.2) == SystemState.DEGRADED          # no second inference in 0.2 s: under 8 per second
     h.valid(10.21)
     assert h.state(10.21) == SystemState.DEGRADED         # two in 0.21 s: still under 8 per second
+
+
+def test_a_fault_outranks_calibrating():
+    """UNAVAILABLE > DEGRADED > CALIBRATING > OK: a slow loop or a failed output while the camera is
+    still being calibrated reads DEGRADED, not CALIBRATING."""
+    h = Health(HealthConfig(deadline_s=0.5, fps_floor=8.0, window_s=1.0))
+    h.calibrating(True)
+    for k in range(30):
+        h.valid(k * 0.05)                      # 20 fps
+    assert h.state(1.45) == SystemState.CALIBRATING
+    for k in range(10):
+        h.valid(2.0 + k * 0.2)                 # 5 fps
+    assert h.state(3.85) == SystemState.DEGRADED
+    h2 = Health(HealthConfig(deadline_s=0.5, fps_floor=8.0, window_s=1.0))
+    h2.calibrating(True)
+    for k in range(30):
+        h2.valid(k * 0.05)
+    h2.fault("sink_errors")
+    assert h2.state(1.45) == SystemState.DEGRADED
+    assert h2.state(3.0) == SystemState.UNAVAILABLE
