@@ -9,10 +9,13 @@ the training data loader read it; this class alone writes and reads it.
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from bsn_edge.camera import Intrinsics
 from bsn_edge.fields import number
@@ -49,6 +52,7 @@ class Calibration:
         self.intrinsics  # noqa: B018 - validates
         if len(self.dist) not in (0, 4, 5, 8, 12, 14):
             raise ValueError(f"dist must hold 0, 4, 5, 8, 12 or 14 OpenCV coefficients, got {len(self.dist)}")
+        check_physical(self.intrinsics, self.dist)
 
     @classmethod
     def of(cls, intrinsics: Intrinsics, dist: tuple[float, ...] = (), mounting: Mounting | None = None,
@@ -113,6 +117,61 @@ class Calibration:
         except ValueError as e:
             msg = str(e)
             raise ValueError(msg if msg.startswith(str(p)) else f"{p}: {msg}") from None
+
+
+FOV_RANGE_DEG = (10.0, 170.0)     # horizontal field of view a pinhole model with distortion describes
+ASPECT_RANGE = (0.5, 2.0)         # fy / fx: pixels at most twice as tall as wide, or as wide as tall
+DIST_LIMIT = 1e3                  # |coefficient|: beyond it no lens, a typo
+
+
+def check_physical(k: Intrinsics, dist: tuple[float, ...]) -> None:
+    """A camera that can exist: ValueError naming the field and its limit otherwise.
+
+    The field of view across within :data:`FOV_RANGE_DEG`, ``fy / fx`` within :data:`ASPECT_RANGE`,
+    the principal point inside the image, every distortion coefficient finite and within
+    :data:`DIST_LIMIT`, and the radial distortion monotonic out to the image's corners (a lens model
+    that folds back maps two directions onto one pixel: no warp can undo it)."""
+    hfov = math.degrees(2 * math.atan(k.width / (2 * k.fx)))
+    lo, hi = FOV_RANGE_DEG
+    if not lo <= hfov <= hi:
+        raise ValueError(f"fx = {k.fx:g} gives a field of view of {hfov:.1f} degrees across {k.width} pixels; "
+                         f"a camera file describes {lo:g} to {hi:g} degrees")
+    if not ASPECT_RANGE[0] <= k.fy / k.fx <= ASPECT_RANGE[1]:
+        raise ValueError(f"fy / fx = {k.fy / k.fx:.3g}; pixels of a camera file are within {ASPECT_RANGE[0]:g} to "
+                         f"{ASPECT_RANGE[1]:g} of square")
+    if not (0 < k.cx < k.width and 0 < k.cy < k.height):
+        raise ValueError(f"the principal point (cx {k.cx:g}, cy {k.cy:g}) lies outside the {k.width}x{k.height} "
+                         f"image (width x height)")
+    if not all(isinstance(d, int | float) and math.isfinite(d) and abs(d) <= DIST_LIMIT for d in dist):
+        raise ValueError(f"dist must hold finite numbers within +-{DIST_LIMIT:g}, got {list(dist)}")
+    if dist:
+        folded = _radial_fold(k, dist)
+        if folded is not None:
+            raise ValueError(f"dist: the radial distortion folds back {folded} (not monotonic out to the image's "
+                             f"corners): no camera images that way")
+
+
+def _radial_fold(k: Intrinsics, dist: tuple[float, ...]) -> str | None:
+    """Where the radial distortion stops growing before it reaches the image's corners, or None."""
+    d = list(dist) + [0.0] * (8 - len(dist))
+    k1, k2, _, _, k3, k4, k5, k6 = d[:8]
+    corner = max(math.hypot((u - k.cx) / k.fx, (v - k.cy) / k.fy) for u in (0, k.width) for v in (0, k.height))
+    r = np.linspace(0.0, 10.0 * corner, 4001)
+    r2 = r * r
+    den = 1 + k4 * r2 + k5 * r2 ** 2 + k6 * r2 ** 3
+    with np.errstate(all="ignore"):
+        rd = r * (1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3) / den
+    reach = np.nonzero(rd >= corner)[0]
+    end = int(reach[0]) if len(reach) else len(r) - 1
+    steps = np.diff(rd[:end + 1])
+    if not np.all(np.isfinite(rd[:end + 1])) or np.any(den[:end + 1] <= 0):
+        return "into a pole"
+    if len(steps) and np.any(steps <= 0):
+        at = float(r[int(np.argmax(steps <= 0))])
+        return f"at {at:.2f} (normalised radius; the corners lie at {corner:.2f})"
+    if not len(reach):
+        return f"short of the corners (it never reaches {corner:.2f})"
+    return None
 
 
 def clip_camera(path: str | os.PathLike, fallback_mounting: Mounting) -> Calibration:

@@ -1,0 +1,56 @@
+"""Camera files that describe no real camera are refused before the first frame, naming the field and its
+limit (exit 2, UNAVAILABLE on the bus), never run with OK and nonsense levels, never an OpenCV assertion."""
+
+import json
+
+import can
+import pytest
+
+from bsn_edge.alerts import SystemState
+from bsn_edge.alerts.can_codec import decode
+from bsn_edge.calibration import Calibration
+from bsn_edge.cli import run as run_cli
+
+
+def _edited(clip, tmp_path, **change) -> str:
+    d = json.loads((clip / "calibration.json").read_text())
+    d.update(change)
+    out = tmp_path / "bad.json"
+    out.write_text(json.dumps(d))       # NaN is written as NaN, which json (and so a camera file) reads
+    return str(out)
+
+
+@pytest.mark.parametrize(("change", "says"), [
+    ({"dist": [float("nan"), 0.0, 0.0, 0.0, 0.0]}, "dist must hold finite numbers"),
+    ({"dist": [1e6, 0.0, 0.0, 0.0, 0.0]}, "dist must hold finite numbers within"),
+    ({"dist": ["big", 0.0, 0.0, 0.0, 0.0]}, "dist must hold finite numbers"),
+    ({"dist": [-0.9, 0.0, 0.0, 0.0, 0.0]}, "folds back"),
+    ({"cx": 1e6}, "principal point"),
+    ({"cy": -5.0}, "principal point"),
+    ({"fx": 1e-6, "fy": 1e-6}, "field of view"),
+    ({"fx": 1e9, "fy": 1e9}, "field of view"),
+    ({"fy": 5.0}, "fy / fx"),
+])
+def test_a_camera_that_cannot_exist_is_refused_with_the_field_named(setup, tmp_path, capsys, change, says):
+    model, clip = setup
+    bad = _edited(clip, tmp_path, **change)
+    with pytest.raises(ValueError, match=says):
+        Calibration.read(bad)
+    with can.Bus(interface="virtual", channel="bsn-camfile") as rx:
+        rc = run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--calib", bad,
+                           "--can", "virtual:bsn-camfile"])
+        msgs = [decode(m.arbitration_id, bytes(m.data)) for m in iter(lambda: rx.recv(0.2), None)]
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert says.split()[0] in err and "UNAVAILABLE sent" in err
+    states = [SystemState(int(d.signals["System_State"])) for d in msgs if d is not None and d.name == "BSN_Status"]
+    assert states == [SystemState.UNAVAILABLE]
+
+
+def test_real_lenses_pass():
+    """The checks refuse no camera that exists: a 1280x720 dashcam's barrel (the Udacity camera's own
+    coefficients from the chessboard), a stronger barrel and a mild pincushion all pass."""
+    from bsn_edge.camera import Intrinsics
+    k = Intrinsics(1150.0, 1150.0, 650.0, 370.0, 1280, 720)
+    for dist in ((-0.24, 0.05, 0.001, -0.0005, 0.0), (-0.35, 0.12, 0.0, 0.0, -0.02), (0.15, 0.0, 0.001, -0.001, 0.0)):
+        Calibration.of(k, dist)
