@@ -7,7 +7,6 @@ when it is not: whatever ends the run, the last status on every bus is UNAVAILAB
 
 from __future__ import annotations
 
-import json
 import threading
 import time
 from collections import deque
@@ -37,7 +36,7 @@ from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.feeder import Feeder, Prepared
 from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.runtime.overlay import OverlayWriter, draw
-from bsn_edge.runtime.sinks import GuardedSink, SinkFailure
+from bsn_edge.runtime.sinks import GuardedSink, LineLog, SinkFailure
 from bsn_edge.runtime.sources import Captured, Source
 from bsn_edge.runtime.stats import LatencyStats
 from bsn_edge.sequence.folder import frame_name
@@ -257,8 +256,8 @@ class FramePipeline:
         if out.log is not None:
             Path(out.log).parent.mkdir(parents=True, exist_ok=True)
             # line-buffered: readable while it runs, and every line whole after a kill
-            logf = open(out.log, "w", buffering=1)  # noqa: SIM115 - closed by its sink
-            self.sinks["log"] = GuardedSink("log", lambda rec: logf.write(json.dumps(rec) + "\n"), logf.close, fault)
+            log = LineLog(out.log)
+            self.sinks["log"] = GuardedSink("log", log.write, log.close, fault)
         if out.maps is not None:
             maps = out.maps
 

@@ -17,6 +17,8 @@ a fault: the alerts had it.
 from __future__ import annotations
 
 import contextlib
+import json
+import os
 import queue
 import threading
 from collections.abc import Callable
@@ -157,3 +159,33 @@ class GuardedSink:
             self._failure = failure
         if self.on_fault is not None:
             self.on_fault(failure)
+
+
+class LineLog:
+    """A JSON-lines file that never ends in half a line: each record is written whole with ``os.write``,
+    and a write that fails part-way (a full disk) is cut back to the end of the last whole line before
+    the error is raised, so a reader of the file finds only whole records."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = path
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._end = 0
+
+    def write(self, record: dict[str, Any]) -> None:
+        data = (json.dumps(record) + "\n").encode()
+        done = 0
+        try:
+            while done < len(data):
+                done += os.write(self._fd, data[done:])
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fd, self._end)
+                os.lseek(self._fd, self._end, os.SEEK_SET)
+            raise
+        self._end += len(data)
+
+    def close(self) -> None:
+        """Idempotent."""
+        if self._fd >= 0:
+            fd, self._fd = self._fd, -1
+            os.close(fd)

@@ -465,3 +465,31 @@ def test_an_output_stuck_in_a_write_from_a_file_is_a_fault_and_the_loop_goes_on(
     sink.close()                    # nor at the end
     assert time.monotonic() - t0 < 0.15 and len(faults) == 1
     hung.set()
+
+
+def test_the_frame_log_never_ends_in_half_a_line(tmp_path, monkeypatch):
+    """A write the disk takes only part of (ENOSPC half-way through a record) is cut back: the file
+    holds the whole records before it and nothing of the failed one, and every line parses."""
+    import errno
+    import os
+
+    from bsn_edge.runtime.sinks import LineLog
+    path = tmp_path / "frames.jsonl"
+    log = LineLog(path)
+    for i in range(3):
+        log.write({"frame": i, "levels": ["NONE"] * 3})
+    real = os.write
+
+    def half_then_full(fd, data):
+        if len(data) > 10:
+            real(fd, data[: len(data) // 2])
+            return len(data) // 2
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(os, "write", half_then_full)
+    with pytest.raises(OSError, match="No space"):
+        log.write({"frame": 3, "levels": ["WARNING"] * 3})
+    monkeypatch.setattr(os, "write", real)
+    log.close()
+    log.close()
+    text = path.read_text()
+    assert text.endswith("\n") and [json.loads(line)["frame"] for line in text.splitlines()] == [0, 1, 2]
