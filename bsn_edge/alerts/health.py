@@ -69,12 +69,24 @@ class Health:
         self._work: deque[float] = deque()     # processing-clock times of the same inferences
         self._down = False
         self._calibrating = False
+        self._senders_down: set[str] = set()
         self._lock = threading.Lock()
 
     def calibrating(self, on: bool) -> None:
         """While on, a state that would be OK reads CALIBRATING (a fault still reads as the fault)."""
         with self._lock:
             self._calibrating = bool(on)
+
+    def sender_down(self, name: str, down: bool) -> None:
+        """A sender that has failed every send for a while (a serial port gone, a bus off) is down: the
+        state reads DEGRADED while any is (the other buses still hear it); one that sends again is up."""
+        with self._lock:
+            (self._senders_down.add if down else self._senders_down.discard)(name)
+
+    @property
+    def senders_down(self) -> list[str]:
+        with self._lock:
+            return sorted(self._senders_down)
 
     def valid(self, t: float, wall: float | None = None) -> None:
         """A valid inference on the frame of time ``t``, finished at ``wall`` on the processing clock."""
@@ -133,7 +145,7 @@ class Health:
         # before that even one inference is on time (the first frame of a run is not DEGRADED)
         judged = bool(self._work) and wall - self._work[0] >= 1.0 / max(self.cfg.fps_floor, 1e-9)
         slow = judged and self._fps(wall) < self.cfg.fps_floor
-        if slow or any(self._faults[f] for f in DEGRADING):
+        if slow or self._senders_down or any(self._faults[f] for f in DEGRADING):
             return SystemState.DEGRADED
         return SystemState.CALIBRATING if self._calibrating else SystemState.OK
 

@@ -277,6 +277,10 @@ def main(argv: list[str] | None = None) -> int:
         if s.stats.log_errors:
             print(f"{PROG}: warning: the CAN log failed ({s.stats.log_error}); the bus went on, DEGRADED",
                   file=sys.stderr)
+    if summary.get("senders_down"):
+        print(f"{PROG}: error: {', '.join(summary['senders_down'])} could not send at the end of the run "
+              "(DEGRADED while it was down)", file=sys.stderr)
+        return 1
     if summary["source_failure"]:
         print(f"{PROG}: error: the source failed: {summary['source_failure']}", file=sys.stderr)
         return 1

@@ -18,8 +18,11 @@ class CycleEmitter:
 
     The state, frame rate and fault counters are those of ``t`` itself, so a stalled pipeline
     shows up as UNAVAILABLE on the bus within one cycle past the deadline. Sender failures are
-    counted into the health's fault counters, which the next status message carries.
+    counted into the health's fault counters, which the next status message carries; a sender whose
+    every send has failed for :attr:`DOWN_AFTER_S` is down (DEGRADED) until one goes through.
     """
+
+    DOWN_AFTER_S = 1.0
 
     def __init__(self, senders: list[Sender], health: Health, cycle_s: float = 0.1,
                  clock: Callable[[], float] | None = None) -> None:
@@ -31,6 +34,7 @@ class CycleEmitter:
         self.latest: AlertFrame | None = None
         self.next_t: float | None = None
         self.sent_cycles = 0
+        self._failing_since: dict[str, float] = {}     # a sender's first failed send of its current run
         self._lock = threading.Lock()
 
     def publish(self, frame: AlertFrame) -> None:
@@ -63,7 +67,11 @@ class CycleEmitter:
         frame = replace(base, t=t, state=state, fps=fps, faults=faults)
         for s in self.senders:
             before_err, before_full, before_log = s.stats.errors, s.stats.full, s.stats.log_errors
-            s.send(frame)
+            if s.send(frame):
+                self._failing_since.pop(s.name, None)
+                h.sender_down(s.name, False)
+            elif t - self._failing_since.setdefault(s.name, t) >= self.DOWN_AFTER_S:
+                h.sender_down(s.name, True)
             if s.stats.errors > before_err:
                 h.fault(s.tx_fault, s.stats.errors - before_err)
             if s.stats.full > before_full:

@@ -381,7 +381,7 @@ class FramePipeline:
                 "wait_ms": {k.removesuffix("_ms"): v for k, v in self.waiting.percentiles().items()},
                 "stage_ms": self.timer.per_frame_ms(frames), "stage_share": self.timer.shares(),
                 "faults": self.health.faults, "cycles_sent": self.emitter.sent_cycles,
-                "senders": {s.name: vars(s.stats) for s in self.senders},
+                "senders": {s.name: vars(s.stats) for s in self.senders}, "senders_down": self.health.senders_down,
                 "source_failure": self.source.failure, "stopped": bool(stop is not None and stop.is_set()),
                 "heartbeat_error": self.heartbeat.last_error if self.heartbeat is not None else "",
                 "camera": self.camera.summary(), "maps_written": 0 if maps is None else maps.written,

@@ -354,3 +354,35 @@ def test_a_missing_can_interface_is_named(setup, capsys):
     model, clip = setup
     assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--can", "nosuchbus:x"]) == 2
     assert "cannot open CAN interface 'nosuchbus' channel 'x'" in capsys.readouterr().err
+
+
+def test_a_serial_port_gone_for_good_is_degraded_on_the_other_bus_and_a_non_zero_exit(setup, capsys, monkeypatch):
+    """The serial port vanishes and cannot be reopened: after a second of failed sends it is down, the
+    CAN bus (decoded with cantools from the DBC, not the project's decoder) says DEGRADED, the summary
+    names it, and bsn-run's ending says so with exit 1."""
+    import cantools
+
+    from bsn_edge.alerts.senders import SerialSender
+    from bsn_edge.cli.common import CHECKOUT as ROOT
+    from tests.fakes import GonePort
+    model, clip = setup
+    dbc = cantools.database.load_file(str(ROOT / "bsn_edge" / "alerts" / "bsn_alerts.dbc"))
+    serial_tx = SerialSender("/dev/bsn-no-such-port", port=GonePort(), retry_s=0.0)
+    with can.Bus(interface="virtual", channel="bsn-fs-serial") as rx, \
+            CanSender("virtual", "bsn-fs-serial") as can_tx:
+        engine = Engine(model)
+        summary = run(engine, open_source(str(clip / "video.mp4")), [can_tx, serial_tx],
+                      RuntimeConfig(cycle_s=0.05), camera=mounted(engine, clip))
+        states = [dbc.decode_message(m.arbitration_id, bytes(m.data))["System_State"]
+                  for m in iter(lambda: rx.recv(0.2), None) if m.arbitration_id == 0x501]
+    serial_tx.close()
+    assert summary["senders_down"] == ["serial"] and summary["senders"]["serial"]["errors"] > 10
+    names = [str(s) for s in states]
+    assert "DEGRADED" in names and names[-1] == "UNAVAILABLE"
+    assert "OK" not in names[names.index("DEGRADED"):], "it stays down: DEGRADED until the end"
+    # the command line: the same port gone, exit 1 and the reason at the end
+    monkeypatch.setattr(run_cli, "make_senders", lambda args: [
+        SerialSender("/dev/bsn-no-such-port", port=GonePort(), retry_s=0.0)])
+    rc = run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                       str(clip / "calibration.json")])
+    assert rc == 1 and "serial could not send at the end of the run" in capsys.readouterr().err
