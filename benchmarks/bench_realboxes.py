@@ -40,13 +40,6 @@ MARKED_SHARE = 0.15          # of an occluder's box at the threshold: marked
 OCCLUDERS = ("car", "truck", "bus", "person", "cyclist")
 GROUPS = {"vehicles": ("car", "truck", "bus"), "people": ("person",), "cyclists": ("cyclist",)}
 PANEL_WIDTH = 640
-EXTRA_LICENCES = {
-    "mountain_highway": "OrangeAVA/Hands-on-ML-Projects-with-OpenCV `data/road.mp4`, MIT licence, (c) 2023 AVA",
-    "udacity_challenge_352x288": "Udacity CarND-Advanced-Lane-Lines `challenge_video.mp4` (MIT, (c) Udacity, Inc.), "
-                                 "as shipped in paroque28/tensorflow-yolov4-tflite (MIT, (c) 2020 Viet Hung)",
-    "garage_drive": "SullyChen driving dataset 1, as shipped in Abhinav-0103/Self-Driving-Car, MIT licence, "
-                    "(c) 2016 Sully Chen",
-}
 
 
 class Frame:
@@ -88,15 +81,12 @@ def load_frames(spec: dict[str, Any]) -> list[Frame]:
         else:
             cal = None
             key = path.parent.name if f["source"] == "image" else path.stem
-            credit = LICENCES_BY_STEM.get(key) or EXTRA_LICENCES[key]
+            credit = licence({"udacity_test_video": "udacity"}.get(key, key))
         if tuple(frames[-1].shape[1::-1]) != tuple(f["size"]):
             raise ValueError(f"{name}: the boxes were drawn on {f['size']} but the frame is "
                              f"{frames[-1].shape[1]}x{frames[-1].shape[0]}")
         out.append(Frame(name, frames, cal, f["boxes"], credit))
     return out
-
-
-LICENCES_BY_STEM = {"dashcam_highway": licence("dashcam_highway"), "udacity_test_video": licence("udacity")}
 
 
 def blind_spots(engine: Engine, frame: Frame) -> np.ndarray:

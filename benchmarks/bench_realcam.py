@@ -98,6 +98,11 @@ LICENCES = {
     "dashcam_highway": "Udacity CarND-LaneLines-P1 `solidWhiteRight.mp4`, MIT licence, (c) 2016-2019 Udacity, Inc.",
     "city pair": "frames of a video published under CC BY 3.0 (nianticlabs/manydepth `assets/`); author: the "
                  "video's author on YouTube (video id sF0wXxZwISw)",
+    "mountain_highway": "OrangeAVA/Hands-on-ML-Projects-with-OpenCV `data/road.mp4`, MIT licence, (c) 2023 AVA",
+    "udacity_challenge_352x288": "Udacity CarND-Advanced-Lane-Lines `challenge_video.mp4` (MIT, (c) Udacity, Inc.), "
+                                 "as shipped in paroque28/tensorflow-yolov4-tflite (MIT, (c) 2020 Viet Hung)",
+    "garage_drive": "SullyChen driving dataset 1, as shipped in Abhinav-0103/Self-Driving-Car, MIT licence, "
+                    "(c) 2016 Sully Chen",
 }
 
 
