@@ -1,4 +1,7 @@
-"""Stand-ins for hardware that fails, shared by the alerts and runtime tests."""
+"""Stand-ins for hardware that fails, and inputs made for the runtime tests, shared by the alerts and
+runtime tests."""
+
+from pathlib import Path
 
 import can
 import serial
@@ -24,3 +27,17 @@ class GonePort:
 
     def close(self):
         pass
+
+
+def long_video(clip: Path, out: Path, repeats: int) -> Path:
+    """The clip's frames ``repeats`` times over as an MPEG-4 file at 10 frames/s."""
+    import cv2
+
+    frames = [cv2.imread(str(p)) for p in sorted((clip / "rgb").glob("*.png"))]
+    h, w = frames[0].shape[:2]
+    vw = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, (w, h))
+    for _ in range(repeats):
+        for f in frames:
+            vw.write(f)
+    vw.release()
+    return out

@@ -1,4 +1,9 @@
-"""``bsn-run``: dashcam video in, left / centre / right hazard levels out."""
+"""``bsn-run``: dashcam video in, left / centre / right hazard levels out.
+
+This module imports only the standard library at its top: ``main`` watches SIGINT and SIGTERM before
+anything else (the runtime's modules take a while to import), so a signal at any moment of start-up
+ends the run cleanly.
+"""
 
 from __future__ import annotations
 
@@ -7,20 +12,17 @@ import json
 import signal
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from tqdm import tqdm
-
-from bsn_edge.alerts.frame import AlertFrame
-from bsn_edge.alerts.senders import CanSender, Sender, SerialSender
-from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.cli.common import fail
-from bsn_edge.mounting import check_height
-from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
-from bsn_edge.runtime.camera_state import CameraState
-from bsn_edge.runtime.maps import MapWriter
-from bsn_edge.sequence.images import atomic_write_bytes
+
+if TYPE_CHECKING:
+    from bsn_edge.alerts.senders import Sender
+    from bsn_edge.runtime.camera_state import CameraState
+
+T = TypeVar("T")
 
 PROG = "bsn-run"
 LOG_CHANNEL = "bsn-can-log"
@@ -96,11 +98,37 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 CAN_LOG_EXTS = (".log", ".asc", ".blf")   # what python-can writes and bsn-listen reads back
+OPEN_DEADLINE_S = 1.0     # a bus or CAN log that has not opened by then never will (a FIFO nobody reads, a hung mount)
 
 
-def make_senders(args) -> list[Sender]:
+def open_within(opener: Callable[[], T], seconds: float, what: str) -> T:
+    """``opener()`` on a thread of its own, waited for ``seconds`` at most: its result or its exception;
+    ``TimeoutError`` naming ``what`` when it is still blocked (the thread is left behind, a daemon)."""
+    result: list[Any] = []
+
+    def attempt() -> None:
+        try:
+            result.append((True, opener()))
+        except BaseException as e:  # handed to the caller's thread
+            result.append((False, e))
+
+    t = threading.Thread(target=attempt, name="bsn-open", daemon=True)
+    t.start()
+    t.join(seconds)
+    if not result:
+        raise TimeoutError(f"{what} did not open within {seconds:g} s (a FIFO nobody reads, a hung disk or mount?)")
+    ok, value = result[0]
+    if not ok:
+        raise value
+    return value
+
+
+def make_senders(args: argparse.Namespace) -> list[Sender]:
     """The configured senders; ``ValueError`` names the bad option (a sender already opened is
     closed again)."""
+    from bsn_edge.alerts.frame import AlertFrame
+    from bsn_edge.alerts.senders import CanSender, SerialSender
+
     senders: list[Sender] = []
     if args.can_log:
         ext = Path(args.can_log).suffix.lower()
@@ -113,14 +141,18 @@ def make_senders(args) -> list[Sender]:
             iface, _, channel = (args.can or f"virtual:{LOG_CHANNEL}").partition(":")
             if not channel:
                 raise ValueError(f"--can needs IFACE:CHANNEL, got {args.can!r}")
+            what = f"--can-log {args.can_log}" if args.can_log else f"CAN interface {iface!r} channel {channel!r}"
             try:
-                senders.append(CanSender(iface, channel, log_path=args.can_log))
+                senders.append(open_within(lambda: CanSender(iface, channel, log_path=args.can_log),
+                                           OPEN_DEADLINE_S, what))
             except Exception as e:
-                raise ValueError(f"cannot open CAN interface {iface!r} channel {channel!r}: "
-                                 f"{type(e).__name__}: {e}") from None
+                raise ValueError(f"cannot open CAN interface {iface!r} channel {channel!r}"
+                                 + (f" with its log {args.can_log}" if args.can_log else "")
+                                 + f": {type(e).__name__}: {e}") from None
         if args.serial:
             try:
-                senders.append(SerialSender(args.serial))
+                senders.append(open_within(lambda: SerialSender(args.serial), OPEN_DEADLINE_S,
+                                           f"serial port {args.serial}"))
             except Exception as e:
                 raise ValueError(f"cannot open serial port {args.serial!r}: {type(e).__name__}: {e}") from None
     except BaseException:
@@ -135,6 +167,8 @@ def make_senders(args) -> list[Sender]:
 
 def refuse(senders: list[Sender], message: str) -> int:
     """The runtime cannot start: say UNAVAILABLE on every bus first, then the reason."""
+    from bsn_edge.alerts.frame import AlertFrame
+
     frame = AlertFrame.unavailable(0.0)
     for s in senders:
         s.send(frame)
@@ -198,62 +232,97 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    if args.max_frames is not None and args.max_frames < 1:
-        return fail(PROG, "--max-frames must be >= 1")
-    if not args.stall > 0:
-        return fail(PROG, f"--stall must be a positive number of seconds, got {args.stall:g}")
-    # from here on a signal stops the run cleanly; once the outputs are open, every way out ends with
-    # UNAVAILABLE on the bus, signals during start-up included
+    # signals first: from here on SIGINT and SIGTERM end the run cleanly, during start-up included; once
+    # the outputs are open, every way out ends with UNAVAILABLE on the bus
     with StopOnSignal() as stopper:
-        try:
-            senders = make_senders(args)
-        except ValueError as e:
-            return fail(PROG, str(e))
-        try:
-            calibration = Calibration.read(args.calib) if args.calib else None
-            if args.height is not None:
-                check_height(args.height, "--height")
-            if args.save_calib and Path(args.save_calib).exists() and not args.force:
-                raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
-            maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
-            trust = None
-            if args.trust:
-                from bsn_edge.modelfile.trust import load_public_keys
-                trust = load_public_keys(args.trust)
-            cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.in_turn, in_flight=args.in_flight)
-            threads = cfg.engine_threads if args.threads is None else args.threads
-            engine = Engine(args.model, threads, args.spin, trust=trust)
-            camera = CameraState(engine.card, calibration, args.height, args.save_calib)
-            source = open_source(args.source, pace=args.pace, stall_s=args.stall)
-        except (FileNotFoundError, ValueError, OSError) as e:
-            return refuse(senders, str(e))
-        if stopper.event.is_set():
-            source.close()
-            refuse(senders, f"stopped by {stopper.signal} during start-up")
-            return 130 if stopper.signal == "SIGINT" else 0
-        stopper.watch(source)
-        try:
-            total = args.max_frames or getattr(source, "total", None)
-            with tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
-                def tick(n: int) -> None:
-                    bar.update(n)
-                    if camera.calibrating and bar.n % 25 == 0:
-                        bar.set_postfix_str(camera.progress(), refresh=False)
+        args = build_parser().parse_args(argv)
+        if args.max_frames is not None and args.max_frames < 1:
+            return fail(PROG, "--max-frames must be >= 1")
+        if not args.stall > 0:
+            return fail(PROG, f"--stall must be a positive number of seconds, got {args.stall:g}")
+        return _run(args, stopper)
 
-                summary = run(engine, source, senders, cfg, overlay=args.overlay, log=args.log,
-                              max_frames=args.max_frames, progress=tick, camera=camera, save_maps=maps,
-                              stop=stopper.event)
-        except OSError as e:            # an output that could not be opened: the bus has had UNAVAILABLE
-            return fail(PROG, f"{e} (UNAVAILABLE sent)" if senders else str(e))
-        except Exception as e:          # a fault of the runtime itself: the bus has had UNAVAILABLE
-            return fail(PROG, f"the runtime stopped on {type(e).__name__}: {e}"
-                              + (" (UNAVAILABLE sent)" if senders else ""), 1)
-        finally:
-            source.close()
-            for s in senders:
-                s.close()
+
+def _stopped_early(stopper: StopOnSignal) -> int:
+    print(f"{PROG}: stopped by {stopper.signal} during start-up", file=sys.stderr)
+    return 130 if stopper.signal == "SIGINT" else 0
+
+
+def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
+    from tqdm import tqdm
+
+    from bsn_edge.runtime import run
+    if stopper.event.is_set():          # nothing is open yet: there is no bus to tell
+        return _stopped_early(stopper)
+    try:
+        senders = make_senders(args)
+    except ValueError as e:
+        return fail(PROG, str(e))
+    try:
+        engine, camera, source, cfg, maps = _start(args)
+    except (FileNotFoundError, ValueError, OSError) as e:
+        return refuse(senders, str(e))
+    if stopper.event.is_set():
+        source.close()
+        refuse(senders, f"stopped by {stopper.signal} during start-up")
+        return 130 if stopper.signal == "SIGINT" else 0
+    stopper.watch(source)
+    try:
+        total = args.max_frames or getattr(source, "total", None)
+        with tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
+            def tick(n: int) -> None:
+                bar.update(n)
+                if camera.calibrating and bar.n % 25 == 0:
+                    bar.set_postfix_str(camera.progress(), refresh=False)
+
+            summary = run(engine, source, senders, cfg, overlay=args.overlay, log=args.log,
+                          max_frames=args.max_frames, progress=tick, camera=camera, save_maps=maps,
+                          stop=stopper.event)
+    except OSError as e:            # an output that could not be opened: the bus has had UNAVAILABLE
+        return fail(PROG, f"{e} (UNAVAILABLE sent)" if senders else str(e))
+    except Exception as e:          # a fault of the runtime itself: the bus has had UNAVAILABLE
+        return fail(PROG, f"the runtime stopped on {type(e).__name__}: {e}"
+                          + (" (UNAVAILABLE sent)" if senders else ""), 1)
+    finally:
+        source.close()
+        for s in senders:
+            s.close()
     summary["signal"] = stopper.signal
+    return _report(summary, args, camera, senders, stopper)
+
+
+def _start(args: argparse.Namespace):
+    """What the run needs before its first frame, each piece checked: ``(engine, camera, source, cfg,
+    maps)``; ``FileNotFoundError``, ``ValueError`` or ``OSError`` names what is wrong."""
+    from bsn_edge.calibration.camera_file import Calibration
+    from bsn_edge.mounting import check_height
+    from bsn_edge.runtime import Engine, RuntimeConfig, open_source
+    from bsn_edge.runtime.camera_state import CameraState
+    from bsn_edge.runtime.maps import MapWriter
+
+    calibration = Calibration.read(args.calib) if args.calib else None
+    if args.height is not None:
+        check_height(args.height, "--height")
+    if args.save_calib and Path(args.save_calib).exists() and not args.force:
+        raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
+    maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
+    trust = None
+    if args.trust:
+        from bsn_edge.modelfile.trust import load_public_keys
+        trust = load_public_keys(args.trust)
+    cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.in_turn, in_flight=args.in_flight)
+    threads = cfg.engine_threads if args.threads is None else args.threads
+    engine = Engine(args.model, threads, args.spin, trust=trust)
+    camera = CameraState(engine.card, calibration, args.height, args.save_calib)
+    source = open_source(args.source, pace=args.pace, stall_s=args.stall)
+    return engine, camera, source, cfg, maps
+
+
+def _report(summary: dict[str, Any], args: argparse.Namespace, camera: CameraState, senders: list[Sender],
+            stopper: StopOnSignal) -> int:
+    """The summary written and printed, warnings for what failed; the exit code."""
+    from bsn_edge.sequence.images import atomic_write_bytes
+
     summary_error = ""
     if args.summary:
         try:
@@ -266,8 +335,9 @@ def main(argv: list[str] | None = None) -> int:
     for name, sink in summary["sinks"].items():
         if sink["failure"]:
             f = sink["failure"]
-            print(f"{PROG}: warning: the {name} output failed at frame {f['frame']} ({f['error']}); the alerts went "
-                  "on, DEGRADED", file=sys.stderr)
+            where = "when it was opened" if f["frame"] is None else f"at frame {f['frame']}"
+            print(f"{PROG}: warning: the {name} output failed {where} ({f['error']}); the alerts went on, DEGRADED",
+                  file=sys.stderr)
         if sink.get("dropped"):
             print(f"{PROG}: note: {sink['dropped']} frames left out of the {name} output, which fell behind the "
                   "camera (the alerts had them)", file=sys.stderr)

@@ -36,7 +36,7 @@ from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.feeder import Feeder, Prepared
 from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.runtime.overlay import OverlayWriter, draw
-from bsn_edge.runtime.sinks import GuardedSink, LineLog, SinkFailure
+from bsn_edge.runtime.sinks import GuardedSink, LineLog, SinkFailure, open_all
 from bsn_edge.runtime.sources import Captured, Source
 from bsn_edge.runtime.stats import LatencyStats
 from bsn_edge.sequence.folder import frame_name
@@ -124,6 +124,7 @@ class FramePipeline:
     """
 
     SINK_BEHIND = 4     # frames an overlay or maps output may fall behind the loop
+    LOG_BEHIND = 64     # lines the frame log may fall behind
 
     def __init__(self, engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig,
                  camera: CameraState, outputs: Outputs, clock: Callable[[], float]) -> None:
@@ -234,8 +235,9 @@ class FramePipeline:
     # -- the run ---------------------------------------------------------------------------------
 
     def open(self) -> None:
-        """Start the heartbeat (live) and open the outputs; one that cannot be opened raises (the run is
-        refused: the user asked for it); later failures only degrade the run."""
+        """Start the heartbeat (live) and open the outputs, each on its own thread; one that refuses to
+        open raises (the run is refused: the user asked for it); one still opening after ``OPEN_WAIT_S``
+        is not waited for (stuck, it fails later), and later failures only degrade the run."""
         self.camera.use_frame_rate(self.source.fps, live=self.source.live)
         if self.source.live:
             self.heartbeat = Heartbeat(self.emitter).__enter__()
@@ -252,12 +254,12 @@ class FramePipeline:
             def overlay(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame) -> None:
                 writer.write(draw(frame, mf, mask, alert, self.geometry))
 
-            self.sinks["overlay"] = GuardedSink("overlay", overlay, writer.close, fault, **behind)
+            self.sinks["overlay"] = GuardedSink("overlay", overlay, writer.close, fault, open=writer.open, **behind)
         if out.log is not None:
-            Path(out.log).parent.mkdir(parents=True, exist_ok=True)
-            # line-buffered: readable while it runs, and every line whole after a kill
+            # a line at a time: readable while it runs, and every line whole after a kill
             log = LineLog(out.log)
-            self.sinks["log"] = GuardedSink("log", log.write, log.close, fault)
+            self.sinks["log"] = GuardedSink("log", log.write, log.close, fault, behind=self.LOG_BEHIND,
+                                            drop_when_full=self.source.live, open=log.open)
         if out.maps is not None:
             maps = out.maps
 
@@ -265,12 +267,15 @@ class FramePipeline:
                 maps.write(name, mf.to_raw(prob), mf.depth_to_raw(depth))
 
             self.sinks["maps"] = GuardedSink("maps", write_maps, None, fault, **behind)
+        open_all(self.sinks.values())
 
     def step(self, item: Prepared, inflight: Future | None = None) -> None:
         """One prepared frame through the remaining stages, timed; ``inflight``: its inference, already
         started on another thread (:meth:`start`), whose answer is waited for here."""
         cap = item.cap
         t0 = time.perf_counter()
+        for sink in self.sinks.values():     # an output stuck for a second is a fault now, whatever the frame
+            sink.check()
         rec: dict[str, Any] = {"frame": cap.index, "t": round(cap.t, 4)}
         self.timer.add("preprocess", item.warp_s)
         if self.read(cap, rec) and item.mf is not None and item.buf is not None:
@@ -315,14 +320,14 @@ class FramePipeline:
         the last word on every bus is UNAVAILABLE, since no valid inference is coming any more."""
         if self.feeder is not None:
             self.feeder.close()
-        for sink in self.sinks.values():
-            sink.close(self.frames)
-        self.camera.close()
         h = self.health
         h.set_fault(Fault.SOURCE_RECONNECTS, self.source.reconnects)
         if self.source.unread:
             h.fault(Fault.DECODE_ERRORS, self.source.unread)
-        h.unavailable()
+        h.unavailable()         # the heartbeat says so while the outputs finish
+        for sink in self.sinks.values():
+            sink.close(self.frames)
+        self.camera.close()
         if self.heartbeat is not None:
             self.heartbeat.close()
         self.emitter.final(time.monotonic() if self.source.live else self.last_t + self.cfg.cycle_s)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import os
 from pathlib import Path
 
 import cv2
@@ -49,17 +51,31 @@ def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
 
 
 class OverlayWriter:
-    """The overlay video at the raw frame's size (opened on the first frame; frames of another
-    size are fitted to it)."""
+    """The overlay video at the raw frame's size (the encoder starts on the first frame; frames of
+    another size are fitted to it).
+
+    OpenCV's writer reports no write error, so the file's disk is watched frame by frame: under
+    ``MIN_FREE_BYTES`` left on it, or a file that has not grown over ``STALLED_FRAMES`` frames, is an
+    ``OSError`` at that frame (the runtime counts it as a sink fault, DEGRADED), not a broken file found
+    at the end."""
+
+    MIN_FREE_BYTES = 8 << 20
+    STALLED_FRAMES = 100
 
     def __init__(self, path: str | Path, fps: float) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        with open(self.path, "wb"):      # a read-only disk refuses now, not at the first frame
-            pass
         self.fps = fps
         self.writer: cv2.VideoWriter | None = None
         self.size: tuple[int, int] | None = None
+        self._grown_at = 0          # frames written when the file last grew
+        self._bytes = 0
+        self._frames = 0
+
+    def open(self) -> None:
+        """Create the file, so that a read-only disk refuses at once (on the sink's thread: opening can block)."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with open(self.path, "wb"):
+            pass
 
     def write(self, img: np.ndarray) -> None:
         h, w = img.shape[:2]
@@ -71,6 +87,22 @@ class OverlayWriter:
         if (w, h) != self.size:
             img = cv2.resize(img, self.size, interpolation=cv2.INTER_AREA)
         self.writer.write(img)
+        self._frames += 1
+        self._check_room()
+
+    def _check_room(self) -> None:
+        vfs = os.statvfs(self.path.parent)
+        free = vfs.f_bavail * vfs.f_frsize
+        if free < self.MIN_FREE_BYTES:
+            raise OSError(errno.ENOSPC, f"{free / 1e6:.1f} MB left on the disk of {self.path} (under "
+                                        f"{self.MIN_FREE_BYTES / 1e6:.0f} MB): the overlay is given up before it "
+                                        "fills the disk")
+        size = os.stat(self.path).st_size
+        if size > self._bytes:
+            self._bytes, self._grown_at = size, self._frames
+        elif self._frames - self._grown_at >= self.STALLED_FRAMES:
+            raise OSError(errno.EIO, f"{self.path} has not grown over {self.STALLED_FRAMES} frames: its disk "
+                                     "takes no more")
 
     def close(self) -> None:
         """Finish the file and read it back: OpenCV's writer does not report a full disk, so an overlay

@@ -11,7 +11,6 @@ import time
 from pathlib import Path
 
 import can
-import cv2
 import numpy as np
 import onnx
 import pytest
@@ -28,6 +27,7 @@ from bsn_edge.export.seal import set_metadata
 from bsn_edge.runtime import Engine, ModelError, Reconnect, RuntimeConfig, open_source, run
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.sources import LiveSource
+from tests.fakes import long_video
 from tests.runtime.conftest import mounted
 
 SHIPPED = DEFAULT_MODEL
@@ -152,17 +152,6 @@ def damage(src: Path, dst: Path, start: float, length: float) -> None:
     a, n = int(len(data) * start), int(len(data) * length)
     data[a:a + n] = bytes(n)
     dst.write_bytes(bytes(data))
-
-
-def long_video(clip: Path, out: Path, repeats: int) -> Path:
-    frames = [cv2.imread(str(p)) for p in sorted((clip / "rgb").glob("*.png"))]
-    h, w = frames[0].shape[:2]
-    vw = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, (w, h))
-    for _ in range(repeats):
-        for f in frames:
-            vw.write(f)
-    vw.release()
-    return out
 
 
 def test_a_video_damaged_in_the_middle_keeps_the_frames_after_the_damage(setup, tmp_path):
