@@ -73,6 +73,21 @@ class Calibration:
     def with_mounting(self, mounting: Mounting, **report: Any) -> Calibration:
         return replace(self, mounting=mounting, mounting_report=dict(report))
 
+    def fit_to(self, width: int, height: int, where: str = "camera file") -> str:
+        """Whether this camera file describes frames of ``width`` x ``height``: "" when its size is theirs,
+        a note when they have its aspect (its intrinsics are rescaled, as a resized video's are);
+        ``ValueError`` naming both sizes when the aspect differs (another camera, or a crop)."""
+        if (width, height) == (self.width, self.height):
+            return ""
+        mine, theirs = self.width / self.height, width / height
+        if abs(theirs / mine - 1.0) > ASPECT_TOLERANCE:
+            raise ValueError(f"{where}: width x height {self.width}x{self.height} (aspect {mine:.3f}), but the "
+                             f"source's frames are {width}x{height} (aspect {theirs:.3f}): the file describes "
+                             f"another camera or another crop (aspects must agree within "
+                             f"{100 * ASPECT_TOLERANCE:g} %); calibrate this one with bsn-calibrate")
+        return (f"{where} is for {self.width}x{self.height} frames, the source's are {width}x{height}: the same "
+                "aspect, its intrinsics rescaled")
+
     def model_frame(self, width: int, height: int, model: Intrinsics, model_mounting: Mounting,
                     mounting: Mounting | None = None) -> ModelFrame:
         """The warp from this camera's frames of ``width`` x ``height`` into the model camera.
@@ -122,6 +137,7 @@ class Calibration:
 FOV_RANGE_DEG = (10.0, 170.0)     # horizontal field of view a pinhole model with distortion describes
 ASPECT_RANGE = (0.5, 2.0)         # fy / fx: pixels at most twice as tall as wide, or as wide as tall
 DIST_LIMIT = 1e3                  # |coefficient|: beyond it no lens, a typo
+ASPECT_TOLERANCE = 0.01           # frames whose width / height is the file's within this are the same camera resized
 
 
 def check_physical(k: Intrinsics, dist: tuple[float, ...]) -> None:

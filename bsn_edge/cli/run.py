@@ -315,6 +315,14 @@ def _start(args: argparse.Namespace):
     engine = Engine(args.model, threads, args.spin, trust=trust)
     camera = CameraState(engine.card, calibration, args.height, args.save_calib)
     source = open_source(args.source, pace=args.pace, stall_s=args.stall)
+    if calibration is not None and source.size is not None:
+        try:
+            camera.size_note = calibration.fit_to(*source.size, where=f"--calib {args.calib}")
+        except ValueError:
+            source.close()
+            raise
+        if camera.size_note:
+            print(f"{PROG}: note: {camera.size_note}", file=sys.stderr)
     return engine, camera, source, cfg, maps
 
 

@@ -58,6 +58,7 @@ class CameraState:
         if self.calibrate_hz <= 0:
             raise ValueError(f"calibrate_hz must be positive, got {calibrate_hz}")
         self.calibrate_wait = True
+        self.size_note = ""          # the camera file was made for frames of another size, same aspect
         self.report: dict[str, Any] = {"source": "camera file" if self.mounting else "online"}
         self._calibrator: OnlineCalibrator | None = None
         self._frames: dict[tuple[int, int], ModelFrame] = {}
@@ -157,6 +158,6 @@ class CameraState:
         with self._lock:
             m, report = self.mounting, dict(self.report)
         return {"intrinsics": "assumed: the model camera's, rescaled (no camera file)" if self.assumed_intrinsics
-                else "camera file", "mounting": None if m is None else m.to_dict(),
+                else "camera file", "size_note": self.size_note, "mounting": None if m is None else m.to_dict(),
                 "calibrating": m is None, "calibration": report,
                 "estimator_skipped": self._calibrator.skipped if self._calibrator is not None else 0}

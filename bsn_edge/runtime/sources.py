@@ -30,6 +30,12 @@ class Captured:
     name: str = ""               # what saved maps are named after: an image's stem, else the frame number
 
 
+def capture_size(cap) -> tuple[int, int] | None:
+    """(width, height) an OpenCV capture reports, or None when it reports none."""
+    w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH) or 0), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT) or 0)
+    return (w, h) if w > 0 and h > 0 else None
+
+
 class Source:
     """Base: iterate to get frames; ``dropped`` counts frames a live source had to skip while the loop
     ran (``before_start`` those it replaced before the loop first asked: the model was still warming
@@ -43,6 +49,7 @@ class Source:
     reconnects = 0
     unread = 0                   # frames of a file that never decoded at its end (counted as decode errors)
     failure: str | None = None
+    size: tuple[int, int] | None = None   # (width, height) of its frames when known before the first one
 
     def __iter__(self) -> Iterator[Captured]:
         raise NotImplementedError
@@ -75,6 +82,7 @@ class VideoFileSource(Source):
             raise ValueError(f"{self.path}: OpenCV cannot open this video")
         self.fps = self.cap.get(cv2.CAP_PROP_FPS) or 10.0
         self.total = int(self.cap.get(cv2.CAP_PROP_FRAME_COUNT)) or None
+        self.size = capture_size(self.cap)
         self.pace, self.give_up = pace, give_up
         self.skipped = 0                 # frames the decoder jumped over or could not decode
         self._stop = threading.Event()
@@ -141,6 +149,8 @@ class ImageFolderSource(Source):
             raise ValueError(f"{self.folder}: no images ({', '.join(IMAGE_EXTS)})")
         self.fps = fps
         self.total = len(self.files)
+        first = cv2.imread(str(self.files[0]), cv2.IMREAD_UNCHANGED)
+        self.size = None if first is None else (first.shape[1], first.shape[0])
         self._stop = threading.Event()
 
     def stop(self) -> None:
@@ -204,6 +214,7 @@ class LiveSource(Source):
             raise ValueError(f"cannot open camera or stream {target!r}")
         if hasattr(self.cap, "get"):
             self.fps = self.cap.get(cv2.CAP_PROP_FPS) or self.fps
+            self.size = capture_size(self.cap)
         self._lock = threading.Lock()
         self._newest: Captured | None = None
         self._taken = True

@@ -54,3 +54,41 @@ def test_real_lenses_pass():
     k = Intrinsics(1150.0, 1150.0, 650.0, 370.0, 1280, 720)
     for dist in ((-0.24, 0.05, 0.001, -0.0005, 0.0), (-0.35, 0.12, 0.0, 0.0, -0.02), (0.15, 0.0, 0.001, -0.001, 0.0)):
         Calibration.of(k, dist)
+
+
+@pytest.mark.parametrize("source", ["rgb", "video.mp4"])
+def test_a_camera_file_of_another_aspect_than_the_source_is_refused_before_the_first_frame(setup, tmp_path, capsys,
+                                                                                           source):
+    model, clip = setup
+    d = json.loads((clip / "calibration.json").read_text())
+    assert (d["width"], d["height"]) == (192, 96)
+    bad = _edited(clip, tmp_path, width=1000, height=1000)      # a square camera for a 2:1 clip
+    with can.Bus(interface="virtual", channel="bsn-camsize") as rx:
+        rc = run_cli.main(["--model", str(model), "--source", str(clip / source), "--calib", bad,
+                           "--can", "virtual:bsn-camsize"])
+        msgs = [decode(m.arbitration_id, bytes(m.data)) for m in iter(lambda: rx.recv(0.2), None)]
+    err = capsys.readouterr().err
+    assert rc == 2 and "1000x1000" in err and "192x96" in err and "aspect" in err, err
+    states = [SystemState(int(d.signals["System_State"])) for d in msgs if d is not None and d.name == "BSN_Status"]
+    assert states == [SystemState.UNAVAILABLE]
+
+
+def test_a_camera_file_of_the_same_aspect_at_another_size_is_rescaled_and_said(setup, tmp_path, capsys):
+    """The clip's own camera described at twice its size: the same camera, so the same warp and the same
+    levels frame by frame as with its own file, and a note that says so."""
+    model, clip = setup
+    d = json.loads((clip / "calibration.json").read_text())
+    # pixel centres: pixel i of the small frame is centred on (i + 0.5) * 2 - 0.5 of the large one
+    twice = _edited(clip, tmp_path, **{k: 2 * d[k] for k in ("fx", "fy", "width", "height")},
+                    cx=2 * (d["cx"] + 0.5) - 0.5, cy=2 * (d["cy"] + 0.5) - 0.5)
+    logs = []
+    for i, calib in enumerate((str(clip / "calibration.json"), twice)):
+        log, summ = tmp_path / f"{i}.jsonl", tmp_path / f"{i}.json"
+        assert run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--calib", calib, "--log", str(log),
+                             "--summary", str(summ)]) == 0
+        lines = log.read_text().splitlines()
+        logs.append([{k: v for k, v in json.loads(x).items() if k != "latency_ms"} for x in lines])
+    assert logs[0] == logs[1] and len(logs[0]) == 15
+    note = json.loads(summ.read_text())["camera"]["size_note"]
+    assert "384x192" in note and "192x96" in note and "same aspect" in note
+    assert "note: --calib" in capsys.readouterr().err
