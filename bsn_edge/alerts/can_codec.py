@@ -62,7 +62,8 @@ class CanEncoder:
               "Dropped_Frames": min(f.get(Fault.DROPPED_FRAMES, 0), SAT),
               "Invalid_Outputs": min(f.get(Fault.NAN_OUTPUTS, 0), SAT),
               "Tx_Errors": min(sum(f.get(k, 0) for k in (Fault.TX_ERRORS, Fault.TX_FULL, Fault.SERIAL_ERRORS)), SAT),
-              "Sink_Errors": min(f.get(Fault.SINK_ERRORS, 0), SINK_SAT)}
+              "Sink_Errors": min(f.get(Fault.SINK_ERRORS, 0), SINK_SAT),
+              "Model_Unsigned": 1 if f.get(Fault.UNSIGNED_MODEL, 0) else 0}
         return [self._encode(HAZARD, hz), self._encode(STATUS, st)]
 
 
@@ -115,4 +116,5 @@ def to_alert_text(d: Decoded) -> str:
     state = SystemState(int(s["System_State"])).name
     return (f"status #{d.counter}: {state} {s['Frame_Rate']:.1f} fps, decode errors {int(s['Decode_Errors'])}, "
             f"dropped {int(s['Dropped_Frames'])}, invalid outputs {int(s['Invalid_Outputs'])}, "
-            f"tx errors {int(s['Tx_Errors'])}, sink errors {int(s.get('Sink_Errors', 0))}" + flag)
+            f"tx errors {int(s['Tx_Errors'])}, sink errors {int(s.get('Sink_Errors', 0))}"
+            + (", model UNSIGNED" if int(s.get("Model_Unsigned", 0)) else "") + flag)

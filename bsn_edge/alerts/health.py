@@ -34,6 +34,7 @@ class Fault(StrEnum):
     SOURCE_RECONNECTS = "source_reconnects"  # a camera or stream reopened
     HEARTBEAT_ERRORS = "heartbeat_errors"    # an exception in the heartbeat thread
     SINK_ERRORS = "sink_errors"              # an output beside the bus (logs, overlay, maps) that failed
+    UNSIGNED_MODEL = "unsigned_model"        # 1: the model is not signed by a trusted key (run by --allow-unsigned)
 
 
 FAULTS = tuple(Fault)

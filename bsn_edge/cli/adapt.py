@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from bsn_edge.adapt import AdaptConfig, AdaptError, adapt
 from bsn_edge.adapt.config import LABEL_DEPTHS
@@ -55,6 +56,9 @@ def build_parser() -> argparse.ArgumentParser:
                         f"(default {d.holdout_fraction:g})")
     p.add_argument("--seed", type=int, default=d.seed, help="data order and augmentation seed (default 0)")
     p.add_argument("--export", action="store_true", help="also write OUT/model_int8.onnx (quantized on your frames)")
+    p.add_argument("--sign", metavar="KEY.pem",
+                   help="with --export: sign the model with this Ed25519 private key (without one it is unsigned, "
+                        "and bsn-run runs it only with --allow-unsigned)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted adaptation in --out: imported clips and finished labels are kept "
                         "(fine-tuning, a few minutes, runs again)")
@@ -65,6 +69,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.sign:
+        if not args.export:
+            return fail(PROG, "--sign signs the exported model: it needs --export")
+        from bsn_edge.export.signing import load_private_key
+        try:
+            load_private_key(args.sign)      # a bad key is refused before any work
+        except (FileNotFoundError, ValueError) as e:
+            return fail(PROG, str(e))
     try:
         cfg = AdaptConfig(rate=args.rate, horizon_s=args.horizon, min_corr=args.min_corr,
                           label_depth=args.label_depth, look_tol=args.look_tol, holdout_fraction=args.holdout,
@@ -85,6 +97,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"kept the source model: {rep['kept_source']}")
     if "export" in rep:
         print(f"wrote {rep['export']['path']}")
+        from bsn_edge.cli.export import signed
+        if signed(Path(rep["export"]["path"]), args.sign):
+            return 2
     print(f"wrote the adapted run to {args.out} (report: {args.out}/adapt/report.json)")
     print(json.dumps({"weights_sha256": rep["weights_sha256"][:16], "seconds": rep["seconds"]}))
     return 0

@@ -10,12 +10,12 @@ from pathlib import Path
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli import sheet, synth
 from bsn_edge.cli.common import CHECKOUT, fail
+from bsn_edge.modelfile.trust import TrustPolicy
 from bsn_edge.runtime import Engine
 from bsn_edge.synth.style import STYLES
 
 PROG = "bsn-demo"
 DEFAULT_MODEL = CHECKOUT / "models" / "bsn_shared_light_int8.onnx"
-PROJECT_KEY = CHECKOUT / "models" / "bsn-edge-project.pub"   # the shipped default is signed with its pair
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,7 +29,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=7, help="random seed of the clip (default 7)")
     p.add_argument("--style", default="town", choices=tuple(sorted(STYLES)),
                    help="synthetic world style of the clip (default town)")
-    p.add_argument("--model", default=str(DEFAULT_MODEL), help="fused ONNX model (default: the shipped one)")
+    p.add_argument("--model", default=str(DEFAULT_MODEL),
+                   help="fused ONNX model (default: the shipped one, signed with the project's key)")
+    p.add_argument("--allow-unsigned", action="store_true",
+                   help="let bsn-run run a --model not signed by a trusted key (see bsn-run --help)")
     return p
 
 
@@ -39,8 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     model = Path(args.model)
     if not model.is_file():
         return fail(PROG, f"model {model} not found; make one with bsn-train and bsn-export (see models/README.md)")
-    try:
-        Engine(model)              # the model is verified (seal, graph, self-test) before the clip is rendered
+    try:                           # verified (seal, signature, graph, self-test) before the clip is rendered
+        Engine(model, trust=TrustPolicy.default(allow_unsigned=args.allow_unsigned))
     except (ValueError, OSError) as e:
         return fail(PROG, str(e))
     clip = out / f"{args.style}_{args.seed}"
@@ -55,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     rc = run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--overlay",
                        str(out / "overlay.mp4"), "--log", str(out / "alerts.jsonl"), "--can-log",
                        str(out / "alerts.log"), "--summary", str(summary), "--calib", str(clip / "calibration.json"),
-                       *(["--trust", str(PROJECT_KEY)] if model.resolve() == DEFAULT_MODEL.resolve() else [])])
+                       *(["--allow-unsigned"] if args.allow_unsigned else [])])
     if rc:
         return rc
     s = json.loads(summary.read_text())

@@ -9,6 +9,8 @@ from bsn_edge.cli.common import fail, glue_values, parse_size
 from bsn_edge.export.pipeline import export_run
 from bsn_edge.export.quantize import METHODS, TYPES, QuantConfig
 from bsn_edge.export.seal import read_card, seal
+from bsn_edge.modelfile.selftest import SelfTestError
+from bsn_edge.modelfile.trust import user_trust_dir
 from bsn_edge.train.run import Run
 
 PROG = "bsn-export"
@@ -45,8 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="quantize the output heads too (by default they stay float)")
     p.add_argument("--reseal", metavar="MODEL.onnx",
                    help="instead of exporting: seal a model exported before models were sealed (writes its card "
-                        "with the graph's sha256 and a self-test answer to --out). Only for a file you trust: "
-                        "sealing cannot tell whether it was damaged before")
+                        "with the graph's sha256 and a self-test answer to --out), signed with --sign KEY.pem, "
+                        "which it needs: a resealed model is vouched for by whoever resealed it. Only for a file "
+                        "you trust: sealing cannot tell whether it was damaged before")
     p.add_argument("--integer-input", metavar="MODEL.onnx",
                    help="instead of exporting: rewrite an int8 model exported before the integer input so its frame "
                         "is normalised by an exact integer convolution on the uint8 frame (no float frame), resealed "
@@ -67,8 +70,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def signed(model: Path, key: str | None) -> int:
-    """Sign ``model`` with ``key`` when one is given; 0, or 2 with a message."""
+    """Sign ``model`` with ``key`` when one is given, else say plainly that it is unsigned; 0, or 2 with a
+    message."""
     if not key:
+        print(f"note: {model} is unsigned: bsn-run refuses it unless it is run with --allow-unsigned. Sign it with "
+              "--sign KEY.pem (bsn-export --new-key KEY.pem makes a key pair; bsn-run trusts KEY.pem.pub given with "
+              f"--trust or put in {user_trust_dir()})")
         return 0
     from bsn_edge.export.signing import sign
     try:
@@ -82,9 +89,11 @@ def signed(model: Path, key: str | None) -> int:
 def reseal(src: Path, out: Path) -> int:
     try:
         card = read_card(src)
-    except (FileNotFoundError, ValueError) as e:
-        return fail(PROG, str(e))
-    sealed = seal(src, card.replace(graph_sha256="", self_test=None), out)
+        sealed = seal(src, card.replace(graph_sha256="", self_test=None), out)
+    except (FileNotFoundError, ValueError, SelfTestError) as e:
+        return fail(PROG, f"{src}: {e}" if isinstance(e, SelfTestError) else str(e))
+    except Exception as e:          # onnxruntime refusing the graph
+        return fail(PROG, f"{src}: cannot be sealed: {type(e).__name__}: {e}")
     print(f"wrote {out}: {sealed.variant} {sealed.input_size[0]}x{sealed.input_size[1]}, graph sha256 "
           f"{sealed.graph_sha256[:16]}..., self-test recorded")
     return 0
@@ -113,6 +122,10 @@ def main(argv: list[str] | None = None) -> int:
     if out.exists() and not args.force:
         return fail(PROG, f"{out} exists; pass --force to overwrite it")
     if args.reseal:
+        if not args.sign:
+            return fail(PROG, "--reseal needs --sign KEY.pem: a resealed model is vouched for only by whoever "
+                              "resealed it, and bsn-run runs only models signed by a key it trusts (bsn-export "
+                              "--new-key KEY.pem makes a key pair)")
         code = reseal(Path(args.reseal), out)
         return code or signed(out, args.sign)
     if args.integer_input:

@@ -35,8 +35,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "per frame blind-spot mask and depth -> LEFT / CENTRE / RIGHT sectors -> smoothing -> "
                     "alert state -> CAN and/or serial at a fixed cycle, with a status heartbeat. Prints a "
                     "summary (frames, dropped, frames/s, p50/p95/p99 latency, per-stage shares). Before the "
-                    "first frame the model's digest and self-test are checked: a model that fails them is "
-                    "refused (UNAVAILABLE is sent first). Exit codes: 0 done (or stopped by SIGTERM), 1 the "
+                    "first frame the model's digest, signature and self-test are checked: a model that fails "
+                    "them is refused (UNAVAILABLE is sent first); only models signed by a trusted key run, "
+                    "unless --allow-unsigned. Exit codes: 0 done (or stopped by SIGTERM), 1 the "
                     "source failed, 2 could not start, 130 interrupted (SIGINT).")
     p.add_argument("--model", required=True, help="fused ONNX model from bsn-export")
     p.add_argument("--source", required=True, help="VIDEO file, image DIR, CAMERA_INDEX or stream URL")
@@ -68,9 +69,15 @@ def build_parser() -> argparse.ArgumentParser:
     reading.add_argument("--in-turn", action="store_true",
                          help="read each frame after the model has answered the one before (one thread)")
     p.add_argument("--pace", action="store_true", help="play files at their own frame rate")
-    p.add_argument("--trust", metavar="KEYS",
-                   help="Ed25519 public key file (or a file or folder of several): refuse any model not signed by "
-                        "one of them (bsn-export --sign); without it, any intact model runs")
+    p.add_argument("--trust", metavar="KEYS", action="append", default=[],
+                   help="also trust models signed by these Ed25519 public keys: a .pub file, a file of several or a "
+                        "folder (repeatable). Always trusted: the project's key (the shipped models) and the keys in "
+                        "your trust folder ($BSN_EDGE_TRUST, else ~/.config/bsn-edge/trust). A model signed by none "
+                        "of them is refused")
+    p.add_argument("--allow-unsigned", action="store_true",
+                   help="run a model that is unsigned or signed by a key not trusted here (your own experiments); "
+                        "the status then says Model_Unsigned on every cycle and the summary says whose it is not. "
+                        "A signature that does not match its model is refused even so")
     p.add_argument("--stall", type=float, default=2.0, metavar="SECONDS",
                    help="a camera or stream that delivers no frame for this long is lost: the bus says "
                         "UNAVAILABLE and it is reopened with back-off (default 2)")
@@ -212,8 +219,11 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
     lines = [f"{PROG}: {summary['frames']} frames ({summary['valid_frames']} valid) in {summary['seconds']:.1f} s: "
              f"{summary['fps']:.1f} frames/s, latency p50 {summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms"
              + (f", {summary['dropped']} dropped" if summary["dropped"] else "")]
-    faults = {k: v for k, v in summary["faults"].items() if v}
+    faults = {k: v for k, v in summary["faults"].items() if v and k != "unsigned_model"}
     lines.append("  faults: " + (", ".join(f"{k} {v}" for k, v in faults.items()) if faults else "none"))
+    model = summary["model"]
+    lines.append(f"  model: signed by key {model['signer']}" if model["authentic"]
+                 else f"  model: UNSIGNED ({model['trust_note']}; run by --allow-unsigned)")
     m = summary["camera"]["mounting"]
     if camera.calibrating:
         lines.append(f"  camera: still {camera.progress()}; online calibration needs a few seconds of straight "
@@ -295,6 +305,7 @@ def _start(args: argparse.Namespace):
     """What the run needs before its first frame, each piece checked: ``(engine, camera, source, cfg,
     maps)``; ``FileNotFoundError``, ``ValueError`` or ``OSError`` names what is wrong."""
     from bsn_edge.calibration.camera_file import Calibration
+    from bsn_edge.modelfile.trust import TrustPolicy
     from bsn_edge.mounting import check_height
     from bsn_edge.runtime import Engine, RuntimeConfig, open_source
     from bsn_edge.runtime.camera_state import CameraState
@@ -306,13 +317,13 @@ def _start(args: argparse.Namespace):
     if args.save_calib and Path(args.save_calib).exists() and not args.force:
         raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
     maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
-    trust = None
-    if args.trust:
-        from bsn_edge.modelfile.trust import load_public_keys
-        trust = load_public_keys(args.trust)
+    trust = TrustPolicy.default(args.trust, args.allow_unsigned)
     cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.in_turn, in_flight=args.in_flight)
     threads = cfg.engine_threads if args.threads is None else args.threads
     engine = Engine(args.model, threads, args.spin, trust=trust)
+    if not engine.authentic:
+        print(f"{PROG}: warning: {engine.verdict.note}; it runs because of --allow-unsigned, and the status says "
+              "Model_Unsigned on every cycle", file=sys.stderr)
     camera = CameraState(engine.card, calibration, args.height, args.save_calib)
     source = open_source(args.source, pace=args.pace, stall_s=args.stall)
     if calibration is not None and source.size is not None:

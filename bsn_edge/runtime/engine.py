@@ -3,7 +3,7 @@
 At load, in this order, any failure raising :class:`ModelError` (the runtime then refuses to
 start): the file is read in chunks; its model card is read and validated; the digest of the
 graph and weights is compared with the card's; with trusted keys, the signature over both
-digests is checked (:mod:`bsn_edge.modelfile.trust`); the session is built from the file; its
+digests is checked against a :class:`~bsn_edge.modelfile.trust.TrustPolicy`; the session is built from the file; its
 input and outputs are checked against the card; the self-test frame is run and compared with the
 answer stored at export.
 """
@@ -19,7 +19,7 @@ import numpy as np
 from bsn_edge.card import CARD_SHA_KEY, FP32, ModelCard
 from bsn_edge.modelfile import selftest
 from bsn_edge.modelfile.read import ModelFile, session
-from bsn_edge.modelfile.trust import UntrustedModelError, verify
+from bsn_edge.modelfile.trust import TrustPolicy, UntrustedModelError, Verdict
 
 
 class ModelError(ValueError):
@@ -30,9 +30,11 @@ class Engine:
     """Runs the model on its preallocated input buffer ``buf`` (the loop warps frames into it)."""
 
     def __init__(self, model: str | Path, threads: int = 2, spinning: bool = False,
-                 trust: Mapping[str, Any] | None = None) -> None:
-        """``trust``: public keys by id (:func:`bsn_edge.modelfile.trust.load_public_keys`); with them, a
-        model not signed by one of them is refused (``signer`` says which key signed). ``spinning``:
+                 trust: TrustPolicy | Mapping[str, Any] | None = None) -> None:
+        """``trust``: the policy (or public keys by id, allowing nothing else) the model's signature is
+        checked against; a model it does not allow is refused. ``verdict`` says which trusted key signed
+        it ("" when none did: ``authentic`` is then False). Without ``trust`` the signature is not checked
+        and the model counts as not authentic (``bsn-run`` always checks). ``spinning``:
         onnxruntime's idle threads spin-wait for the next work; off by default, because between two
         inferences the loop decodes, warps and calibrates on the same cores, which spinning threads
         take from it (``benchmarks/results/runtime.md``)."""
@@ -50,11 +52,12 @@ class Engine:
             raise ModelError(f"{self.path}: the model file is damaged: the sha256 of its graph and weights "
                              f"({mf.graph_sha256[:12]}...) is not the one its export recorded "
                              f"({self.card.graph_sha256[:12]}...)")
-        self.signer = ""
+        self.verdict = Verdict("", "the signature was not checked")
         if trust is not None:
+            policy = trust if isinstance(trust, TrustPolicy) else TrustPolicy(trust)
             try:
-                self.signer = verify(mf.metadata, mf.graph_sha256, mf.metadata.get(CARD_SHA_KEY, ""), trust,
-                                     str(self.path))
+                self.verdict = policy.check(mf.metadata, mf.graph_sha256, mf.metadata.get(CARD_SHA_KEY, ""),
+                                            str(self.path))
             except UntrustedModelError as e:
                 raise ModelError(str(e)) from None
         try:
@@ -85,6 +88,15 @@ class Engine:
             if list(o.shape) != [1, 1, h, w] or o.type != "tensor(float)":
                 raise ModelError(f"{self.path}: output {o.name!r} is {o.type} {list(o.shape)}; a bsn-export model "
                                  f"gives float [1, 1, {h}, {w}] (the card's input size)")
+
+    @property
+    def signer(self) -> str:
+        """The id of the trusted key that signed the model, "" when none did (or it was not checked)."""
+        return self.verdict.signer
+
+    @property
+    def authentic(self) -> bool:
+        return self.verdict.authentic
 
     @property
     def kernels(self) -> str:

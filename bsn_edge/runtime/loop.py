@@ -134,6 +134,8 @@ class FramePipeline:
         self.machines = [SectorState(cfg.alerts) for _ in range(3)]
         self.health = Health(cfg.health)
         self.wall = None if source.live else clock    # a live source's frame times are the processing clock
+        if not engine.authentic:        # said on every cycle: nobody trusted vouches for this model
+            self.health.set_fault(Fault.UNSIGNED_MODEL, 1)
         self.emitter = CycleEmitter(senders, self.health, cfg.cycle_s, self.wall)
         self.timer = StageTimer()
         self.latency = LatencyStats()
@@ -395,7 +397,8 @@ class FramePipeline:
                 "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
                           "quantization": card.quantization, "kernels": self.engine.kernels,
                           "self_test": self.engine.self_test,
-                          "signer": self.engine.signer}}
+                          "signer": self.engine.signer, "authentic": self.engine.authentic,
+                          "trust_note": self.engine.verdict.note}}
 
 
 def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig | None = None,

@@ -18,12 +18,14 @@ from bsn_edge.alerts.can_codec import DBC_PATH
 from bsn_edge.cli.common import CHECKOUT
 from tests.fakes import long_video
 
-ENV = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
+
+def env() -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(CHECKOUT)}
 
 
 def bsn_run(*argv: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "bsn_edge.cli.run", *argv], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=ENV, text=True)
+                            stderr=subprocess.PIPE, env=env(), text=True)
 
 
 def statuses(can_log: Path) -> list[tuple[float, dict]]:
@@ -93,7 +95,7 @@ def test_signals_are_watched_before_the_runtime_is_imported():
     before ``main`` installs its handlers: a signal while the runtime's modules load is handled."""
     code = ("import sys; before = set(sys.modules); import bsn_edge.cli.run; "
             "print(sorted(m.split('.')[0] for m in set(sys.modules) - before))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, check=True).stdout
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env(), check=True).stdout
     third_party = {m for m in ast.literal_eval(out) if m not in sys.stdlib_module_names and not m.startswith(
         ("bsn_edge", "__editable__"))}
     assert not third_party, f"imported before the handlers: {sorted(third_party)}"

@@ -243,7 +243,8 @@ def test_a_sealed_graph_with_the_wrong_output_ranks_is_refused_at_load(setup, tm
     set_metadata(m, sealed)
     bad = tmp_path / "rank2.onnx"
     onnx.save(m, str(bad))
-    code, got = run_on_bus("bsn-sink-rank", ["--model", str(bad), "--source", str(clip / "video.mp4")])
+    code, got = run_on_bus("bsn-sink-rank", ["--model", str(bad), "--source", str(clip / "video.mp4"),
+                                            "--allow-unsigned"])
     err = capsys.readouterr().err
     assert code == 2 and "output 'blindspot' is tensor(float) [" in err and "Traceback" not in err
     assert [d.signals["System_State"] for d in got if d.name == "BSN_Status"] == [SystemState.UNAVAILABLE]

@@ -1,5 +1,6 @@
-"""Models that are not ours: with --trust, only a model signed by a trusted key runs. An intact seal is
-not enough: anyone can edit a card and re-digest it."""
+"""Models that are not ours: bsn-run runs only a model signed by a trusted key (the project's, the trust
+folder's, --trust), unless told in words (--allow-unsigned), and then the status says so on every cycle.
+An intact seal is not enough: anyone can edit a card and re-digest it."""
 
 import json
 import shutil
@@ -9,11 +10,10 @@ import onnx
 import pytest
 
 from bsn_edge.alerts import SystemState
-from bsn_edge.alerts.can_codec import decode
 from bsn_edge.card import CARD_SHA_KEY, card_digest
 from bsn_edge.cli import export as export_cli
 from bsn_edge.cli import run as run_cli
-from bsn_edge.modelfile.trust import SIGNATURE_KEY, load_public_keys
+from bsn_edge.modelfile.trust import SIGNATURE_KEY, TrustPolicy, load_public_keys
 from bsn_edge.runtime import Engine
 from bsn_edge.runtime.engine import ModelError
 
@@ -31,6 +31,32 @@ def signed_copy(model, tmp_path, key, name="signed.onnx"):
     return out
 
 
+def unsigned_copy(model, tmp_path, name="unsigned.onnx"):
+    """The model with its signature taken out: still sealed (the signature lies outside the seal)."""
+    m = onnx.load(str(model))
+    kept = [(p.key, p.value) for p in m.metadata_props if p.key != SIGNATURE_KEY]
+    del m.metadata_props[:]
+    for k, v in kept:
+        e = m.metadata_props.add()
+        e.key, e.value = k, v
+    out = tmp_path / name
+    onnx.save(m, str(out))
+    return out
+
+
+def bus_run(channel, argv):
+    """bsn-run on a virtual bus: (exit code, the status frames' signals decoded by cantools)."""
+    import cantools
+
+    from bsn_edge.alerts.can_codec import DBC_PATH
+    db = cantools.database.load_file(str(DBC_PATH))
+    with can.Bus(interface="virtual", channel=channel) as rx:
+        code = run_cli.main([*argv, "--can", f"virtual:{channel}"])
+        st = [db.decode_message(m.arbitration_id, bytes(m.data), decode_choices=False)
+              for m in iter(lambda: rx.recv(0.2), None) if m.arbitration_id == 0x501]
+    return code, st
+
+
 def test_a_signed_model_runs_for_its_key_only(setup, tmp_path, keys):
     model, _ = setup
     ours, theirs = keys
@@ -40,13 +66,14 @@ def test_a_signed_model_runs_for_its_key_only(setup, tmp_path, keys):
     with pytest.raises(ModelError, match="not among the trusted keys"):
         Engine(signed, trust=load_public_keys(f"{theirs}.pub"))
     with pytest.raises(ModelError, match="not signed"):
-        Engine(model, trust=load_public_keys(f"{ours}.pub"))
+        Engine(unsigned_copy(model, tmp_path), trust=load_public_keys(f"{ours}.pub"))
     folder = tmp_path / "trusted"
     folder.mkdir()
     for k in keys:
         shutil.copy(f"{k}.pub", folder)
     assert Engine(signed, trust=load_public_keys(folder)).signer == engine.signer
-    assert Engine(model).signer == "", "without --trust any intact model runs, as before"
+    unchecked = Engine(model)
+    assert unchecked.signer == "" and not unchecked.authentic, "a library user who checks nothing gets no verdict"
 
 
 def test_a_resealed_edit_keeps_its_seal_but_loses_its_signature(setup, tmp_path, keys):
@@ -71,20 +98,80 @@ def test_a_resealed_edit_keeps_its_seal_but_loses_its_signature(setup, tmp_path,
     assert SIGNATURE_KEY in props
 
 
-def test_bsn_run_refuses_an_unsigned_model_with_unavailable_and_a_message(setup, tmp_path, keys, capsys):
+def test_bsn_run_refuses_an_unsigned_model_by_default_with_unavailable_and_a_message(setup, tmp_path, capsys):
+    model, clip = setup
+    bare = unsigned_copy(model, tmp_path)
+    code, st = bus_run("bsn-trust", ["--model", str(bare), "--source", str(clip / "video.mp4")])
+    err = capsys.readouterr().err
+    assert code == 2 and "not signed" in err and "--allow-unsigned" in err and "Traceback" not in err
+    assert [s["System_State"] for s in st] == [SystemState.UNAVAILABLE]
+
+
+def test_a_model_signed_by_a_key_not_trusted_here_is_refused_until_its_key_is_given(setup, tmp_path, keys, capsys):
+    model, clip = setup
+    _, theirs = keys
+    foreign = signed_copy(model, tmp_path, theirs)
+    argv = ["--model", str(foreign), "--source", str(clip / "video.mp4"), "--calib", str(clip / "calibration.json")]
+    code, _ = bus_run("bsn-foreign", argv)
+    assert code == 2 and "not among the trusted keys" in capsys.readouterr().err
+    code, st = bus_run("bsn-foreign", [*argv, "--trust", f"{theirs}.pub"])
+    assert code == 0 and st and all(s["Model_Unsigned"] == 0 for s in st)
+
+
+def test_allow_unsigned_runs_it_and_the_status_says_so_on_every_cycle(setup, tmp_path, capsys):
+    model, clip = setup
+    bare = unsigned_copy(model, tmp_path)
+    summ = tmp_path / "s.json"
+    code, st = bus_run("bsn-unsigned", ["--model", str(bare), "--source", str(clip / "video.mp4"), "--calib",
+                                        str(clip / "calibration.json"), "--allow-unsigned", "--summary", str(summ)])
+    assert code == 0 and len(st) > 5 and all(s["Model_Unsigned"] == 1 for s in st)
+    assert st[-1]["System_State"] == SystemState.UNAVAILABLE
+    s = json.loads(summ.read_text())["model"]
+    assert s["authentic"] is False and s["signer"] == "" and "not signed" in s["trust_note"]
+    out = capsys.readouterr()
+    assert "model: UNSIGNED" in out.out and "warning" in out.err
+    # the signed original on the same run: the flag stays clear
+    code, st = bus_run("bsn-unsigned", ["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                                        str(clip / "calibration.json")])
+    assert code == 0 and all(s["Model_Unsigned"] == 0 for s in st)
+
+
+def test_a_signature_that_does_not_match_is_refused_even_with_allow_unsigned(setup, tmp_path, keys, capsys):
     model, clip = setup
     ours, _ = keys
-    with can.Bus(interface="virtual", channel="bsn-trust") as rx:
-        code = run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--trust", f"{ours}.pub",
-                             "--can", "virtual:bsn-trust"])
-        states = []
-        while (msg := rx.recv(timeout=0.2)) is not None:
-            d = decode(msg.arbitration_id, msg.data)
-            if d is not None and d.name == "BSN_Status":
-                states.append(d.signals["System_State"])
+    signed = signed_copy(model, tmp_path, ours)
+    m = onnx.load(str(signed))
+    props = {p.key: p.value for p in m.metadata_props}
+    props["bsn.threshold"] = json.dumps(0.9)       # pushed up: it would report less
+    props[CARD_SHA_KEY] = card_digest({k: v for k, v in props.items() if k.startswith("bsn.")})
+    del m.metadata_props[:]
+    for k, v in props.items():
+        e = m.metadata_props.add()
+        e.key, e.value = k, v
+    edited = tmp_path / "edited.onnx"
+    onnx.save(m, str(edited))
+    code, st = bus_run("bsn-tampered", ["--model", str(edited), "--source", str(clip / "video.mp4"), "--trust",
+                                        f"{ours}.pub", "--allow-unsigned"])
+    assert code == 2 and "does not match" in capsys.readouterr().err
+    assert [s["System_State"] for s in st] == [SystemState.UNAVAILABLE]
+
+
+def test_reseal_needs_a_key_and_a_model_answering_nan_is_refused_with_a_message(setup, tmp_path, keys, capsys):
+    import numpy as np
+    from onnx import numpy_helper
+    model, _ = setup
+    ours, _ = keys
+    assert export_cli.main(["--reseal", str(model), "--out", str(tmp_path / "r.onnx")]) == 2
+    assert "--reseal needs --sign" in capsys.readouterr().err and not (tmp_path / "r.onnx").exists()
+    m = onnx.load(str(model))
+    w = next(t for t in m.graph.initializer if numpy_helper.to_array(t).dtype == np.float32
+             and numpy_helper.to_array(t).size > 100)
+    w.CopyFrom(numpy_helper.from_array(np.full_like(numpy_helper.to_array(w), np.nan), w.name))
+    nan = tmp_path / "nan.onnx"
+    onnx.save(m, str(nan))
+    assert export_cli.main(["--reseal", str(nan), "--out", str(tmp_path / "n.onnx"), "--sign", str(ours)]) == 2
     err = capsys.readouterr().err
-    assert code == 2 and "not signed" in err and "Traceback" not in err
-    assert states == [SystemState.UNAVAILABLE]
+    assert "non-finite" in err and "Traceback" not in err and not (tmp_path / "n.onnx").exists()
 
 
 def test_keys_are_never_overwritten_and_bad_keys_are_named(tmp_path, keys, capsys):
@@ -99,15 +186,16 @@ def test_keys_are_never_overwritten_and_bad_keys_are_named(tmp_path, keys, capsy
         load_public_keys(junk)
 
 
-def test_the_shipped_default_is_signed_with_the_projects_key():
-    from bsn_edge.cli.demo import DEFAULT_MODEL, PROJECT_KEY
+def test_the_shipped_default_is_signed_with_the_projects_key_and_runs_by_default():
+    from bsn_edge.cli.demo import DEFAULT_MODEL
+    from bsn_edge.modelfile.trust import PROJECT_KEYS
     if not DEFAULT_MODEL.is_file():
         pytest.skip("the shipped model is not in this checkout")
-    engine = Engine(DEFAULT_MODEL, trust=load_public_keys(PROJECT_KEY))
-    assert engine.signer == next(iter(load_public_keys(PROJECT_KEY)))
+    engine = Engine(DEFAULT_MODEL, trust=TrustPolicy.default())
+    assert engine.authentic and engine.signer in load_public_keys(PROJECT_KEYS)
 
 
-def test_reseal_turns_a_model_from_before_seals_into_one_the_runtime_runs(setup, tmp_path):
+def test_reseal_turns_a_model_from_before_seals_into_one_the_runtime_runs(setup, tmp_path, keys):
     """A model exported before models were sealed (no graph digest, no self-test answer) is refused;
     bsn-export --reseal records both, and the resealed file runs with the same card."""
     from bsn_edge.export.seal import read_card, set_metadata
@@ -119,7 +207,7 @@ def test_reseal_turns_a_model_from_before_seals_into_one_the_runtime_runs(setup,
     onnx.save(m, str(old))
     with pytest.raises(ModelError, match="no integrity digest"):
         Engine(old)
-    assert export_cli.main(["--reseal", str(old), "--out", str(tmp_path / "new.onnx")]) == 0
+    assert export_cli.main(["--reseal", str(old), "--out", str(tmp_path / "new.onnx"), "--sign", str(keys[0])]) == 0
     engine = Engine(tmp_path / "new.onnx")
     assert engine.card.graph_sha256 == card.graph_sha256 and engine.card.threshold == card.threshold
     assert engine.self_test["max_abs_prob"] < 1e-5, "its own answer, recorded at reseal"
@@ -138,7 +226,7 @@ def test_a_file_swapped_after_the_check_is_not_what_runs(setup, tmp_path, keys, 
     signed = signed_copy(model, tmp_path, ours)
     original = signed.read_bytes()
     other = tmp_path / "other.onnx"
-    assert export_cli.main(["--reseal", str(model), "--out", str(other)]) == 0   # valid, unsigned, same graph
+    assert export_cli.main(["--reseal", str(model), "--out", str(other), "--sign", str(keys[1])]) == 0  # same graph
 
     def swap_then_open(src, *args, **kwargs):
         signed.write_bytes(b"\x08\x07" + other.read_bytes()[2:-7])      # anything but the verified file
