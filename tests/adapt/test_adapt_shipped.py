@@ -35,7 +35,7 @@ def iou(run: Path, clips: list) -> dict[str, float]:
 
 
 @pytest.mark.slow
-def test_adapting_the_shipped_default_with_its_own_labellers_does_not_lose_iou(tmp_path):
+def test_adapting_the_shipped_default_with_its_own_labellers_does_not_lose_iou(tmp_path, tests_key):
     assert (SHIPPED / "checkpoint.json").is_file(), f"the shipped run is missing from {SHIPPED}"
     truth, user = tmp_path / "truth", tmp_path / "user"
     for name, style, seed in DRIVES:
@@ -49,7 +49,8 @@ def test_adapting_the_shipped_default_with_its_own_labellers_does_not_lose_iou(t
 
     out = tmp_path / "adapted"
     assert adapt_cli.main(["--run", str(SHIPPED), "--video", *(str(user / n) for n, _, _ in DRIVES),
-                           "--out", str(out), "--T", HORIZON, "--steps", "150", "--export", "--quiet"]) == 0
+                           "--out", str(out), "--T", HORIZON, "--steps", "150", "--export", "--sign",
+                           str(tests_key), "--quiet"]) == 0
     rep = json.loads((out / "adapt" / "report.json").read_text())
     assert rep["status"] == "ok", rep
     depth_from = {n: c.get("label_depth") for n, c in rep["clips"].items()}
