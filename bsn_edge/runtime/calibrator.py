@@ -28,7 +28,8 @@ import numpy as np
 from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
 from bsn_edge.camera import Intrinsics
 from bsn_edge.mounting import Mounting
-from bsn_edge.runtime.priority import lower_priority
+from bsn_edge.runtime.priority import check_nice, lower_priority
+from bsn_edge.runtime.slot import LatestSlot
 
 # The online estimator tracks fewer corners in a smaller picture than ``bsn-calibrate --mount``: a
 # pair then costs a fraction of the CPU, and convergence needs many pairs more than precise ones
@@ -47,8 +48,7 @@ class OnlineCalibrator:
                  wait: bool = True) -> None:
         if every < 1:
             raise ValueError(f"every must be >= 1, got {every}")
-        if not 0 <= nice <= 19:
-            raise ValueError(f"nice must be within 0..19, got {nice}")
+        check_nice(nice)
         self.nice, self.wait = nice, wait
         self.skipped = 0
         self.fit = MountFit(intrinsics, dist, cfg or ONLINE_FIT)
@@ -58,10 +58,9 @@ class OnlineCalibrator:
         self._mounting: Mounting | None = None
         self._report: dict[str, Any] = {}
         self._settled: tuple[Mounting | None, dict[str, Any]] = (None, {})
-        self._lock = threading.Lock()
-        self._slot: np.ndarray | None = None
-        self._has_work = threading.Condition(self._lock)
-        self._closed = False
+        self._lock = threading.RLock()      # the estimate's state, and the slot's
+        # held: the loop waits for the estimator's work on a frame, not only for its hand-over
+        self._slot: LatestSlot[np.ndarray] = LatestSlot(hold=True, cond=threading.Condition(self._lock))
         self._thread: threading.Thread | None = None
         if background:
             self._thread = threading.Thread(target=self._work, name="online-calibration", daemon=True)
@@ -77,17 +76,13 @@ class OnlineCalibrator:
             self._settled = (self._mounting, dict(self._report))
             self._step(frame)
             return
-        with self._has_work:
-            if self._slot is not None and not self.wait:
+        with self._lock:
+            if not self.wait and self._slot.full:
                 self.skipped += 1
                 return
-            while self._slot is not None and not self._closed:
-                self._has_work.wait()
-            if self._closed:
-                return
-            self._settled = (self._mounting, dict(self._report))
-            self._slot = frame.copy()
-            self._has_work.notify_all()
+            accepted, _ = self._slot.put(frame.copy())
+            if accepted:    # still under the lock: the estimate of every frame before this one
+                self._settled = (self._mounting, dict(self._report))
 
     def result(self) -> tuple[Mounting | None, dict[str, Any]]:
         """The converged mounting (None until then) and the report, from the frames fed before the last."""
@@ -96,30 +91,20 @@ class OnlineCalibrator:
 
     def close(self) -> None:
         """Stop the worker; idempotent."""
-        with self._has_work:
-            self._closed = True
-            self._has_work.notify_all()
+        self._slot.close()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
 
     def _work(self) -> None:
         if not self.wait:
             lower_priority(self.nice)
-        while True:
-            with self._has_work:
-                while self._slot is None and not self._closed:
-                    self._has_work.wait()
-                if self._closed:
-                    return
-                frame = self._slot
+        while (frame := self._slot.take()) is not None:
             try:
                 self._step(frame)
             except Exception as e:
                 with self._lock:
                     self.error = f"{type(e).__name__}: {e}"
-            with self._has_work:
-                self._slot = None
-                self._has_work.notify_all()
+            self._slot.done()
 
     def _step(self, frame: np.ndarray) -> None:
         if not self.fit.add(frame):

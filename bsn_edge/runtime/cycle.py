@@ -101,9 +101,13 @@ class Heartbeat:
                     self.emitter.health.fault(Fault.HEARTBEAT_ERRORS)
             self._stop.wait(self.emitter.cycle_s / 2)
 
-    def __enter__(self) -> Heartbeat:
+    def start(self) -> Heartbeat:
+        """Start the thread; returns the heartbeat (``close()`` stops it)."""
         self._thread.start()
         return self
+
+    def __enter__(self) -> Heartbeat:
+        return self.start()
 
     def close(self) -> None:
         """Stop the thread (idempotent); the caller sends what comes after."""

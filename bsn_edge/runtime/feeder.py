@@ -28,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from bsn_edge.model_frame import ModelFrame
-from bsn_edge.runtime.priority import lower_priority
+from bsn_edge.runtime.priority import check_nice, lower_priority
+from bsn_edge.runtime.slot import LatestSlot
 from bsn_edge.runtime.sources import Captured, Source
 
 
@@ -68,8 +69,7 @@ class Feeder:
 
     def __init__(self, source: Source, warp: Warp, buffers: list[np.ndarray], background: bool,
                  limit: int | None = None, nice: int = 0, held: int = 1) -> None:
-        if not 0 <= nice <= 19:
-            raise ValueError(f"nice must be within 0..19, got {nice}")
+        check_nice(nice)
         if held < 1 or (held > 1 and not background):
             raise ValueError(f"held must be 1, or more with a background feeder; got {held}")
         if background and len(buffers) < self.buffers_needed(held):
@@ -83,9 +83,8 @@ class Feeder:
         self._free = list(buffers)
         self._auto_release = held == 1
         self._held: list[np.ndarray] = []        # the buffers of the frames the caller has
-        self._cond = threading.Condition()
-        self._slot: Prepared | None = None
-        self._ended = False
+        self._cond = threading.Condition()       # the buffers' lock, and the slot's
+        self._slot: LatestSlot[Prepared] = LatestSlot(newest_wins=self.newest_wins, cond=self._cond)
         self._closed = False
         self._error: BaseException | None = None
         self._dropped = 0
@@ -127,13 +126,10 @@ class Feeder:
             if self._auto_release:
                 for buf in list(self._held):
                     self.release(buf)
+            item = self._slot.take()
             with self._cond:
-                while self._slot is None and not self._ended:
-                    self._cond.wait()
-                item, self._slot = self._slot, None
                 if item is not None and item.buf is not None:
                     self._held.append(item.buf)
-                self._cond.notify_all()
                 if item is None:
                     if self._error is not None:
                         raise self._error
@@ -146,6 +142,7 @@ class Feeder:
         with self._cond:
             self._closed = True
             self._cond.notify_all()
+        self._slot.close()
         if self._thread is not None and self._thread is not threading.current_thread():
             self.source.stop()
             self._thread.join(timeout=5.0)
@@ -170,20 +167,16 @@ class Feeder:
             self._cond.notify_all()
 
     def _put(self, item: Prepared) -> bool:
-        """Hand ``item`` over; False when the feeder was closed meanwhile."""
+        """Hand ``item`` over (a live source's newest replaces one not yet taken, which is counted as
+        dropped and its buffer freed); False when the feeder was closed meanwhile."""
         with self._cond:
-            if self.newest_wins and self._slot is not None:
+            accepted, replaced = self._slot.put(item)
+            if replaced is not None:
                 self._dropped += 1
-                if self._slot.buf is not None:
-                    self._free.append(self._slot.buf)
-                self._slot = None
-            while self._slot is not None and not self._closed:
-                self._cond.wait()
-            if self._closed:
-                return False
-            self._slot = item
-            self._cond.notify_all()
-            return True
+                if replaced.buf is not None:
+                    self._free.append(replaced.buf)
+                    self._cond.notify_all()
+            return accepted
 
     def _work(self) -> None:
         n = 0
@@ -205,6 +198,4 @@ class Feeder:
             with self._cond:
                 self._error = e
         finally:
-            with self._cond:
-                self._ended = True
-                self._cond.notify_all()
+            self._slot.end()

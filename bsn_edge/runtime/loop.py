@@ -34,8 +34,10 @@ from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.feeder import Feeder, Prepared
+from bsn_edge.runtime.frame_record import FrameRecord
 from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.runtime.overlay import OverlayWriter, draw
+from bsn_edge.runtime.priority import check_nice
 from bsn_edge.runtime.sinks import GuardedSink, LineLog, SinkFailure, open_all
 from bsn_edge.runtime.sources import Captured, Source
 from bsn_edge.runtime.stats import LatencyStats
@@ -70,8 +72,7 @@ class RuntimeConfig:
     def __post_init__(self) -> None:
         if not self.cycle_s > 0 or self.warmup < 0:
             raise ValueError(f"cycle_s must be positive and warmup >= 0, got {self.cycle_s} and {self.warmup}")
-        if not 0 <= self.feeder_nice <= 19:
-            raise ValueError(f"feeder_nice must be within 0..19, got {self.feeder_nice}")
+        check_nice(self.feeder_nice, "feeder_nice")
         if not 1 <= self.in_flight <= MAX_IN_FLIGHT:
             raise ValueError(f"in_flight must be within 1..{MAX_IN_FLIGHT}, got {self.in_flight}")
         if self.in_flight > 1 and not self.overlap:
@@ -150,7 +151,7 @@ class FramePipeline:
 
     # -- the stages ------------------------------------------------------------------------------
 
-    def read(self, cap: Captured, rec: dict[str, Any]) -> bool:
+    def read(self, cap: Captured, rec: FrameRecord) -> bool:
         """Count what the source says about this frame; False when there is no picture to use."""
         h = self.health
         self.frames += 1
@@ -160,11 +161,11 @@ class FramePipeline:
         self.timer.add("decode", cap.decode_s)
         if cap.frame is None:
             h.fault(Fault.DECODE_ERRORS)
-            rec["fault"] = "decode_error"
+            rec.fault = Fault.DECODE_ERRORS
             return False
         if self.last_shape is not None and cap.frame.shape != self.last_shape:
             h.fault(Fault.SIZE_CHANGES)
-            rec["fault"] = "size_change"
+            rec.fault = Fault.SIZE_CHANGES
         self.last_shape = cap.frame.shape
         return True
 
@@ -180,21 +181,19 @@ class FramePipeline:
         mf.to_model(frame, dst=buf[0])
         return mf, self.camera.calibrating
 
-    def infer(self, buf: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """The model on ``buf``; None (and counted) when it answers NaN or infinity."""
-        return self.checked(*self.engine.infer(buf))
-
-    def start(self, item: Prepared) -> Future | None:
-        """The frame's inference started on one of the loop's inference threads (``in_flight`` > 1):
-        the future answers (prob, depth, when it began, seconds); None when there is nothing to run."""
-        if item.cap.frame is None or item.buf is None or self.pool is None:
-            return None
-        return self.pool.submit(self._timed_infer, item.buf)
-
-    def _timed_infer(self, buf: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+    def infer(self, buf: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """The model on ``buf``: (prob, depth, when it began, seconds). The one inference path, on the
+        loop's thread or (``in_flight`` > 1) on an inference thread (:meth:`start`)."""
         t0 = time.perf_counter()
         prob, depth = self.engine.infer(buf)
         return prob, depth, t0, time.perf_counter() - t0
+
+    def start(self, item: Prepared) -> Future | None:
+        """The frame's inference started on one of the loop's inference threads (``in_flight`` > 1);
+        None when there is nothing to run there (the loop's thread then runs it in :meth:`step`)."""
+        if item.cap.frame is None or item.buf is None or self.pool is None:
+            return None
+        return self.pool.submit(self.infer, item.buf)
 
     def checked(self, prob: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """The model's answer; None (and counted) when it is NaN or infinity."""
@@ -242,7 +241,7 @@ class FramePipeline:
         is not waited for (stuck, it fails later), and later failures only degrade the run."""
         self.camera.use_frame_rate(self.source.fps, live=self.source.live)
         if self.source.live:
-            self.heartbeat = Heartbeat(self.emitter).__enter__()
+            self.heartbeat = Heartbeat(self.emitter).start()
         out = self.outputs
 
         def fault(_: SinkFailure) -> None:
@@ -278,31 +277,23 @@ class FramePipeline:
         t0 = time.perf_counter()
         for sink in self.sinks.values():     # an output stuck for a second is a fault now, whatever the frame
             sink.check()
-        rec: dict[str, Any] = {"frame": cap.index, "t": round(cap.t, 4)}
+        rec = FrameRecord(cap.index, cap.t)
         self.timer.add("preprocess", item.warp_s)
         if self.read(cap, rec) and item.mf is not None and item.buf is not None:
             self.health.calibrating(item.calibrating)
-            if inflight is None:
-                out = self.infer(item.buf)
-                seconds = time.perf_counter() - t0
-            else:
-                prob, depth, began, seconds = inflight.result()
-                t0 = min(t0, began)          # the frame's path began with its inference
-                out = self.checked(prob, depth)
+            prob, depth, began, seconds = self.infer(item.buf) if inflight is None else inflight.result()
+            t0 = min(t0, began)          # the frame's path began with its inference at the latest
+            out = self.checked(prob, depth)
             self.feeder.release(item.buf)
             t2 = time.perf_counter()
             self.timer.add("inference", seconds)
             if out is None:
-                rec["fault"] = "nan_output"
+                rec.fault = Fault.NAN_OUTPUTS
             else:
                 prob, depth = out
-                alert, mask = self.sectors(cap, item.mf, prob, depth)
+                rec.alert, mask = self.sectors(cap, item.mf, prob, depth)
                 self.timer.add("postprocess", time.perf_counter() - t2)
-                rec.update(levels=[s.level.name for s in alert.sectors],
-                           scores=[round(s.score, 3) for s in alert.sectors],
-                           distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in alert.sectors],
-                           state=alert.state.name)
-                self.write(cap, item.mf, mask, alert, prob, depth)
+                self.write(cap, item.mf, mask, rec.alert, prob, depth)
         t4 = time.perf_counter()
         self.emit(cap)
         t5 = time.perf_counter()
@@ -314,8 +305,8 @@ class FramePipeline:
         self.waiting.add(max(0.0, t0 - item.ready_at))
         log = self.sinks.get("log")
         if log is not None:
-            rec["latency_ms"] = round(1e3 * latency, 2)
-            log.write(cap.index, rec)
+            rec.latency_ms = 1e3 * latency
+            log.write(cap.index, rec.to_json())
 
     def close(self) -> None:
         """Whatever ended the run (the source, a signal, an exception): the outputs are finished, then
@@ -357,20 +348,20 @@ class FramePipeline:
             def done() -> bool:
                 return (max_frames is not None and self.frames >= max_frames) or (stop is not None and stop.is_set())
 
-            for item in self.feeder:
-                pending.append((item, self.start(item)))
-                if len(pending) < held:
-                    continue
-                self.step(*pending.popleft())
-                if progress:
-                    progress(1)
-                if done():
-                    break
-            else:
-                while pending and not done():     # the source ended with frames still in the model
+            def drain(keep: int) -> bool:
+                """Step the oldest frames until ``keep`` are left in flight; whether the run is done."""
+                while len(pending) > keep and not done():
                     self.step(*pending.popleft())
                     if progress:
                         progress(1)
+                return done()
+
+            for item in self.feeder:
+                pending.append((item, self.start(item)))
+                if drain(held - 1):
+                    break
+            else:
+                drain(0)                  # the source ended with frames still in the model
         finally:
             if self.pool is not None:
                 self.pool.shutdown(wait=True, cancel_futures=True)

@@ -1,9 +1,19 @@
-"""Threads of the runtime that yield the cores to the model: :func:`lower_priority`."""
+"""Threads of the runtime that yield the cores to the model: :func:`lower_priority`, and
+:func:`check_nice` for every setting that asks for it."""
 
 from __future__ import annotations
 
 import os
 import threading
+
+NICE_RANGE = (0, 19)      # steps below the caller's priority a thread may take (Linux's nice range)
+
+
+def check_nice(nice: int, name: str = "nice") -> None:
+    """``ValueError`` naming the setting when ``nice`` is outside :data:`NICE_RANGE`."""
+    lo, hi = NICE_RANGE
+    if not lo <= nice <= hi:
+        raise ValueError(f"{name} must be within {lo}..{hi}, got {nice}")
 
 
 def lower_priority(nice: int) -> bool:

@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bsn_edge.runtime.slot import LatestSlot
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import IMAGE_EXTS
 
@@ -216,8 +217,7 @@ class LiveSource(Source):
             self.fps = self.cap.get(cv2.CAP_PROP_FPS) or self.fps
             self.size = capture_size(self.cap)
         self._lock = threading.Lock()
-        self._newest: Captured | None = None
-        self._taken = True
+        self._slot: LatestSlot[Captured] = LatestSlot(newest_wins=True)
         self._asked = False        # the loop has asked for a frame: from then on a replaced one is dropped
         self._last_frame = time.monotonic()
         self._stop = threading.Event()
@@ -267,29 +267,30 @@ class LiveSource(Source):
             if not ok or frame is None or dt > self.policy.stall_s:
                 if not self._reopen():
                     self._ended.set()
+                    self._slot.end()
                     return
                 continue
             now = time.monotonic()
             with self._lock:
                 self._last_frame = now
-                if not self._taken and self._asked:
-                    self.dropped += 1
-                elif not self._taken:
-                    self.before_start += 1
-                self._newest, self._taken = Captured(now, frame, i, dt), False
+            _, replaced = self._slot.put(Captured(now, frame, i, dt))
+            if replaced is not None:
+                with self._lock:
+                    if self._asked:
+                        self.dropped += 1
+                    else:
+                        self.before_start += 1
             i += 1
 
     def __iter__(self) -> Iterator[Captured]:
+        with self._lock:
+            self._asked = True
         while not self._stop.is_set():
-            with self._lock:
-                item, fresh = self._newest, not self._taken
-                self._taken = self._asked = True
-            if fresh and item is not None:
+            item = self._slot.take(timeout=0.1)
+            if item is not None:
                 yield item
-            elif self._ended.is_set():
+            elif self._ended.is_set() or self._slot.closed:
                 return
-            else:
-                time.sleep(0.002)
 
     @property
     def last_frame_at(self) -> float:
@@ -299,9 +300,10 @@ class LiveSource(Source):
 
     def stop(self) -> None:
         self._stop.set()
+        self._slot.close()
 
     def close(self) -> None:
-        self._stop.set()
+        self.stop()
         self._thread.join(timeout=2)
         if self.cap is not None:
             self.cap.release()

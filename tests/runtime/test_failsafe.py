@@ -164,7 +164,7 @@ def test_a_video_damaged_in_the_middle_keeps_the_frames_after_the_damage(setup, 
         summary = run(engine, open_source(str(bad)), [tx], log=tmp_path / "l.jsonl", camera=mounted(engine, clip))
         got = statuses(rx)
     lines = [json.loads(x) for x in (tmp_path / "l.jsonl").read_text().splitlines()]
-    broken = [x["frame"] for x in lines if x.get("fault") == "decode_error"]
+    broken = [x["frame"] for x in lines if x.get("fault") == "decode_errors"]
     assert broken, "the damage was seen"
     assert summary["frames"] == 60 and summary["valid_frames"] == 60 - len(broken)
     assert max(x["frame"] for x in lines if "levels" in x) == 59, "frames after the damage were used"
