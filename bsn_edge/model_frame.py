@@ -109,10 +109,6 @@ class ModelFrame:
         """The lens taken out and nothing else: the same pinhole camera, pose and size, undistorted."""
         return cls(camera, dist, mounting, camera, mounting)
 
-    @property
-    def raw_size(self) -> tuple[int, int]:
-        return self.raw.height, self.raw.width
-
     # -- raw -> model --------------------------------------------------------------------------
 
     @property

@@ -102,14 +102,7 @@ def reseal(src: Path, out: Path) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(glue_values(argv))
     if args.new_key:
-        from bsn_edge.export.signing import new_key
-        try:
-            priv, pub, kid = new_key(args.new_key, args.force)
-        except (FileExistsError, OSError) as e:
-            return fail(PROG, str(e))
-        print(f"wrote the private key {priv} (keep it: it signs your models) and the public key {pub} "
-              f"(key {kid}; give it to bsn-run --trust)")
-        return 0
+        return _new_key(args.new_key, args.force)
     if not args.out:
         return fail(PROG, "--out MODEL.onnx is required (or --new-key KEY.pem)")
     out = Path(args.out)
@@ -126,24 +119,42 @@ def main(argv: list[str] | None = None) -> int:
             return fail(PROG, "--reseal needs --sign KEY.pem: a resealed model is vouched for only by whoever "
                               "resealed it, and bsn-run runs only models signed by a key it trusts (bsn-export "
                               "--new-key KEY.pem makes a key pair)")
-        code = reseal(Path(args.reseal), out)
-        return code or signed(out, args.sign)
+        return reseal(Path(args.reseal), out) or signed(out, args.sign)
     if args.integer_input:
-        from bsn_edge.export.pipeline import upgrade_integer_input
-        try:
-            summary = upgrade_integer_input(args.integer_input, out)
-        except (FileNotFoundError, ValueError) as e:
-            return fail(PROG, str(e))
-        replaced = summary["quantization"]["integer_input"]["replaced"]
-        print(f"wrote {out}: the frame's preparation ({', '.join(replaced)}) as one integer convolution; "
-              "outputs equal to the original's to the bit; resealed")
-        return signed(out, args.sign)
+        return _integer_input(args.integer_input, out) or signed(out, args.sign)
     if not args.checkpoint:
         return fail(PROG, "--checkpoint RUN is required (or --reseal / --integer-input MODEL.onnx)")
     if args.int8 and not args.calib:
         return fail(PROG, "--int8 needs --calib DIR_OR_VIDEO (frames to calibrate activation ranges on)")
     if args.ship_run and Run(args.ship_run).exists() and not args.force:
         return fail(PROG, f"--ship-run {args.ship_run} already holds a run; pass --force to replace it")
+    return _export(args, out) or signed(out, args.sign) or _ship(args)
+
+
+def _new_key(path: str, force: bool) -> int:
+    from bsn_edge.export.signing import new_key
+    try:
+        priv, pub, kid = new_key(path, force)
+    except (FileExistsError, OSError) as e:
+        return fail(PROG, str(e))
+    print(f"wrote the private key {priv} (keep it: it signs your models) and the public key {pub} "
+          f"(key {kid}; give it to bsn-run --trust, or put it in {user_trust_dir()})")
+    return 0
+
+
+def _integer_input(src: str, out: Path) -> int:
+    from bsn_edge.export.pipeline import upgrade_integer_input
+    try:
+        summary = upgrade_integer_input(src, out)
+    except (FileNotFoundError, ValueError) as e:
+        return fail(PROG, str(e))
+    replaced = summary["quantization"]["integer_input"]["replaced"]
+    print(f"wrote {out}: the frame's preparation ({', '.join(replaced)}) as one integer convolution; "
+          "outputs equal to the original's to the bit; resealed")
+    return 0
+
+
+def _export(args: argparse.Namespace, out: Path) -> int:
     try:
         qcfg = QuantConfig(args.method, args.activations, args.weights, not args.per_tensor, not args.quantize_heads,
                            args.weight_bits == 7)
@@ -159,15 +170,18 @@ def main(argv: list[str] | None = None) -> int:
               f"{100 * c['mask_agreement']:.2f} %, depth median rel. diff {100 * c['depth_median_rel']:.2f} %; "
               f"{len(summary['quantization']['float_nodes'])} nodes kept float (the output heads and what of the "
               "frame's preparation is not integer; reasons in the summary)")
-    if signed(out, args.sign):
-        return 2
-    if args.ship_run:
-        try:
-            shipped = Run(args.checkpoint).ship(args.ship_run, force=args.force)
-        except (FileNotFoundError, ValueError) as e:
-            return fail(PROG, str(e))
-        size = sum(f.stat().st_size for f in shipped.path.rglob("*") if f.is_file())
-        print(f"wrote the run to {shipped.path} ({size / 1e6:.1f} MB, fp16 weights and teacher)")
+    return 0
+
+
+def _ship(args: argparse.Namespace) -> int:
+    if not args.ship_run:
+        return 0
+    try:
+        shipped = Run(args.checkpoint).ship(args.ship_run, force=args.force)
+    except (FileNotFoundError, ValueError) as e:
+        return fail(PROG, str(e))
+    size = sum(f.stat().st_size for f in shipped.path.rglob("*") if f.is_file())
+    print(f"wrote the run to {shipped.path} ({size / 1e6:.1f} MB, fp16 weights and teacher)")
     return 0
 
 

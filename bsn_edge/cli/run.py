@@ -39,69 +39,89 @@ def build_parser() -> argparse.ArgumentParser:
                     "them is refused (UNAVAILABLE is sent first); only models signed by a trusted key run, "
                     "unless --allow-unsigned. Exit codes: 0 done (or stopped by SIGTERM), 1 the "
                     "source failed, 2 could not start, 130 interrupted (SIGINT).")
-    p.add_argument("--model", required=True, help="fused ONNX model from bsn-export")
-    p.add_argument("--source", required=True, help="VIDEO file, image DIR, CAMERA_INDEX or stream URL")
-    p.add_argument("--can", metavar="IFACE:CHANNEL", help="send on this python-can bus, e.g. socketcan:can0")
-    p.add_argument("--can-log", metavar="FILE.log",
-                   help="log every CAN frame sent: .log (candump format, readable by python -m cantools decode), "
-                        ".asc or .blf; without --can, frames go to a virtual bus")
-    p.add_argument("--serial", metavar="URL", help="send on this serial port (pyserial URL, e.g. /dev/ttyUSB0)")
-    p.add_argument("--overlay", metavar="OUT.mp4",
-                   help="write a video with blind spots and sector levels (drawn on a thread of its own: from a "
-                        "camera, frames it falls behind on are left out of it and counted, never the alerts)")
-    p.add_argument("--log", metavar="OUT.jsonl", help="one JSON line per frame")
-    p.add_argument("--max-frames", type=int, default=None, metavar="N", help="stop after this many frames")
-    p.add_argument("--threads", type=int, default=None,
-                   help="onnxruntime intra-op threads per inference (default 2, or 1 with --in-flight 2 and more)")
-    p.add_argument("--in-flight", type=int, default=1, metavar="N",
-                   help="frames the model runs at once, each on a thread of its own (default 1). On 2 cores, 2 "
-                        "gives more frames a second than one inference split over both, each frame's answer "
-                        "later (see the README); needs reading overlapped")
-    spin = p.add_mutually_exclusive_group()
-    spin.add_argument("--spin", action="store_true",
-                      help="let idle onnxruntime threads spin-wait (faster for the model alone, slower end to end: "
-                           "they take the cores the loop decodes, warps and calibrates on)")
-    spin.add_argument("--no-spin", action="store_true", help="idle onnxruntime threads sleep (the default)")
-    reading = p.add_mutually_exclusive_group()
-    reading.add_argument("--overlap", action="store_true",
-                         help="decode and warp the next frame on a thread of its own, at a lower priority, while "
-                              "the model runs (the default; see the README)")
-    reading.add_argument("--in-turn", action="store_true",
-                         help="read each frame after the model has answered the one before (one thread)")
-    p.add_argument("--pace", action="store_true", help="play files at their own frame rate")
-    p.add_argument("--trust", metavar="KEYS", action="append", default=[],
+    _model_and_source(p)
+    _camera(p)
+    _outputs(p)
+    _speed(p)
+    return p
+
+
+def _model_and_source(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("what runs on what")
+    g.add_argument("--model", required=True, help="fused ONNX model from bsn-export")
+    g.add_argument("--source", required=True, help="VIDEO file, image DIR, CAMERA_INDEX or stream URL")
+    g.add_argument("--trust", metavar="KEYS", action="append", default=[],
                    help="also trust models signed by these Ed25519 public keys: a .pub file, a file of several or a "
                         "folder (repeatable). Always trusted: the project's key (the shipped models) and the keys in "
                         "your trust folder ($BSN_EDGE_TRUST, else ~/.config/bsn-edge/trust). A model signed by none "
                         "of them is refused")
-    p.add_argument("--allow-unsigned", action="store_true",
+    g.add_argument("--allow-unsigned", action="store_true",
                    help="run a model that is unsigned or signed by a key not trusted here (your own experiments); "
                         "the status then says Model_Unsigned on every cycle and the summary says whose it is not. "
                         "A signature that does not match its model is refused even so")
-    p.add_argument("--stall", type=float, default=2.0, metavar="SECONDS",
+    g.add_argument("--pace", action="store_true", help="play files at their own frame rate")
+    g.add_argument("--stall", type=float, default=2.0, metavar="SECONDS",
                    help="a camera or stream that delivers no frame for this long is lost: the bus says "
                         "UNAVAILABLE and it is reopened with back-off (default 2)")
-    p.add_argument("--cycle", type=float, default=0.1, help="send cycle in seconds (default 0.1)")
-    p.add_argument("--summary", metavar="OUT.json", help="also write the summary here")
-    p.add_argument("--calib", metavar="CALIB.json",
+    g.add_argument("--max-frames", type=int, default=None, metavar="N", help="stop after this many frames")
+
+
+def _camera(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("the camera")
+    g.add_argument("--calib", metavar="CALIB.json",
                    help="the camera file from bsn-calibrate (intrinsics, lens distortion and, after --mount, the "
                         "mounting): every frame is warped into the model's own camera with it. Without a mounting "
                         "in it, the camera is calibrated online (status CALIBRATING until pitch and yaw have "
                         "converged over forward driving). Without --calib the camera is taken to be the model's "
                         "own, rescaled, and calibrated online")
-    p.add_argument("--height", type=float, metavar="M",
+    g.add_argument("--height", type=float, metavar="M",
                    help="camera height above the road in metres (overrides the camera file's; default: the "
                         "file's, else the model camera's reference height). Distances scale with it")
-    p.add_argument("--save-calib", metavar="CALIB.json",
+    g.add_argument("--save-calib", metavar="CALIB.json",
                    help="where online calibration writes the camera file once it has converged (refuses an "
                         "existing file unless --force)")
-    p.add_argument("--save-maps", metavar="DIR",
+
+
+def _outputs(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("where the alerts and the rest go")
+    g.add_argument("--can", metavar="IFACE:CHANNEL", help="send on this python-can bus, e.g. socketcan:can0")
+    g.add_argument("--can-log", metavar="FILE.log",
+                   help="log every CAN frame sent: .log (candump format, readable by python -m cantools decode), "
+                        ".asc or .blf; without --can, frames go to a virtual bus")
+    g.add_argument("--serial", metavar="URL", help="send on this serial port (pyserial URL, e.g. /dev/ttyUSB0)")
+    g.add_argument("--cycle", type=float, default=0.1, help="send cycle in seconds (default 0.1)")
+    g.add_argument("--overlay", metavar="OUT.mp4",
+                   help="write a video with blind spots and sector levels (drawn on a thread of its own: from a "
+                        "camera, frames it falls behind on are left out of it and counted, never the alerts)")
+    g.add_argument("--log", metavar="OUT.jsonl", help="one JSON line per frame")
+    g.add_argument("--summary", metavar="OUT.json", help="also write the summary here")
+    g.add_argument("--save-maps", metavar="DIR",
                    help="per frame, NAME_blindspot.png (8-bit probability) and NAME_depth.png (16-bit, metres x "
                         "256, 0 = none) in the raw frame's own pixels, NAME the image's stem or the frame number; "
                         "a folder that already holds maps is refused unless --force")
-    p.add_argument("--force", action="store_true",
+    g.add_argument("--force", action="store_true",
                    help="let --save-calib overwrite an existing file and --save-maps write over an earlier run's maps")
-    return p
+
+
+def _speed(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("speed on the car's cores")
+    g.add_argument("--threads", type=int, default=None,
+                   help="onnxruntime intra-op threads per inference (default 2, or 1 with --in-flight 2 and more)")
+    g.add_argument("--in-flight", type=int, default=1, metavar="N",
+                   help="frames the model runs at once, each on a thread of its own (default 1). On 2 cores, 2 "
+                        "gives more frames a second than one inference split over both, each frame's answer "
+                        "later (see the README); needs reading overlapped")
+    spin = g.add_mutually_exclusive_group()
+    spin.add_argument("--spin", action="store_true",
+                      help="let idle onnxruntime threads spin-wait (faster for the model alone, slower end to end: "
+                           "they take the cores the loop decodes, warps and calibrates on)")
+    spin.add_argument("--no-spin", action="store_true", help="idle onnxruntime threads sleep (the default)")
+    reading = g.add_mutually_exclusive_group()
+    reading.add_argument("--overlap", action="store_true",
+                         help="decode and warp the next frame on a thread of its own, at a lower priority, while "
+                              "the model runs (the default; see the README)")
+    reading.add_argument("--in-turn", action="store_true",
+                         help="read each frame after the model has answered the one before (one thread)")
 
 
 CAN_LOG_EXTS = (".log", ".asc", ".blf")   # what python-can writes and bsn-listen reads back

@@ -286,44 +286,44 @@ def label_sequence(seq: str | Path, cfg: LabelConfig | None = None, sources: Sou
         raise
     report["sources_detail"] = {"depth": depth.describe(), "seg": seg.describe(), "poses": pose_info}
 
-    T = cfg.horizon_frames
-    todo = list(range(max(len(idx) - T, 0)))
+    todo = list(range(max(len(idx) - cfg.horizon_frames, 0)))
     if on_total:
         on_total(len(todo))
     warper = Warper(meta.intrinsics, origin=poses[0, :3, 3])
     cache = FrameCache(seq, idx, depth, seg, poses, warper, lens, cfg.look_tol > 0)
     per_frame = []
-    skipped = 0
     for k in todo:
-        i = int(idx[k])
-        done = _read_done(labels, i)
-        if done is not None:
-            omega, vis = done
-            per_frame.append({"frame": i, "blindspot_px": int(omega.sum()), "visible_px": int(vis.sum()),
-                              "blindspot_in_v_px": int((omega & vis).sum()), "resumed": True})
-            skipped += 1
-        else:
-            d_t, sem_t, grey_t = cache.take(k)
-            lab = label_frame(warper, [cache.cloud(k + j) for j in range(1, T + 1)], d_t, sm.is_traversable(sem_t),
-                              sem_t == sm.SKY, poses[i], cfg, grey_t)
-            write_mask(labels.blindspot(i), lab.omega, durable=True)
-            write_mask(labels.visibility(i), lab.visibility, durable=True)
-            per_frame.append({
-                "frame": i, "blindspot_px": int(lab.omega.sum()), "visible_px": int(lab.visibility.sum()),
-                "blindspot_in_v_px": int((lab.omega & lab.visibility).sum()),
-                "warped_px": int(lab.warped.sum()), "removed_by_depth_px": lab.removed_by_depth,
-                "removed_by_area_px": lab.removed_by_area, "removed_by_look_px": lab.removed_by_look,
-            })
+        per_frame.append(_label_one(labels, cache, warper, idx, k, poses, cfg))
         if progress:
             progress(1)
     elapsed = time.perf_counter() - t_start
     report.update(
-        status="ok", label_frames=len(todo), resumed_frames=skipped,
+        status="ok", label_frames=len(todo), resumed_frames=sum(1 for f in per_frame if f.get("resumed")),
         unlabelled_tail_frames=int(len(idx) - len(todo)), resampled_indices=idx.tolist(),
         min_area_px=cfg.min_area_px(meta.height, meta.width), seconds=round(elapsed, 3), per_frame=per_frame,
     )
     _write_report(out, report)
     return report
+
+
+def _label_one(labels, cache: FrameCache, warper: Warper, idx: np.ndarray, k: int, poses: np.ndarray,
+               cfg: LabelConfig) -> dict[str, Any]:
+    """Label the ``k``-th resampled frame (or read it back when an earlier run finished it); its report line."""
+    i = int(idx[k])
+    done = _read_done(labels, i)
+    if done is not None:
+        omega, vis = done
+        return {"frame": i, "blindspot_px": int(omega.sum()), "visible_px": int(vis.sum()),
+                "blindspot_in_v_px": int((omega & vis).sum()), "resumed": True}
+    d_t, sem_t, grey_t = cache.take(k)
+    lab = label_frame(warper, [cache.cloud(k + j) for j in range(1, cfg.horizon_frames + 1)], d_t,
+                      sm.is_traversable(sem_t), sem_t == sm.SKY, poses[i], cfg, grey_t)
+    write_mask(labels.blindspot(i), lab.omega, durable=True)
+    write_mask(labels.visibility(i), lab.visibility, durable=True)
+    return {"frame": i, "blindspot_px": int(lab.omega.sum()), "visible_px": int(lab.visibility.sum()),
+            "blindspot_in_v_px": int((lab.omega & lab.visibility).sum()),
+            "warped_px": int(lab.warped.sum()), "removed_by_depth_px": lab.removed_by_depth,
+            "removed_by_area_px": lab.removed_by_area, "removed_by_look_px": lab.removed_by_look}
 
 
 def _min_frames(cfg: LabelConfig, fps: float) -> int:

@@ -83,11 +83,6 @@ class Cloud:
     levels: tuple[Points, ...]
 
     @property
-    def has_grey(self) -> bool:
-        """Whether the points carry their grey levels (the cloud was made with its picture)."""
-        return all(lv.grey is not None for lv in self.levels)
-
-    @property
     def size(self) -> int:
         return sum(len(lv) for lv in self.levels)
 

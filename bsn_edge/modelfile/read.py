@@ -100,11 +100,6 @@ def graph_digest(data: bytes) -> str:
     return _scan(io.BytesIO(data), len(data))[1]
 
 
-def read_metadata(data: bytes) -> dict[str, str]:
-    """``metadata_props`` of serialized model bytes."""
-    return _scan(io.BytesIO(data), len(data))[0]
-
-
 @dataclass(frozen=True)
 class ModelFile:
     """A model file's bytes, read once, with their metadata and the digest of everything else.
@@ -142,16 +137,15 @@ def _options(threads: int, spinning: bool, profile_prefix: str | None, exact_x64
     so.inter_op_num_threads = 1
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
     so.log_severity_level = 3
-    # no arena and no pre-planned memory pattern: ~15 MB less peak memory on the car for the
-    # shipped model, at the same speed (measured side by side, 2 threads)
+    # no arena and no pre-planned memory pattern: less peak memory on the car for the same speed
     so.enable_cpu_mem_arena = False
     so.enable_mem_pattern = False
     if not spinning:
         so.add_session_config_entry("session.intra_op.allow_spinning", "0")
     # x86 CPUs without VNNI (AVX2, AVX-512F) multiply uint8 activations by int8 weights in pairs
-    # summed into int16, which saturates for weights outside [-64, 63]: the shipped model's depth
-    # came out up to 55 % off on an AVX2 machine. This makes onnxruntime use uint8 x uint8 there
-    # (exact, slower); on VNNI and ARM CPUs it changes nothing.
+    # summed into int16, which saturates for weights outside [-64, 63] (7-bit weights stay clear of
+    # it). This makes onnxruntime use uint8 x uint8 there (exact, slower); on VNNI and ARM CPUs it
+    # changes nothing.
     if exact_x64:
         so.add_session_config_entry("session.x64quantprecision", "1")
     if profile_prefix:
