@@ -71,6 +71,7 @@ def converge(card, video: Path, estimator: MountFitConfig, hz: float | None,
             break
         calibrating = cam.calibrating
         t0 = time.thread_time()
+        cam.observe(frame)
         cam.frame_for(frame)
         if calibrating:
             cpu_s += time.thread_time() - t0

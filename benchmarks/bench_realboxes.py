@@ -94,6 +94,7 @@ def blind_spots(engine: Engine, frame: Frame) -> np.ndarray:
     state = CameraState(engine.card, frame.calibration, background=False)   # the estimate of these frames
     mf = None
     for f in frame.frames:
+        state.observe(f)
         mf = state.frame_for(f)
     state.close()
     prob, _ = engine.infer(mf.to_model(frame.image)[None])

@@ -80,6 +80,7 @@ def run_model(engine: Engine, src: Source) -> list[np.ndarray]:
     state = CameraState(engine.card, src.calibration)
     out = {}
     for i, frame in enumerate(src.frames):
+        state.observe(frame)
         mf = state.frame_for(frame)
         if i not in src.shown:
             continue

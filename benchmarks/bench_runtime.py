@@ -121,6 +121,7 @@ def cpu_budget(model: str, video: Path, frames: int, calibration: Calibration | 
     def read(_: int) -> None:
         frame = next(caps).frame
         if frame is not None:
+            camera.observe(frame)
             camera.frame_for(frame).to_model(frame, dst=buf[0])
             if len(batches) < frames:
                 batches.append(buf.copy())

@@ -88,12 +88,18 @@ class CameraState:
             return self.calibration
         return Calibration.of(self.card.camera.scaled(width, height), (), None)
 
-    def frame_for(self, frame: np.ndarray) -> ModelFrame:
-        """The model frame for this raw frame (built once per size and mounting); while calibrating,
-        the frame also feeds the estimator."""
-        h, w = frame.shape[:2]
+    def observe(self, frame: np.ndarray) -> None:
+        """Let online calibration see this frame (nothing once the mounting is known): the estimator is
+        started on the first frame, fed one frame in ``calibrate_every``, and when it has converged the
+        mounting is taken (and the camera file written, when asked). The runtime's frame path calls it
+        before :meth:`frame_for`, frame by frame in order."""
         if self.calibrating:
             self._calibrate(frame)
+
+    def frame_for(self, frame: np.ndarray) -> ModelFrame:
+        """The model frame for this raw frame with the mounting known now (built once per size and
+        mounting); it changes nothing (:meth:`observe` is what calibrates)."""
+        h, w = frame.shape[:2]
         with self._lock:
             key = (h, w)
             mf = self._frames.get(key)

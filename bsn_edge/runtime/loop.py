@@ -175,8 +175,9 @@ class FramePipeline:
         return self.source.dropped + (self.feeder.dropped if self.feeder is not None else 0)
 
     def warp(self, frame: np.ndarray, buf: np.ndarray) -> tuple[ModelFrame, bool]:
-        """The frame into the model camera, written into the input buffer ``buf``; whether the camera
-        was still calibrating for it."""
+        """The frame shown to online calibration, then into the model camera, written into the input
+        buffer ``buf``; whether the camera was still calibrating for it."""
+        self.camera.observe(frame)
         mf = self.camera.frame_for(frame)
         mf.to_model(frame, dst=buf[0])
         return mf, self.camera.calibrating

@@ -150,7 +150,7 @@ def test_online_calibration_on_its_thread_is_the_estimate_of_the_same_frames_inl
         state.use_frame_rate(10.0)
         converged_at = None
         for i, f in enumerate(frames(long_drive)):
-            state.frame_for(f)
+            state.observe(f)
             if not state.calibrating and converged_at is None:
                 converged_at = i
         state.close()

@@ -188,7 +188,7 @@ def test_online_calibration_says_how_far_it_got():
     assert state.calibrating
     rng = np.random.default_rng(0)
     for _ in range(3):
-        state.frame_for(rng.integers(0, 255, (96, 192, 3), np.uint8))
+        state.observe(rng.integers(0, 255, (96, 192, 3), np.uint8))
     text = state.progress()
     assert text.startswith("calibrating:") and "forward driving" in text
 

@@ -1,0 +1,141 @@
+"""Each stage of the runtime's FramePipeline on its own, against what it must do (not a run end to end):
+read counts what the source says, warp shows the frame to calibration and then puts the frame into the
+model camera, checked refuses NaN, sectors turns a mask into levels, emit sends the cycles due, write
+feeds the outputs."""
+
+import numpy as np
+import pytest
+
+from bsn_edge.alerts import SystemState
+from bsn_edge.alerts.can_codec import decode
+from bsn_edge.alerts.health import Fault
+from bsn_edge.alerts.senders import Sender
+from bsn_edge.alerts.state_machine import Level
+from bsn_edge.calibration import Calibration
+from bsn_edge.runtime import Engine, RuntimeConfig
+from bsn_edge.runtime.camera_state import CameraState
+from bsn_edge.runtime.frame_record import FrameRecord
+from bsn_edge.runtime.loop import FramePipeline, Outputs
+from bsn_edge.runtime.sources import Captured, ImageFolderSource
+
+
+class Collect(Sender):
+    """A sender that keeps what it sends, decoded back."""
+
+    name = "collect"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.got = []
+
+    def _send(self, frames):
+        self.got += [decode(fid, data) for fid, data in frames]
+
+
+@pytest.fixture
+def pipeline(setup):
+    model, clip = setup
+    engine = Engine(model)
+    camera = CameraState(engine.card, Calibration.read(clip / "calibration.json"))
+    sender = Collect()
+    p = FramePipeline(engine, ImageFolderSource(clip / "rgb"), [sender], RuntimeConfig(cycle_s=0.1), camera,
+                      Outputs(), clock=lambda: 0.0)
+    yield p, sender, clip
+    camera.close()
+
+
+def test_read_counts_a_frame_that_did_not_decode_and_a_change_of_size(pipeline):
+    p, _, _ = pipeline
+    rec = FrameRecord(0, 0.0)
+    assert not p.read(Captured(0.0, None, 0), rec) and rec.fault is Fault.DECODE_ERRORS
+    rec = FrameRecord(1, 0.1)
+    assert p.read(Captured(0.1, np.zeros((96, 192, 3), np.uint8), 1), rec) and rec.fault is None
+    rec = FrameRecord(2, 0.2)
+    assert p.read(Captured(0.2, np.zeros((90, 192, 3), np.uint8), 2), rec), "another size is still a picture"
+    assert rec.fault is Fault.SIZE_CHANGES
+    assert p.health.faults[Fault.DECODE_ERRORS] == 1 and p.health.faults[Fault.SIZE_CHANGES] == 1
+    assert p.frames == 3
+
+
+def test_warp_puts_the_frame_into_the_model_camera_as_the_camera_file_says(pipeline):
+    import cv2
+    p, _, clip = pipeline
+    frame = cv2.imread(str(sorted((clip / "rgb").glob("*.png"))[0]))
+    buf = np.empty_like(p.engine.buf)
+    _, calibrating = p.warp(frame, buf)
+    assert not calibrating, "the camera file has a mounting"
+    cal = Calibration.read(clip / "calibration.json")
+    want = cal.model_frame(frame.shape[1], frame.shape[0], p.engine.card.camera, p.engine.card.mounting).to_model(frame)
+    assert np.array_equal(buf[0], want)
+
+
+def test_frame_for_changes_nothing_and_observe_is_what_calibrates(setup):
+    import cv2
+    model, clip = setup
+    engine = Engine(model)
+    state = CameraState(engine.card, None, background=False)
+    frame = cv2.imread(str(sorted((clip / "rgb").glob("*.png"))[0]))
+    for _ in range(3):
+        state.frame_for(frame)
+    assert state._calibrator is None, "asking for the model frame starts no estimator"
+    state.observe(frame)
+    assert state._calibrator is not None and state._calibrator.seen == 1
+    state.close()
+
+
+def test_checked_refuses_nan_and_infinity_and_counts_them(pipeline):
+    p, _, _ = pipeline
+    h, w = p.engine.card.input_size
+    good = (np.full((h, w), 0.2, np.float32), np.full((h, w), 10.0, np.float32))
+    assert p.checked(*good) is not None
+    bad_p = good[0].copy()
+    bad_p[3, 4] = np.nan
+    bad_d = good[1].copy()
+    bad_d[0, 0] = np.inf
+    assert p.checked(bad_p, good[1]) is None and p.checked(good[0], bad_d) is None
+    assert p.health.faults[Fault.NAN_OUTPUTS] == 2
+
+
+def test_sectors_turn_a_near_blind_spot_on_the_left_into_a_left_warning(pipeline):
+    import cv2
+    p, _, clip = pipeline
+    frame = cv2.imread(str(sorted((clip / "rgb").glob("*.png"))[0]))
+    mf = p.camera.frame_for(frame)
+    h, w = p.engine.card.input_size
+    prob = np.zeros((h, w), np.float32)
+    prob[int(0.7 * h):, : w // 4] = 1.0            # low in the picture on the left: near road hidden
+    depth = np.full((h, w), 4.0, np.float32)
+    alert = None
+    for k in range(20):                             # smoothing: levels rise over frames, not at once
+        alert, mask = p.sectors(Captured(0.1 * k, frame, k), mf, prob, depth)
+    assert alert.left.level is Level.WARNING and alert.centre.level is Level.NONE and alert.right.level is Level.NONE
+    assert alert.left.distance_m is not None and alert.left.distance_m < 8.0
+    assert mask[int(0.8 * h), 2] and p.emitter.latest is alert, "published to the send cycle"
+
+
+def test_emit_sends_every_cycle_due_by_the_frames_time(pipeline):
+    p, sender, _ = pipeline
+    p.emit(Captured(0.0, None, 0))
+    p.emit(Captured(0.35, None, 1))
+    status = [d for d in sender.got if d.name == "BSN_Status"]
+    assert len(status) == 4, "cycles at 0.0, 0.1, 0.2 and 0.3 s"
+    assert all(d.crc_ok for d in sender.got)
+    assert status[0].signals["System_State"] == SystemState.UNAVAILABLE, "no valid inference yet"
+
+
+def test_write_hands_the_frame_to_each_output_that_is_still_writing(pipeline):
+    from bsn_edge.runtime.sinks import GuardedSink
+    p, _, _ = pipeline
+    got = {"overlay": [], "maps": []}
+    p.sinks["overlay"] = GuardedSink("overlay", lambda *a: got["overlay"].append(a))
+    p.sinks["maps"] = GuardedSink("maps", lambda *a: got["maps"].append(a))
+    h, w = p.engine.card.input_size
+    frame = np.zeros((96, 192, 3), np.uint8)
+    mf = p.camera.frame_for(frame)
+    alert, mask = p.sectors(Captured(0.0, frame, 0), mf, np.zeros((h, w), np.float32), np.ones((h, w), np.float32))
+    p.write(Captured(0.0, frame, 0, name="a"), mf, mask, alert, np.zeros((h, w), np.float32),
+            np.ones((h, w), np.float32))
+    for sink in p.sinks.values():
+        sink.close()
+    assert len(got["overlay"]) == 1 and got["overlay"][0][0] is frame
+    assert len(got["maps"]) == 1 and got["maps"][0][0] == "a"
