@@ -40,8 +40,12 @@ def capture_size(cap) -> tuple[int, int] | None:
 class Source:
     """Base: iterate to get frames; ``dropped`` counts frames a live source had to skip while the loop
     ran (``before_start`` those it replaced before the loop first asked: the model was still warming
-    up, no frame was due yet); ``failure`` says why a source ended before its end (None when it ended normally);
-    ``stop()`` ends the iteration early (safe to call from a signal handler)."""
+    up, no frame was due yet); ``failure`` says why a source ended before its end (None when it ended normally).
+
+    The base owns the policy every source shares: ``stop()`` ends the iteration early, from any thread
+    (safe to call from a signal handler: it only sets an event, then :meth:`_on_stop`), no frame is
+    handed out once stopped, and ``close()`` stops before it lets go (:meth:`_release`). A backend fills
+    :meth:`_frames`, which may stop early by watching :attr:`stopped`."""
 
     live = False
     fps = 10.0                   # frames per second of the source's own clock (a file's, a folder's; nominal when live)
@@ -52,14 +56,36 @@ class Source:
     failure: str | None = None
     size: tuple[int, int] | None = None   # (width, height) of its frames when known before the first one
 
+    def __init__(self) -> None:
+        self._stop = threading.Event()
+
+    @property
+    def stopped(self) -> bool:
+        return self._stop.is_set()
+
     def __iter__(self) -> Iterator[Captured]:
+        for cap in self._frames():
+            if self.stopped:
+                return
+            yield cap
+
+    def _frames(self) -> Iterator[Captured]:
+        """The backend's frames, in order (the hook)."""
         raise NotImplementedError
 
     def stop(self) -> None:
-        pass
+        self._stop.set()
+        self._on_stop()
+
+    def _on_stop(self) -> None:
+        """Wake whatever the backend waits on (a thread, a slot)."""
 
     def close(self) -> None:
-        pass
+        self.stop()
+        self._release()
+
+    def _release(self) -> None:
+        """Let go of the device or file."""
 
 
 class VideoFileSource(Source):
@@ -75,6 +101,7 @@ class VideoFileSource(Source):
         feeder runs below the model's), and with less CPU than frame threading takes."""
         if decode_threads < 0:
             raise ValueError(f"decode_threads must be >= 0, got {decode_threads}")
+        super().__init__()
         self.path = Path(path)
         self.cap = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, decode_threads])
         if not self.cap.isOpened():          # a file FFmpeg does not read: whichever backend can
@@ -86,10 +113,6 @@ class VideoFileSource(Source):
         self.size = capture_size(self.cap)
         self.pace, self.give_up = pace, give_up
         self.skipped = 0                 # frames the decoder jumped over or could not decode
-        self._stop = threading.Event()
-
-    def stop(self) -> None:
-        self._stop.set()
 
     def _index_of_frame_read(self, expected: int) -> int:
         """The index of the frame just read, from its timestamp (``expected`` when there is none)."""
@@ -98,11 +121,11 @@ class VideoFileSource(Source):
             return expected
         return max(expected, round(ms * self.fps / 1000.0))
 
-    def __iter__(self) -> Iterator[Captured]:
+    def _frames(self) -> Iterator[Captured]:
         start = time.monotonic()
         i = 0            # the index the next frame should have
         failures = 0     # failed reads since the last frame
-        while not self._stop.is_set():
+        while not self.stopped:
             t0 = time.perf_counter()
             ok, frame = self.cap.read()
             dt = time.perf_counter() - t0
@@ -126,7 +149,7 @@ class VideoFileSource(Source):
             yield Captured(t, frame, k, dt)
             i = k + 1
 
-    def close(self) -> None:
+    def _release(self) -> None:
         self.cap.release()
 
     def _end(self, i: int) -> None:
@@ -142,6 +165,7 @@ class VideoFileSource(Source):
 
 class ImageFolderSource(Source):
     def __init__(self, folder: str | Path, fps: float = 10.0) -> None:
+        super().__init__()
         self.folder = Path(folder)
         rgb = SequenceFolder(self.folder).dir(SequenceFolder.RGB)
         root = rgb if rgb.is_dir() else self.folder
@@ -152,15 +176,9 @@ class ImageFolderSource(Source):
         self.total = len(self.files)
         first = cv2.imread(str(self.files[0]), cv2.IMREAD_UNCHANGED)
         self.size = None if first is None else (first.shape[1], first.shape[0])
-        self._stop = threading.Event()
 
-    def stop(self) -> None:
-        self._stop.set()
-
-    def __iter__(self) -> Iterator[Captured]:
+    def _frames(self) -> Iterator[Captured]:
         for i, p in enumerate(self.files):
-            if self._stop.is_set():
-                return
             t0 = time.perf_counter()
             frame = cv2.imread(str(p), cv2.IMREAD_COLOR)
             yield Captured(i / self.fps, frame, i, time.perf_counter() - t0, p.stem)
@@ -208,6 +226,7 @@ class LiveSource(Source):
     live = True
 
     def __init__(self, target: int | str, reconnect: Reconnect | None = None, opener=None) -> None:
+        super().__init__()
         self.target, self.policy = target, reconnect or Reconnect()
         self._opener = opener or (lambda t: open_capture(t, self.policy.stall_s))
         self.cap = self._open()
@@ -220,7 +239,6 @@ class LiveSource(Source):
         self._slot: LatestSlot[Captured] = LatestSlot(newest_wins=True)
         self._asked = False        # the loop has asked for a frame: from then on a replaced one is dropped
         self._last_frame = time.monotonic()
-        self._stop = threading.Event()
         self._ended = threading.Event()
         self._thread = threading.Thread(target=self._read, name="bsn-capture", daemon=True)
         self._thread.start()
@@ -282,10 +300,10 @@ class LiveSource(Source):
                         self.before_start += 1
             i += 1
 
-    def __iter__(self) -> Iterator[Captured]:
+    def _frames(self) -> Iterator[Captured]:
         with self._lock:
             self._asked = True
-        while not self._stop.is_set():
+        while not self.stopped:
             item = self._slot.take(timeout=0.1)
             if item is not None:
                 yield item
@@ -298,12 +316,10 @@ class LiveSource(Source):
         with self._lock:
             return self._last_frame
 
-    def stop(self) -> None:
-        self._stop.set()
+    def _on_stop(self) -> None:
         self._slot.close()
 
-    def close(self) -> None:
-        self.stop()
+    def _release(self) -> None:
         self._thread.join(timeout=2)
         if self.cap is not None:
             self.cap.release()

@@ -20,9 +20,10 @@ class ListSource(Source):
     processing clock, as a camera's are)."""
 
     def __init__(self, n: int, live: bool = False, gap_s: float = 0.0, shape=(4, 6, 3)) -> None:
+        super().__init__()
         self.n, self.live, self.gap_s, self.shape = n, live, gap_s, shape
 
-    def __iter__(self):
+    def _frames(self):
         for i in range(self.n):
             if self.gap_s:
                 time.sleep(self.gap_s)
