@@ -31,12 +31,7 @@ class Calibration:
     ``mounting_report`` says where the mounting came from (method, spread over the clip, frames).
     """
 
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    width: int
-    height: int
+    intrinsics: Intrinsics                # written flat in the file: fx, fy, cx, cy, width, height
     dist: tuple[float, ...] = ()          # OpenCV order k1 k2 p1 p2 k3
     rms_px: float = 0.0
     used: tuple[str, ...] = ()
@@ -49,7 +44,6 @@ class Calibration:
     intrinsics_method: str = ""
 
     def __post_init__(self) -> None:
-        self.intrinsics  # noqa: B018 - validates
         if len(self.dist) not in (0, 4, 5, 8, 12, 14):
             raise ValueError(f"dist must hold 0, 4, 5, 8, 12 or 14 OpenCV coefficients, got {len(self.dist)}")
         check_physical(self.intrinsics, self.dist)
@@ -58,13 +52,7 @@ class Calibration:
     def of(cls, intrinsics: Intrinsics, dist: tuple[float, ...] = (), mounting: Mounting | None = None,
            **report: Any) -> Calibration:
         """A camera file for a camera known some other way (a synthetic clip, a dataset's calibration)."""
-        k = intrinsics
-        return cls(k.fx, k.fy, k.cx, k.cy, k.width, k.height, tuple(float(d) for d in dist), mounting=mounting,
-                   mounting_report=dict(report))
-
-    @property
-    def intrinsics(self) -> Intrinsics:
-        return Intrinsics(self.fx, self.fy, self.cx, self.cy, self.width, self.height)
+        return cls(intrinsics, tuple(float(d) for d in dist), mounting=mounting, mounting_report=dict(report))
 
     @property
     def has_distortion(self) -> bool:
@@ -77,15 +65,16 @@ class Calibration:
         """Whether this camera file describes frames of ``width`` x ``height``: "" when its size is theirs,
         a note when they have its aspect (its intrinsics are rescaled, as a resized video's are);
         ``ValueError`` naming both sizes when the aspect differs (another camera, or a crop)."""
-        if (width, height) == (self.width, self.height):
+        k = self.intrinsics
+        if (width, height) == (k.width, k.height):
             return ""
-        mine, theirs = self.width / self.height, width / height
+        mine, theirs = k.width / k.height, width / height
         if abs(theirs / mine - 1.0) > ASPECT_TOLERANCE:
-            raise ValueError(f"{where}: width x height {self.width}x{self.height} (aspect {mine:.3f}), but the "
+            raise ValueError(f"{where}: width x height {k.width}x{k.height} (aspect {mine:.3f}), but the "
                              f"source's frames are {width}x{height} (aspect {theirs:.3f}): the file describes "
                              f"another camera or another crop (aspects must agree within "
                              f"{100 * ASPECT_TOLERANCE:g} %); calibrate this one with bsn-calibrate")
-        return (f"{where} is for {self.width}x{self.height} frames, the source's are {width}x{height}: the same "
+        return (f"{where} is for {k.width}x{k.height} frames, the source's are {width}x{height}: the same "
                 "aspect, its intrinsics rescaled")
 
     def model_frame(self, width: int, height: int, model: Intrinsics, model_mounting: Mounting,
@@ -98,7 +87,10 @@ class Calibration:
         return ModelFrame(self.intrinsics.scaled(width, height), self.dist, m, model, model_mounting)
 
     def to_dict(self) -> dict[str, Any]:
+        """The file's fields, the intrinsics flat at the top (``fx``, ``fy``, ``cx``, ``cy``, ``width``,
+        ``height``), as camera files have always been written."""
         d = asdict(self)
+        d = {**d.pop("intrinsics"), **d}
         d["mounting"] = None if self.mounting is None else self.mounting.to_dict()
         return d
 
@@ -121,8 +113,8 @@ class Calibration:
             intrinsic = {k: number(d, k, str(p)) for k in ("fx", "fy", "cx", "cy")}
             size = {k: number(d, k, str(p), int) for k in ("width", "height")}
             m = d.get("mounting")
-            rest = {k: v for k, v in d.items() if k in known and k not in (*intrinsic, *size)}
-            return cls(**{**rest, **intrinsic, **size, "dist": tuple(d.get("dist", ())),
+            rest = {k: v for k, v in d.items() if k in known and k != "intrinsics"}
+            return cls(**{**rest, "intrinsics": Intrinsics(**intrinsic, **size), "dist": tuple(d.get("dist", ())),
                           "used": tuple(d.get("used", ())), "skipped": tuple(d.get("skipped", ())),
                           "board": tuple(d.get("board", (9, 6))),
                           "mounting": None if m is None else Mounting.from_dict(m, f"{p}: mounting"),

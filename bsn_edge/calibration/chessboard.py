@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 
 from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.camera import Intrinsics
 from bsn_edge.sequence.media import IMAGE_EXTS, VIDEO_EXTS
 
 SUBPIX = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
@@ -77,6 +78,6 @@ def calibrate(source: str | os.PathLike, board: tuple[int, int] = (9, 6), square
         raise ValueError(f"{source}: found the {cols}x{rows} board in {len(used)} views; need at least 3 "
                          f"(skipped: {len(skipped)})")
     rms, K, dist, _, _ = cv2.calibrateCamera(obj, img, size, None, None)
-    return Calibration(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), int(size[0]), int(size[1]),
-                       tuple(float(d) for d in dist.ravel()[:5]), float(rms), tuple(used), tuple(skipped),
+    k = Intrinsics(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), int(size[0]), int(size[1]))
+    return Calibration(k, tuple(float(d) for d in dist.ravel()[:5]), float(rms), tuple(used), tuple(skipped),
                        board, square_m, intrinsics_method="chessboard")

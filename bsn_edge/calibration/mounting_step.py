@@ -43,10 +43,9 @@ def calibrate_mounting(video: str | os.PathLike, camera: Calibration, height_m: 
         raise FileNotFoundError(f"{path} not found")
     frames = read_video(path, max_frames, progress)
     # the intrinsics are rescaled to the video's size, but another aspect ratio is another camera
-    if frames and abs(frames[0].shape[1] / frames[0].shape[0] - camera.width / camera.height) > 0.01:
-        raise ValueError(f"{path} is {frames[0].shape[1]}x{frames[0].shape[0]} but the camera file is for "
-                             f"{camera.width}x{camera.height}: another aspect ratio is another camera")
-    h, w = (frames[0].shape[:2]) if frames else (camera.height, camera.width)
+    if frames:
+        camera.fit_to(frames[0].shape[1], frames[0].shape[0], where=f"the camera file for {path}")
+    h, w = (frames[0].shape[:2]) if frames else (camera.intrinsics.height, camera.intrinsics.width)
     intr = camera.intrinsics.scaled(w, h)
     fit = MountFit(intr, camera.dist, cfg or MountFitConfig())
     for f in frames:

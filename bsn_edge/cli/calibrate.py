@@ -103,7 +103,8 @@ def field_of_view(args) -> int:
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     cal.write(args.out)
-    print(f"fx {cal.fx:.1f}  fy {cal.fy:.1f}  cx {cal.cx:.1f}  cy {cal.cy:.1f}  at {cal.width}x{cal.height} "
+    k = cal.intrinsics
+    print(f"fx {k.fx:.1f}  fy {k.fy:.1f}  cx {k.cx:.1f}  cy {k.cy:.1f}  at {k.width}x{k.height} "
           f"(width x height), from {args.hfov:g} degrees across; no lens distortion")
     if args.hfov > WIDE_DEG:
         print(f"{PROG}: note: a lens {args.hfov:g} degrees across bends straight lines towards its edges, which a "
@@ -132,7 +133,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     cal.write(args.out)
     print(f"{len(cal.used)} views used, {len(cal.skipped)} skipped; RMS reprojection error {cal.rms_px:.3f} px")
-    print(f"fx {cal.fx:.1f}  fy {cal.fy:.1f}  cx {cal.cx:.1f}  cy {cal.cy:.1f}  at {cal.width}x{cal.height} "
+    k = cal.intrinsics
+    print(f"fx {k.fx:.1f}  fy {k.fy:.1f}  cx {k.cx:.1f}  cy {k.cy:.1f}  at {k.width}x{k.height} "
           "(width x height)")
     print("distortion k1 k2 p1 p2 k3: " + " ".join(f"{d:+.4f}" for d in cal.dist))
     for s in cal.skipped:

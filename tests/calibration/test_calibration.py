@@ -60,8 +60,9 @@ def test_recovers_known_intrinsics_and_distortion(boards):
     cal = calibrate(boards, (9, 6), 0.03)
     # stated tolerances for 12-14 rendered 640x480 views (the renderer's own sampling adds error)
     assert cal.rms_px < 1.0
-    assert cal.fx == pytest.approx(520.0, rel=0.015) and cal.fy == pytest.approx(515.0, rel=0.015)
-    assert abs(cal.cx - 322.0) < 4 and abs(cal.cy - 236.0) < 4
+    k = cal.intrinsics
+    assert k.fx == pytest.approx(520.0, rel=0.015) and k.fy == pytest.approx(515.0, rel=0.015)
+    assert abs(k.cx - 322.0) < 4 and abs(k.cy - 236.0) < 4
     assert cal.dist[0] == pytest.approx(-0.28, abs=0.04)
     assert "blank.png" in [s["view"] for s in cal.skipped]
     assert all("no complete 9x6 board" in s["reason"] for s in cal.skipped)
@@ -77,7 +78,7 @@ def test_cli_writes_a_file_the_runtime_reads(boards, tmp_path, capsys):
     mf = cal.model_frame(W, H, Intrinsics.from_fov(256, 128, 80.0), Mounting(1.5, 1.5))
     assert mf.to_model(img).shape == (128, 256, 3)
     # rescaling to a model's size happens in one place
-    assert cal.intrinsics.scaled(320, 240).fx == pytest.approx(cal.fx / 2)
+    assert cal.intrinsics.scaled(320, 240).fx == pytest.approx(cal.intrinsics.fx / 2)
 
 
 def test_too_few_boards_and_bad_arguments(tmp_path, capsys):
@@ -108,17 +109,18 @@ def test_a_camera_known_by_its_field_of_view_sees_its_edges_at_half_that_angle(t
     video = noise_video(tmp_path / "drive.mp4", 3, 320, 176)
     out = tmp_path / "cam.json"
     assert calib_cli.main([str(video), "--hfov", "70", "--out", str(out)]) == 0
-    cam = Calibration.read(out)
-    assert (cam.width, cam.height, cam.dist) == (320, 176, ())
+    read = Calibration.read(out)
+    cam = read.intrinsics
+    assert (cam.width, cam.height, read.dist) == (320, 176, ())
     assert math.degrees(math.atan2(cam.width - cam.cx, cam.fx) + math.atan2(cam.cx, cam.fx)) == pytest.approx(70.0)
-    assert cam.fx == cam.fy and cam.cy == pytest.approx(88.0) and cam.intrinsics_method.startswith("field of view")
+    assert cam.fx == cam.fy and cam.cy == pytest.approx(88.0) and read.intrinsics_method.startswith("field of view")
     assert "70 degrees across" in capsys.readouterr().out
     # a folder of the camera's frames gives the same camera
     frames = tmp_path / "frames"
     frames.mkdir()
     cv2.imwrite(str(frames / "000000.png"), np.zeros((176, 320, 3), np.uint8))
     assert calib_cli.main([str(frames), "--hfov", "70", "--out", str(tmp_path / "f.json")]) == 0
-    assert Calibration.read(tmp_path / "f.json").fx == pytest.approx(cam.fx)
+    assert Calibration.read(tmp_path / "f.json").intrinsics.fx == pytest.approx(cam.fx)
     # refused: the user's file without --force, a field of view no forward camera has, --hfov with --mount
     assert calib_cli.main([str(video), "--hfov", "70", "--out", str(out)]) == 2
     assert calib_cli.main([str(video), "--hfov", "700", "--out", str(tmp_path / "x.json")]) == 2

@@ -139,18 +139,19 @@ def test_labels_are_deterministic(seq, tmp_path):
 
 def test_calibration_file_replaces_the_intrinsics(seq, tmp_path):
     from bsn_edge.calibration import Calibration
+    from bsn_edge.camera import Intrinsics
     from bsn_edge.sequence import SequenceMeta
     m = SequenceMeta.read(seq)
     # the same camera described at twice the size: rescaled, it is identical, so are the labels
-    Calibration(m.fx * 2, m.fy * 2, (m.cx + 0.5) * 2 - 0.5, (m.cy + 0.5) * 2 - 0.5, m.width * 2,
-                m.height * 2).write(tmp_path / "c.json")
+    Calibration(Intrinsics(m.fx * 2, m.fy * 2, (m.cx + 0.5) * 2 - 0.5, (m.cy + 0.5) * 2 - 0.5, m.width * 2,
+                           m.height * 2)).write(tmp_path / "c.json")
     ref = label_sequence(seq, CFG)
     shutil.rmtree(labels_dir(seq, CFG))
     rep = label_sequence(seq, CFG, Sources(calib=str(tmp_path / "c.json")))
     assert [f["blindspot_px"] for f in rep["per_frame"]] == [f["blindspot_px"] for f in ref["per_frame"]]
     same = {p.name: read_mask(p) for p in (labels_dir(seq, CFG) / "blindspot").iterdir()}
     # a camera that differs (a longer lens, a lower centre) is used, not ignored: other masks
-    Calibration(m.fx * 1.4, m.fy * 1.4, m.cx, m.cy + 6, m.width, m.height).write(tmp_path / "d.json")
+    Calibration(Intrinsics(m.fx * 1.4, m.fy * 1.4, m.cx, m.cy + 6, m.width, m.height)).write(tmp_path / "d.json")
     label_sequence(seq, CFG, Sources(calib=str(tmp_path / "d.json")), force=True)
     other = {p.name: read_mask(p) for p in (labels_dir(seq, CFG) / "blindspot").iterdir()}
     assert other.keys() == same.keys()
@@ -162,11 +163,13 @@ def test_the_calibrated_camera_is_recorded_where_training_reads_it(seq, tmp_path
     """bsn-label --calib: the calibration's intrinsics (at the clip's size) go with the labels, and
     training takes the model card's camera from there."""
     from bsn_edge.calibration import Calibration
+    from bsn_edge.camera import Intrinsics
     from bsn_edge.labels.generator import label_camera
     from bsn_edge.sequence import SequenceMeta
     from bsn_edge.sequence.folder import SequenceFolder
     m = SequenceMeta.read(seq)
-    Calibration(m.fx * 2.2, m.fy * 2.2, m.width, m.height, m.width * 2, m.height * 2).write(tmp_path / "c.json")
+    Calibration(Intrinsics(m.fx * 2.2, m.fy * 2.2, m.width, m.height, m.width * 2, m.height * 2)).write(
+        tmp_path / "c.json")
     label_sequence(seq, CFG, Sources(calib=str(tmp_path / "c.json")))
     cam = label_camera(SequenceFolder(seq).labels(CFG.name))
     assert (cam.width, cam.height) == (m.width, m.height)

@@ -144,9 +144,10 @@ def decode_log(path) -> list[SystemState]:
 
 def test_camera_file_with_a_mounting_is_used_from_the_first_frame(setup, tmp_path):
     from bsn_edge.calibration import Calibration
+    from bsn_edge.camera import Intrinsics
     from bsn_edge.mounting import Mounting
     model, clip = setup
-    cal = Calibration(300.0, 300.0, 96.0, 48.0, 192, 96, dist=(-0.2, 0.05, 0.0, 0.0, 0.0),
+    cal = Calibration(Intrinsics(300.0, 300.0, 96.0, 48.0, 192, 96), dist=(-0.2, 0.05, 0.0, 0.0, 0.0),
                       mounting=Mounting(1.2, -1.5, 2.0, 0.5))
     cal.write(tmp_path / "c.json")
     log = tmp_path / "a.log"

@@ -48,7 +48,7 @@ def test_hood_is_neither_road_nor_blind_spot_and_the_camera_file_is_written(tmp_
     rig = Rig.draw(seed)
     cal = Calibration.read(out / "calibration.json")
     assert cal.mounting == rig.mounting and cal.dist == rig.dist
-    assert (cal.fx, cal.width) == pytest.approx((rig.intrinsics(192, 96).fx, 192))
+    assert (cal.intrinsics.fx, cal.intrinsics.width) == pytest.approx((rig.intrinsics(192, 96).fx, 192))
     sem = cv2.imread(str(out / "semantic" / "000000.png"), cv2.IMREAD_UNCHANGED)
     depth = cv2.imread(str(out / "depth" / "000000.png"), cv2.IMREAD_UNCHANGED)
     bottom = sem[-2, 96]
