@@ -1,14 +1,35 @@
-"""Reading numbers from user files: a missing or non-numeric field is an error that names it.
+"""Reading user files: a file that is not what it should be, or a missing or non-numeric field, is an
+error that names the path or the field.
 
-Every ``from_dict`` that reads a file a user can edit (camera files, model cards, configs) takes its
-numbers through :func:`number`, so no field silently falls back to a default.
+Every reader of a JSON file a user can edit (camera files, sequence metadata, training runs) opens it
+through :func:`read_json_object`, and every ``from_dict`` takes its numbers through :func:`number`, so
+no field silently falls back to a default.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
+
+
+def read_json_object(path: str | os.PathLike, what: str = "", error: type[Exception] = ValueError) -> dict[str, Any]:
+    """The JSON object in ``path``; ``error`` naming the path (and ``what`` it should be, e.g. "not a
+    camera file") when it is not JSON, not text or not an object. A missing file is the caller's to
+    name (``FileNotFoundError`` from the read otherwise)."""
+    p = Path(path)
+    lead = f"{p}: {what} (" if what else f"{p}: "
+    tail = ")" if what else ""
+    try:
+        d = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise error(f"{lead}not valid JSON: {e}{tail}") from None
+    if not isinstance(d, dict):
+        raise error(f"{lead}expected a JSON object, got {type(d).__name__}{tail}")
+    return d
 
 
 def number(d: Mapping[str, Any], key: str, where: str, kind: type = float) -> float | int:

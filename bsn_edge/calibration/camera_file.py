@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from bsn_edge.camera import Intrinsics
-from bsn_edge.fields import number
+from bsn_edge.fields import number, read_json_object
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.mounting import Mounting
 from bsn_edge.sequence.images import atomic_write_bytes
@@ -102,12 +102,7 @@ class Calibration:
         p = Path(path)
         if not p.is_file():
             raise FileNotFoundError(f"calibration file {p} not found")
-        try:
-            d = json.loads(p.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise ValueError(f"{p}: not a camera file (not JSON: {e})") from None
-        if not isinstance(d, dict):
-            raise ValueError(f"{p}: not a camera file (expected a JSON object; bsn-calibrate writes one)")
+        d = read_json_object(p, "not a camera file")
         known = {f.name for f in fields(cls)}     # fields of other versions are left out, not guessed at
         try:
             intrinsic = {k: number(d, k, str(p)) for k in ("fx", "fy", "cx", "cy")}

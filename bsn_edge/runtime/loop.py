@@ -38,6 +38,7 @@ from bsn_edge.runtime.frame_record import FrameRecord
 from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.runtime.overlay import OverlayWriter, draw
 from bsn_edge.runtime.priority import check_nice
+from bsn_edge.runtime.run_summary import ModelSummary, RunSummary, SinkSummary
 from bsn_edge.runtime.sinks import GuardedSink, LineLog, SinkFailure, open_all
 from bsn_edge.runtime.sources import Captured, Source
 from bsn_edge.runtime.stats import LatencyStats
@@ -328,7 +329,8 @@ class FramePipeline:
 
     def run(self, max_frames: int | None = None, progress: Callable[[int], Any] | None = None,
             stop: threading.Event | None = None) -> dict[str, Any]:
-        """Process the source until it ends, ``max_frames`` or ``stop``; returns the summary.
+        """Process the source until it ends, ``max_frames`` or ``stop``; returns the summary as written
+        (:meth:`RunSummary.to_json <bsn_edge.runtime.run_summary.RunSummary.to_json>`).
 
         With ``in_flight`` > 1 the model runs that many frames at once, each on an inference thread of
         its own (an engine of one intra-op thread each: two on two cores do more frames a second than
@@ -367,30 +369,26 @@ class FramePipeline:
             if self.pool is not None:
                 self.pool.shutdown(wait=True, cancel_futures=True)
             self.close()
-        return self.summary(time.perf_counter() - t_start, stop)
+        return self.summary(time.perf_counter() - t_start, stop).to_json()
 
-    def summary(self, elapsed: float, stop: threading.Event | None) -> dict[str, Any]:
-        card, frames = self.engine.card, self.frames
-        maps = self.outputs.maps
-        return {"frames": frames, "valid_frames": self.valid, "dropped": self.dropped,
-                "before_start": self.source.before_start,
-                "overlap": self.cfg.overlap, "in_flight": self.cfg.in_flight,
-                "seconds": round(elapsed, 3), "fps": frames / elapsed if elapsed else 0.0,
-                **self.latency.percentiles(),
-                "wait_ms": {k.removesuffix("_ms"): v for k, v in self.waiting.percentiles().items()},
-                "stage_ms": self.timer.per_frame_ms(frames), "stage_share": self.timer.shares(),
-                "faults": self.health.faults, "cycles_sent": self.emitter.sent_cycles,
-                "senders": {s.name: vars(s.stats) for s in self.senders}, "senders_down": self.health.senders_down,
-                "source_failure": self.source.failure, "stopped": bool(stop is not None and stop.is_set()),
-                "heartbeat_error": self.heartbeat.last_error if self.heartbeat is not None else "",
-                "camera": self.camera.summary(), "maps_written": 0 if maps is None else maps.written,
-                "sinks": {name: {"written": k.written, "dropped": k.dropped,
-                                 "failure": None if k.ok else vars(k.failure)} for name, k in self.sinks.items()},
-                "model": {"variant": card.variant, "size": list(card.input_size), "threshold": card.threshold,
-                          "quantization": card.quantization, "kernels": self.engine.kernels,
-                          "self_test": self.engine.self_test,
-                          "signer": self.engine.signer, "authentic": self.engine.authentic,
-                          "trust_note": self.engine.verdict.note}}
+    def summary(self, elapsed: float, stop: threading.Event | None) -> RunSummary:
+        card, frames, maps = self.engine.card, self.frames, self.outputs.maps
+        return RunSummary(
+            frames=frames, valid_frames=self.valid, dropped=self.dropped, before_start=self.source.before_start,
+            overlap=self.cfg.overlap, in_flight=self.cfg.in_flight, seconds=round(elapsed, 3),
+            fps=frames / elapsed if elapsed else 0.0, latency_ms=self.latency.percentiles(),
+            wait_ms={k.removesuffix("_ms"): v for k, v in self.waiting.percentiles().items()},
+            stage_ms=self.timer.per_frame_ms(frames), stage_share=self.timer.shares(), faults=self.health.faults,
+            cycles_sent=self.emitter.sent_cycles, senders={s.name: vars(s.stats) for s in self.senders},
+            senders_down=self.health.senders_down, source_failure=self.source.failure,
+            stopped=bool(stop is not None and stop.is_set()),
+            heartbeat_error=self.heartbeat.last_error if self.heartbeat is not None else "",
+            camera=self.camera.summary(), maps_written=0 if maps is None else maps.written,
+            sinks={name: SinkSummary(k.written, k.dropped, None if k.ok else vars(k.failure))
+                   for name, k in self.sinks.items()},
+            model=ModelSummary(card.variant, tuple(card.input_size), card.threshold, card.quantization,
+                               self.engine.kernels, self.engine.self_test, self.engine.signer,
+                               self.engine.authentic, self.engine.verdict.note))
 
 
 def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig | None = None,

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.fields import read_json_object
 from bsn_edge.sequence.images import atomic_write_bytes
 
 META_NAME = "meta.json"
@@ -56,12 +57,7 @@ class SequenceMeta:
         if not path.is_file():
             raise FileNotFoundError(f"{seq_dir}: not a sequence folder (no {META_NAME}); bsn-synth makes one, and "
                                     "bsn-adapt imports your own videos as sequence folders")
-        try:
-            d = json.loads(path.read_text())
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path}: invalid JSON: {e}") from None
-        if not isinstance(d, dict):
-            raise ValueError(f"{path}: expected a JSON object")
+        d = read_json_object(path)
         known = {"fps", "width", "height", "fx", "fy", "cx", "cy", "source", "frames", "seed"}
         missing = sorted(known - {"seed", "frames", "source"} - d.keys())
         if missing:

@@ -31,6 +31,7 @@ from typing import Any
 import torch
 
 from bsn_edge.card import UNRECORDED, ModelCard, TrainingRecord
+from bsn_edge.fields import read_json_object
 from bsn_edge.models import BlindSpotNet, ModelSpec, build, create_teacher, weights_bytes
 from bsn_edge.sequence.images import atomic_write, atomic_write_bytes, torn_writes
 from bsn_edge.train.config import TeacherConfig
@@ -166,12 +167,7 @@ class Run:
         p = self.checkpoint_path
         if not p.is_file():
             raise FileNotFoundError(f"{self.path}: not a training run (no {self.CHECKPOINT})")
-        try:
-            d = json.loads(p.read_text())
-        except json.JSONDecodeError as e:
-            raise RunError(f"{p}: not valid JSON ({e})") from None
-        if not isinstance(d, dict):
-            raise RunError(f"{p}: expected a JSON object")
+        d = read_json_object(p, error=RunError)
         if "card" in d:
             d["card"] = ModelCard.from_dict(d["card"], str(p))
         else:
@@ -241,10 +237,7 @@ class Run:
         """The resolved config the run was trained with ({} if the run has none)."""
         if not self.config_path.is_file():
             return {}
-        try:
-            return json.loads(self.config_path.read_text())
-        except json.JSONDecodeError as e:
-            raise RunError(f"{self.config_path}: not valid JSON ({e})") from None
+        return read_json_object(self.config_path, error=RunError)
 
     def load_model(self) -> tuple[BlindSpotNet, ModelCard]:
         """The trained model (eval mode) and its card. Refuses weights whose sha256 is not the

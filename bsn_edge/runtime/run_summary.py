@@ -1,0 +1,84 @@
+"""What a run of the runtime did: :class:`RunSummary`, written as ``bsn-run --summary`` and printed.
+
+Fields of the JSON (:meth:`RunSummary.to_json`), in the order written:
+``frames`` (read from the source), ``valid_frames`` (with a valid inference), ``dropped`` (a live
+source's frames the loop had no time for), ``before_start`` (replaced before the loop first asked),
+``overlap``, ``in_flight`` (how reading and inference ran), ``seconds``, ``fps`` (frames a second of
+processing), ``p50_ms``, ``p95_ms``, ``p99_ms`` (latency), ``wait_ms`` (frames waiting for the model,
+same percentiles), ``stage_ms`` and ``stage_share`` (per stage: decode, preprocess, inference,
+postprocess, send), ``faults`` (the counters, by :class:`~bsn_edge.alerts.health.Fault` name),
+``cycles_sent``, ``senders`` (per sender: sent, errors, ...), ``senders_down`` (senders that could not
+send at the end), ``source_failure`` (why the source ended early, or null), ``stopped`` (by a signal
+or the caller), ``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report),
+``maps_written``, ``sinks`` (per output: written, dropped, failure), ``model`` (variant, size,
+threshold, quantization, kernels, self-test, signer, authentic, trust note); ``bsn-run`` adds
+``signal``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from bsn_edge.alerts.health import Fault
+
+
+@dataclass(frozen=True)
+class ModelSummary:
+    variant: str
+    size: tuple[int, int]
+    threshold: float
+    quantization: str
+    kernels: str
+    self_test: dict[str, float]
+    signer: str
+    authentic: bool
+    trust_note: str
+
+
+@dataclass(frozen=True)
+class SinkSummary:
+    written: int
+    dropped: int
+    failure: dict[str, Any] | None
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    frames: int
+    valid_frames: int
+    dropped: int
+    before_start: int
+    overlap: bool
+    in_flight: int
+    seconds: float
+    fps: float
+    latency_ms: dict[str, float]          # written flat: p50_ms, p95_ms, p99_ms
+    wait_ms: dict[str, float]
+    stage_ms: dict[str, float]
+    stage_share: dict[str, float]
+    faults: dict[Fault, int]
+    cycles_sent: int
+    senders: dict[str, dict[str, Any]]
+    senders_down: list[str]
+    source_failure: str | None
+    stopped: bool
+    heartbeat_error: str
+    camera: dict[str, Any]
+    maps_written: int
+    sinks: dict[str, SinkSummary] = field(default_factory=dict)
+    model: ModelSummary | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The record as ``--summary`` writes it (field names in the module's docstring)."""
+        d = asdict(self)
+        latency = d.pop("latency_ms")
+        out: dict[str, Any] = {}
+        for k, v in d.items():
+            out[k] = v
+            if k == "fps":
+                out.update(latency)
+        out["faults"] = {f.value: n for f, n in self.faults.items()}
+        if out["model"] is not None:
+            out["model"]["size"] = list(self.model.size)
+        return out
