@@ -3,10 +3,8 @@ import os
 import numpy as np
 import pytest
 
-from bsn_edge import semantics as sm
-from bsn_edge.camera import Intrinsics, look_pose
-from bsn_edge.synth import Agents, Boxes, RoadLayout, World
-from bsn_edge.synth.boxes import KIND_VEHICLE
+from bsn_edge.camera import Intrinsics
+from bsn_edge.synth import RoadLayout
 
 
 @pytest.fixture
@@ -18,19 +16,6 @@ def straight_road() -> RoadLayout:
 @pytest.fixture
 def small_camera() -> Intrinsics:
     return Intrinsics.from_fov(256, 128, 80.0)
-
-
-def ego_pose(x: float = 1.6, y: float = 0.0, pitch: float = 0.02) -> np.ndarray:
-    """Camera 1.5 m up, in the right lane, looking along +y."""
-    return look_pose(np.array([x, y, 1.5]), np.pi / 2, pitch)
-
-
-def car(x0, y0, x1, y1, h=1.5) -> Boxes:
-    return Boxes.make([(x0, y0, 0.0)], [(x1, y1, h)], sm.CAR, KIND_VEHICLE, (0.5, 0.5, 0.5))
-
-
-def world_with(layout: RoadLayout, boxes: Boxes) -> World:
-    return World(layout, boxes, Agents.empty())
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -72,14 +57,3 @@ def small_light_onnx(tmp_path_factory, tests_key):
             sign(made[size], tests_key)
         return made[size]
     return exported
-
-
-def noise_video(path, frames: int, width: int, height: int, fps: float = 25.0, seed: int = 0):
-    """An MPEG-4 file of ``frames`` frames of uniform noise (nothing to calibrate on, everything to decode)."""
-    import cv2
-    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (width, height))
-    rng = np.random.default_rng(seed)
-    for _ in range(frames):
-        w.write(rng.integers(0, 256, (height, width, 3), dtype=np.uint8))
-    w.release()
-    return path

@@ -1,10 +1,22 @@
-"""Stand-ins for hardware that fails, and inputs made for the runtime tests, shared by the alerts and
-runtime tests."""
+"""What the tests share besides fixtures: stand-ins for hardware that fails, inputs made for the runtime
+(videos, camera states) and small synthetic worlds."""
 
 from pathlib import Path
 
 import can
+import numpy as np
 import serial
+
+from bsn_edge import semantics as sm
+from bsn_edge.calibration import Calibration
+from bsn_edge.camera import look_pose
+from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.synth import Agents, Boxes, RoadLayout, World
+from bsn_edge.synth.boxes import KIND_VEHICLE
+
+SMOKE = str(CHECKOUT / "configs" / "smoke.toml")   # the tests' training config
+SHIPPED = DEFAULT_MODEL                                # the shipped default model
 
 
 class FullBus:
@@ -41,3 +53,34 @@ def long_video(clip: Path, out: Path, repeats: int) -> Path:
             vw.write(f)
     vw.release()
     return out
+
+
+def noise_video(path, frames: int, width: int, height: int, fps: float = 25.0, seed: int = 0):
+    """An MPEG-4 file of ``frames`` frames of uniform noise (nothing to calibrate on, everything to decode)."""
+    import cv2
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (width, height))
+    rng = np.random.default_rng(seed)
+    for _ in range(frames):
+        w.write(rng.integers(0, 256, (height, width, 3), dtype=np.uint8))
+    w.release()
+    return path
+
+
+def mounted(engine, clip):
+    """The runtime's camera for the clip's own camera file (mounting known: no online calibration)."""
+    from bsn_edge.runtime.camera_state import CameraState
+
+    return CameraState(engine.card, Calibration.read(clip / "calibration.json"))
+
+
+def ego_pose(x: float = 1.6, y: float = 0.0, pitch: float = 0.02) -> np.ndarray:
+    """Camera 1.5 m up, in the right lane, looking along +y."""
+    return look_pose(np.array([x, y, 1.5]), np.pi / 2, pitch)
+
+
+def car(x0, y0, x1, y1, h=1.5) -> Boxes:
+    return Boxes.make([(x0, y0, 0.0)], [(x1, y1, h)], sm.CAR, KIND_VEHICLE, (0.5, 0.5, 0.5))
+
+
+def world_with(layout: RoadLayout, boxes: Boxes) -> World:
+    return World(layout, boxes, Agents.empty())

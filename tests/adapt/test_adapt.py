@@ -20,7 +20,7 @@ from bsn_edge.labels.sources.onnx_model import OnnxImageModel
 from bsn_edge.sequence import read_depth
 from bsn_edge.synth import SynthConfig, write_clip
 from bsn_edge.train import Run
-from tests.train.test_training import SMOKE
+from tests.fakes import SMOKE
 
 GROUND_TRUTH = ("depth", "semantic", "poses.txt", "bsgt", "boxes")
 

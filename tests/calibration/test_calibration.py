@@ -105,7 +105,7 @@ def test_a_camera_known_by_its_field_of_view_sees_its_edges_at_half_that_angle(t
     at half the field of view either side of the axis (pixel edges at 0 and W), centred, square."""
     import math
 
-    from tests.conftest import noise_video
+    from tests.fakes import noise_video
     video = noise_video(tmp_path / "drive.mp4", 3, 320, 176)
     out = tmp_path / "cam.json"
     assert calib_cli.main([str(video), "--hfov", "70", "--out", str(out)]) == 0

@@ -51,7 +51,7 @@ def test_the_shipped_card_reads_back_to_its_stored_entries_and_a_card_without_a_
     so cards sealed before the record existed digest as they did."""
     import onnx
 
-    from tests.runtime.test_failsafe import SHIPPED
+    from tests.fakes import SHIPPED
 
     assert "training" not in card_for((64, 128)).to_dict()
     if not SHIPPED.is_file():

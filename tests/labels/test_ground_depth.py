@@ -18,7 +18,7 @@ from bsn_edge.sequence import read_mask
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth import Boxes, Renderer, SynthConfig, write_clip
 from bsn_edge.synth.boxes import KIND_VEHICLE
-from tests.conftest import world_with
+from tests.fakes import world_with
 
 
 def test_road_depth_matches_trigonometry():

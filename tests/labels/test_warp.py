@@ -9,7 +9,7 @@ from bsn_edge.camera import Intrinsics, look_pose
 from bsn_edge.labels import LabelConfig, Warper, label_frame, remove_small_components
 from bsn_edge.labels.warp import look_agrees, smooth_grey
 from bsn_edge.synth import Boxes, Renderer
-from tests.conftest import car, world_with
+from tests.fakes import car, world_with
 
 FPS, SPEED, T = 5.0, 8.0, 25
 

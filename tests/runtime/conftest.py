@@ -2,7 +2,6 @@
 
 import pytest
 
-from bsn_edge.calibration import Calibration
 from bsn_edge.synth import SynthConfig, write_clip
 
 SIZE = (128, 256)
@@ -16,10 +15,3 @@ def setup(tmp_path_factory, small_light_onnx):
     clip = root / "clip"
     write_clip(SynthConfig(frames=15, height=96, width=192, seed=2), clip)
     return model, clip
-
-
-def mounted(engine, clip):
-    """The runtime's camera for the clip's own camera file (mounting known: no online calibration)."""
-    from bsn_edge.runtime.camera_state import CameraState
-
-    return CameraState(engine.card, Calibration.read(clip / "calibration.json"))

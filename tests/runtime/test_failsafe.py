@@ -22,15 +22,11 @@ from bsn_edge.alerts.senders import CanSender
 from bsn_edge.card import CARD_SHA_KEY, ModelCard, card_digest
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli.common import CHECKOUT
-from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.export.seal import set_metadata
 from bsn_edge.runtime import Engine, ModelError, Reconnect, RuntimeConfig, open_source, run
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
 from bsn_edge.runtime.sources import LiveSource
-from tests.fakes import long_video
-from tests.runtime.conftest import mounted
-
-SHIPPED = DEFAULT_MODEL
+from tests.fakes import SHIPPED, long_video, mounted
 
 
 def statuses(rx) -> list[int]:

@@ -12,7 +12,7 @@ import pytest
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.feeder import Feeder
 from bsn_edge.runtime.sources import Captured, Source
-from tests.runtime.conftest import mounted
+from tests.fakes import mounted
 
 
 class ListSource(Source):

@@ -19,8 +19,7 @@ from bsn_edge.cli import run as run_cli
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.sources import ImageFolderSource
-from tests.fakes import FullBus, GonePort
-from tests.runtime.conftest import mounted
+from tests.fakes import FullBus, GonePort, mounted
 
 
 def test_video_to_can_log_that_both_decoders_read(setup, tmp_path, capsys):

@@ -351,7 +351,7 @@ def test_a_video_file_is_decoded_on_the_reading_thread_with_the_same_frames(tmp_
     import cv2
 
     from bsn_edge.runtime.sources import VideoFileSource
-    from tests.conftest import noise_video
+    from tests.fakes import noise_video
     path = noise_video(tmp_path / "v.mp4", 30, 192, 96, seed=3)
 
     def frames(**kw):
@@ -510,7 +510,7 @@ def small_disk(tmp_path):
 
 
 def test_an_overlay_filling_its_disk_degrades_at_the_frame_it_fails_not_at_the_end(setup, tmp_path, small_disk):
-    from tests.conftest import noise_video
+    from tests.fakes import noise_video
     model, _ = setup
     video = noise_video(tmp_path / "noise.mp4", 120, 1280, 720)
     summ = tmp_path / "s.json"

@@ -6,7 +6,7 @@ from bsn_edge import semantics as sm
 from bsn_edge.sequence.images import depth_to_png16
 from bsn_edge.synth import Boxes, Renderer
 from bsn_edge.synth.boxes import KIND_VEHICLE
-from tests.conftest import car, ego_pose, world_with
+from tests.fakes import car, ego_pose, world_with
 
 
 def analytic_ground(intr, T_wc):

@@ -23,9 +23,9 @@ from bsn_edge.models import BlindSpotNet
 from bsn_edge.train import Run, RunError, load_config
 from bsn_edge.train.losses import masked_bce
 from bsn_edge.train.trainer import cpu_has_native_bf16
+from tests.fakes import SMOKE
 
 ROOT = Path(__file__).resolve().parents[2]
-SMOKE = str(ROOT / "configs" / "smoke.toml")
 
 
 @pytest.fixture(scope="module")
