@@ -81,6 +81,20 @@ def _frames_of(source: Path, fps: float | None, max_fps: float) -> tuple[list[Pa
                             "folder")
 
 
+def _camera_of(source: Path, calib: Calibration | None, w: int, h: int,
+               model_hfov_deg: float) -> tuple[Calibration, str]:
+    """The imported clip's camera and where it came from: ``calib``, else a sequence folder's own camera
+    file or meta, else assumed with the model camera's field of view."""
+    if calib is not None:
+        return calib, str(calib.mounting_report.get("method", "--calib"))
+    if source.is_dir() and SequenceFolder(source).calibration_path.is_file():
+        return Calibration.read(SequenceFolder(source).calibration_path), "the clip's camera file"
+    if source.is_dir() and SequenceFolder(source).meta_path.is_file():
+        return Calibration.of(SequenceMeta.read(source).intrinsics, method="the clip's meta"), "the clip's meta"
+    how = f"assumed: no --calib, the model camera's {model_hfov_deg:g} degree field of view"
+    return Calibration.of(Intrinsics.from_fov(w, h, model_hfov_deg), method=how), how
+
+
 def import_clip(source: str | Path, dest: Path, calib: Calibration | None, model_hfov_deg: float,
                 fps: float | None = None, max_fps: float = 10.0,
                 progress: Callable[[int], None] | None = None) -> Imported:
@@ -133,15 +147,7 @@ def import_clip(source: str | Path, dest: Path, calib: Calibration | None, model
     if n == 0 or size is None:
         raise UnusableClipError(f"{source}: no frame could be read")
     h, w = size
-    if calib is not None:
-        cam, how = calib, str(calib.mounting_report.get("method", "--calib"))
-    elif source.is_dir() and SequenceFolder(source).calibration_path.is_file():
-        cam, how = Calibration.read(SequenceFolder(source).calibration_path), "the clip's camera file"
-    elif source.is_dir() and SequenceFolder(source).meta_path.is_file():
-        cam, how = Calibration.of(SequenceMeta.read(source).intrinsics, method="the clip's meta"), "the clip's meta"
-    else:
-        how = f"assumed: no --calib, the model camera's {model_hfov_deg:g} degree field of view"
-        cam = Calibration.of(Intrinsics.from_fov(w, h, model_hfov_deg), method=how)
+    cam, how = _camera_of(source, calib, w, h, model_hfov_deg)
     cam.write(seq.calibration_path)
     k = cam.intrinsics.scaled(w, h)
     SequenceMeta(fps=rate / step, width=w, height=h, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy,

@@ -109,8 +109,19 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
     built-in VO; clips that cannot be used go to ``report["rejected"]`` with the reason. Both steps
     resume: a finished import and finished label frames are kept."""
     card = src.card()
-    lcfg = cfg.label_config()
     hfov = float(np.degrees(2 * np.arctan(card.camera.width / (2 * card.camera.fx))))
+    usable = _import_all(videos, folder, cfg, calib, hfov, fps, report, progress)
+    specs = prepare_labeller(src, folder.depth_model, folder.teacher_model)
+    road_ok = _with_road(usable, specs["seg"], report)
+    depth_of = {imp.name: _first_depth(cfg.label_depth, imp.path, cfg.label_config().name, specs["depth"])
+                for imp in road_ok}
+    results = _label_all(road_ok, depth_of, specs["seg"], cfg, report, progress)
+    return _kept(road_ok, results, depth_of, cfg.label_config(), report)
+
+
+def _import_all(videos: list[str | Path], folder: AdaptFolder, cfg: AdaptConfig, calib: Calibration | None,
+                hfov: float, fps: float | None, report: dict[str, Any], progress: bool) -> list[Imported]:
+    """The videos imported as clips long enough and moving enough to label; the others rejected."""
     names: set[str] = set()
     usable = []
     with tqdm(desc="import", unit="frame", disable=None if progress else True) as bar:
@@ -133,12 +144,14 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
             report["clips"][name] = {"source": imp.source, "frames": imp.frames, "fps": imp.fps,
                                      "camera": imp.camera, "moving_s": round(moving, 1)}
             usable.append(imp)
+    return usable
 
-    specs = prepare_labeller(src, folder.depth_model, folder.teacher_model)
+
+def _with_road(usable: list[Imported], seg: str, report: dict[str, Any]) -> list[Imported]:
+    """The clips whose road the teacher finds; the others rejected."""
     road_ok = []
     for imp in usable:
-        share = road_share(make_seg(specs["seg"], ClipData(imp.path, SequenceMeta.read(imp.path), imp.frames)),
-                           imp.frames)
+        share = road_share(make_seg(seg, ClipData(imp.path, SequenceMeta.read(imp.path), imp.frames)), imp.frames)
         report["clips"][imp.name]["road_share"] = round(share, 3)
         if share < MIN_ROAD_SHARE:
             report["rejected"][imp.name] = (f"no road found: the teacher sees road in {100 * share:.1f} % of the lower "
@@ -146,7 +159,12 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
             del report["clips"][imp.name]
         else:
             road_ok.append(imp)
-    depth_of = {imp.name: _first_depth(cfg.label_depth, imp.path, lcfg.name, specs["depth"]) for imp in road_ok}
+    return road_ok
+
+
+def _label_all(road_ok: list[Imported], depth_of: dict[str, str], seg: str, cfg: AdaptConfig,
+               report: dict[str, Any], progress: bool) -> dict[str, Any]:
+    """Label every clip with its depth source (``depth_of``, updated where it falls back); the results."""
     results: dict[str, Any] = {}
     with tqdm(total=0, desc="label", unit="frame", disable=None if progress else True) as bar:
         def on_total(n: int) -> None:
@@ -156,7 +174,7 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
         def label(group: list[Imported], force: bool = False) -> None:
             for depth in sorted({depth_of[imp.name] for imp in group}):
                 part = [imp for imp in group if depth_of[imp.name] == depth]
-                sources = Sources(depth=depth, seg=specs["seg"], poses="vo")
+                sources = Sources(depth=depth, seg=seg, poses="vo")
                 done = label_many([i.path for i in part], cfg.label_config(depth), sources, jobs=1, progress=bar.update,
                                   on_total=on_total, force=force)
                 results.update({imp.name: r for imp, r in zip(part, done, strict=True)})
@@ -169,6 +187,12 @@ def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: Ad
             report["clips"][imp.name]["model_depth_rejected"] = results[imp.name].message
             depth_of[imp.name] = "ground"
         label(fallback, force=True)
+    return results
+
+
+def _kept(road_ok: list[Imported], results: dict[str, Any], depth_of: dict[str, str], lcfg,
+          report: dict[str, Any]) -> list[Clip]:
+    """The labelled clips with blind spots in their labels; the others rejected with the reason."""
     labelled = []
     for imp in road_ok:
         r = results[imp.name]
@@ -256,24 +280,29 @@ def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, repo
     report["fine_tune"] = {"steps": cfg.steps, "seed": cfg.seed, "loss_first_last": [losses[0], losses[-1]],
                            "trained": "B (D frozen)"}
 
-    out = Path(out)
+    report["weights_sha256"] = _write_adapted(src, Path(out), model, card, threshold, best, lcfg.name, train, held)
+    if export:
+        from bsn_edge.export.pipeline import export_run
+
+        path = Path(out) / EXPORT_NAME
+        summary = export_run(out, path, int8=True, calib=max(labelled, key=lambda c: len(c.frames)).path)
+        report["export"] = {"path": str(path), "int8_vs_fp32": summary["int8_vs_fp32"]}
+    return report
+
+
+def _write_adapted(src: Run, out: Path, model, card, threshold: float, best: dict[str, Any], label: str,
+                   train: list[Clip], held: list[Clip]) -> str:
+    """The adapted run written to ``out`` (its card, the source's config and teacher); its weights' sha256."""
     dst = Run(out)
     fields = {f.name: getattr(card, f.name) for f in dataclasses.fields(card) if f.name != "weights_sha256"}
     fields.update(threshold=threshold, graph_sha256="", self_test=None)
-    new_card = dst.save(model, fields, {"adapted_from": str(src.path), "label": lcfg.name,
+    new_card = dst.save(model, fields, {"adapted_from": str(src.path), "label": label,
                                         "train_clips": sorted({c.path.name for c in train}),
                                         "val_clips": sorted({c.path.name for c in held}), "val": best})
     dst.write_config(src.config())
     dst.teacher_path.parent.mkdir(exist_ok=True)
     shutil.copy2(src.teacher_path, dst.teacher_path)     # a later adaptation of this run labels with it
-    report["weights_sha256"] = new_card.weights_sha256
-    if export:
-        from bsn_edge.export.pipeline import export_run
-
-        path = out / EXPORT_NAME
-        summary = export_run(out, path, int8=True, calib=max(labelled, key=lambda c: len(c.frames)).path)
-        report["export"] = {"path": str(path), "int8_vs_fp32": summary["int8_vs_fp32"]}
-    return report
+    return new_card.weights_sha256
 
 
 def adapt(run_dir: str | Path, videos: list[str | Path], out: str | Path, cfg: AdaptConfig | None = None,

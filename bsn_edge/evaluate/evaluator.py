@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -20,6 +21,36 @@ from bsn_edge.train.trainer import outputs, scaled
 METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
 
 
+def _scored(counts: dict[str, Counts], ranked: ScoreHistogram, sweep: ThresholdSweep | None) -> dict[str, Any]:
+    """Each method's metrics; BSN's with its average precision (and, over all clips, the sweep's best
+    threshold and IoU)."""
+    scored = {m: c.metrics() for m, c in counts.items() if c.tp + c.fp + c.fn}
+    if "BSN" in scored:
+        scored["BSN"]["ap"] = ranked.average_precision()
+        if sweep is not None:
+            best_th, best = sweep.best()
+            scored["BSN"] |= {"ap_by_chance": ranked.positive_share(), "best_threshold": best_th,
+                              "best_iou": best["iou"]}
+    return scored
+
+
+@torch.no_grad()
+def _baselines(item: dict[str, Any], x: torch.Tensor, depth: np.ndarray, teacher: torch.nn.Module | None,
+               teacher_scale: float, intr, boxes_at: Path | None, pose: np.ndarray | None) -> dict[str, np.ndarray]:
+    """The paper's baselines on one frame: traversable-and-hidden and 2D detection from the teacher's
+    segmentation (or the ground truth's without a teacher), 3D detection where the clip has boxes."""
+    if teacher is not None:
+        t_logits = teacher(scaled(x, teacher_scale))[0]
+        t_logits = torch.nn.functional.interpolate(t_logits, size=x.shape[2:], mode="bilinear", align_corners=False)
+        sem = t_logits.argmax(1)[0].numpy().astype(np.uint8)
+    else:
+        sem = item["semantic"].numpy().astype(np.uint8)
+    preds = {"Traversable": traversable_hidden(sem, depth, intr), "Detection-2D": detection_2d(sem)}
+    if boxes_at is not None:
+        preds["Detection-3D"] = detection_3d(np.load(boxes_at), pose, intr, preds["Detection-2D"])
+    return preds
+
+
 @torch.no_grad()
 def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], label: str,
              teacher: torch.nn.Module | None, grid_frames: int = 3, teacher_scale: float = 0.5,
@@ -32,22 +63,20 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
     the ground truth's when ``teacher`` is None; ``segmentation`` says which (None: no baselines)."""
     if card.threshold is None:
         raise ValueError("the run has no decision threshold yet (training did not finish)")
-    threshold = card.threshold
-    methods = METHODS if baselines else METHODS[:1]
+    threshold, methods = card.threshold, (METHODS if baselines else METHODS[:1])
     overall = {m: Counts() for m in methods}
     ranked, sweep = ScoreHistogram(), ThresholdSweep()
     per_clip: dict[str, dict[str, Any]] = {}
     rows = []
+    card_at = card.at_size(*size)
+    intr = card_at.camera
     for clip in clips:
         # everything in the model camera: the frames, the labels and the baselines' geometry
-        card_at = card.at_size(*size)
         ds = BlindSpotDataset([clip], size, label_name=label, camera=card_at.camera, mounting=card_at.mounting)
-        intr = card_at.camera
         seq = SequenceFolder(clip.path)
         poses = read_kitti_poses(seq.poses_path) if seq.poses_path.exists() else None
         if poses is not None:
             poses = poses @ ds.warps(clip).pose_fix
-        has_boxes = seq.dir(seq.BOXES).is_dir() and poses is not None
         counts = {m: Counts() for m in methods}
         clip_ranked = ScoreHistogram()
         picks = set(np.linspace(0, len(ds) - 1, grid_frames).round().astype(int).tolist()) \
@@ -62,18 +91,9 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
             vis = item["visibility"][0].numpy() > 0.5
             preds = {"BSN": prob >= threshold}
             if baselines:
-                if teacher is not None:
-                    t_logits = teacher(scaled(x, teacher_scale))[0]
-                    t_logits = torch.nn.functional.interpolate(t_logits, size=x.shape[2:], mode="bilinear",
-                                                               align_corners=False)
-                    sem = t_logits.argmax(1)[0].numpy().astype(np.uint8)
-                else:
-                    sem = item["semantic"].numpy().astype(np.uint8)
-                preds |= {"Traversable": traversable_hidden(sem, d, intr), "Detection-2D": detection_2d(sem)}
-                if has_boxes:
-                    f = ds.items[k][1]
-                    boxes = np.load(seq.boxes(f))
-                    preds["Detection-3D"] = detection_3d(boxes, poses[f], intr, preds["Detection-2D"])
+                boxes_at = seq.boxes(ds.items[k][1]) if seq.dir(seq.BOXES).is_dir() and poses is not None else None
+                pose = poses[ds.items[k][1]] if boxes_at is not None else None
+                preds |= _baselines(item, x, d, teacher, teacher_scale, intr, boxes_at, pose)
             for h in (clip_ranked, sweep):
                 h.add(prob, label_m, vis)
             for m, p in preds.items():
@@ -83,15 +103,9 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
                 rgb = ds.load(k)["rgb"]
                 rows.append((rgb, label_m, vis, preds))
         per_clip[clip.path.name] = {"style": clip.style, "frames": len(ds),
-                                    **{m: c.metrics() for m, c in counts.items() if c.tp + c.fp + c.fn}}
+                                    **_scored(counts, clip_ranked, None)}
         ranked.merge(clip_ranked)
-        if "BSN" in per_clip[clip.path.name]:
-            per_clip[clip.path.name]["BSN"]["ap"] = clip_ranked.average_precision()
-    scored = {m: c.metrics() for m, c in overall.items() if c.tp + c.fp + c.fn}
-    if "BSN" in scored:
-        best_th, best = sweep.best()
-        scored["BSN"] |= {"ap": ranked.average_precision(), "ap_by_chance": ranked.positive_share(),
-                          "best_threshold": best_th, "best_iou": best["iou"]}
+    scored = _scored(overall, ranked, sweep)
     b_reads = ("ground-truth depth (a research oracle; no camera has it)" if model.oracle_depth
                else "D's depth" if model.use_depth else "no depth")
     return {"threshold": threshold, "methods": list(methods), "overall": scored, "b_reads": b_reads,

@@ -83,12 +83,9 @@ def _from_uint8_input(g: onnx.GraphProto, tensor: str) -> bool:
     return any(i.name == tensor and i.type.tensor_type.elem_type == TensorProto.UINT8 for i in g.input)
 
 
-def integer_input(model: onnx.ModelProto) -> IntegerInput | None:
-    """Rewrite ``model`` (quantized, QDQ) in place so its normalisation runs as ``QLinearConv``
-    straight on the uint8 frame; None (and ``model`` untouched) when the graph does not have the
-    float input chain this applies to, or its weights are not exact in 7 bits."""
-    g = model.graph
-    init = {t.name: t for t in g.initializer}
+def _input_chain(g: onnx.GraphProto, init: dict[str, onnx.TensorProto]):
+    """The float input chain this rewrite applies to: (Cast to float of the uint8 frame, the
+    normalising Conv, an optional zero Pad, the QuantizeLinear after it); None when the graph has another."""
     consumers: dict[str, list[onnx.NodeProto]] = {}
     for n in g.node:
         for i in n.input:
@@ -127,6 +124,20 @@ def integer_input(model: onnx.ModelProto) -> IntegerInput | None:
     y_zero = numpy_helper.to_array(init[quant.input[2]])
     if y_zero.dtype != np.uint8 or y_zero.size != 1:
         return None
+    return cast, conv, pad, quant
+
+
+def integer_input(model: onnx.ModelProto) -> IntegerInput | None:
+    """Rewrite ``model`` (quantized, QDQ) in place so its normalisation runs as ``QLinearConv``
+    straight on the uint8 frame; None (and ``model`` untouched) when the graph does not have the
+    float input chain this applies to, or its weights are not exact in 7 bits."""
+    g = model.graph
+    init = {t.name: t for t in g.initializer}
+    chain = _input_chain(g, init)
+    if chain is None:
+        return None
+    cast, conv, pad, quant = chain
+    y_zero = numpy_helper.to_array(init[quant.input[2]])
     found = _integer_weights(numpy_helper.to_array(init[conv.input[1]]), numpy_helper.to_array(init[conv.input[2]]))
     if found is None:
         return None

@@ -30,7 +30,7 @@ from bsn_edge.data import BlindSpotDataset, Clip, find_clips, split_clips
 from bsn_edge.data.cache import SampleCache, default_cache_root
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.metrics import ThresholdSweep
-from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, create_model, create_teacher, get_spec, start_from
+from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, create_model, create_teacher, get_spec, start_from
 from bsn_edge.sequence import SequenceMeta
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.train.config import Config
@@ -241,6 +241,34 @@ def teacher_miou(teacher: torch.nn.Module, cache: SampleCache, scale: float, fra
     return out
 
 
+def _teacher_to_start(cfg: Config, run: Run) -> tuple[torch.nn.Module, bool]:
+    """The teacher to start from, and whether it is finished: ``teacher.checkpoint``'s, or the run's own
+    finished one; else a new one (from ``teacher.init``'s weights when given) to train."""
+    t = cfg.teacher
+    teacher = create_teacher(t.encoder, t.width)
+    if t.checkpoint:
+        state = Run.of_teacher(t.checkpoint).load_teacher_state()
+        if state is None:
+            raise FileNotFoundError(f"teacher.checkpoint {t.checkpoint}: no teacher/teacher.pt there")
+        teacher.load_state_dict(state)
+        return teacher, True
+    state = run.load_teacher_state()
+    if state is not None:
+        teacher.load_state_dict(state)
+        return teacher, True
+    if t.init:
+        state = Run.of_teacher(t.init).load_teacher_state()
+        if state is None:
+            raise FileNotFoundError(f"teacher.init {t.init}: no teacher/teacher.pt there")
+        teacher.load_state_dict(state)
+    return teacher, False
+
+
+def _teacher_val(teacher: torch.nn.Module, cfg: Config, val_cache, dtype: torch.dtype | None) -> dict[str, float]:
+    return {f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, cfg.teacher.scale, cfg.train.eval_frames,
+                                                   dtype).items()}
+
+
 def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool,
                   cache: SampleCache | None = None, val_cache: SampleCache | None = None,
                   resume: bool = False) -> torch.nn.Module:
@@ -250,28 +278,14 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
     of batches (the schedule spans ``teacher.steps``)."""
     t = cfg.teacher
     dev = train_device(cfg)
-    teacher = create_teacher(t.encoder, t.width)
-    if t.checkpoint:
-        state = Run.of_teacher(t.checkpoint).load_teacher_state()
-        if state is None:
-            raise FileNotFoundError(f"teacher.checkpoint {t.checkpoint}: no teacher/teacher.pt there")
-        teacher.load_state_dict(state)
+    teacher, finished = _teacher_to_start(cfg, run)
+    if finished:
         return teacher.to(dev).eval()
-    state = run.load_teacher_state()
-    if state is not None:
-        teacher.load_state_dict(state)
-        return teacher.to(dev).eval()
-    if t.init:
-        state = Run.of_teacher(t.init).load_teacher_state()
-        if state is None:
-            raise FileNotFoundError(f"teacher.init {t.init}: no teacher/teacher.pt there")
-        teacher.load_state_dict(state)
     saved = run.load_teacher_progress() if resume else None
     if saved is not None:
         teacher.load_state_dict(saved["weights"])
-    teacher.to(dev)
     cl = cfg.train.channels_last
-    teacher.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
+    teacher.to(dev).to(memory_format=torch.channels_last if cl else torch.contiguous_format)
     dtype = autocast_dtype(cfg, dev)
     model = torch.nn.parallel.DistributedDataParallel(teacher) if world > 1 else teacher
     optim = Optimizer(model.parameters(), t.lr, t.steps, cfg.train)
@@ -290,12 +304,9 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         if start == 0 and t.init and val_cache is not None and t.eval_every:
             # where a teacher trained on from another begins
             run.append_history({"phase": "teacher", "step": 0, "samples": 0, "seconds": 0.0,
-                                "precision": precision_name(dtype),
-                                **{f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, t.scale,
-                                                                           cfg.train.eval_frames, dtype).items()}})
+                                "precision": precision_name(dtype), **_teacher_val(teacher, cfg, val_cache, dtype)})
     model.train()
-    losses: list[float] = []
-    t0 = time.perf_counter()
+    losses, t0 = [], time.perf_counter()
     for step in bar:
         b = next(batches)
         with _autocast(dev, dtype):
@@ -310,9 +321,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         if rank == 0 and val_cache is not None and t.eval_every and (done % t.eval_every == 0 or done == t.steps):
             run.append_history({"phase": "teacher", "step": done, "samples": done * t.batch_size * world,
                                 "seconds": round(seconds, 1), "ce": float(np.mean(losses)),
-                                "precision": precision_name(dtype),
-                                **{f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, t.scale,
-                                                                           cfg.train.eval_frames, dtype).items()}})
+                                "precision": precision_name(dtype), **_teacher_val(teacher, cfg, val_cache, dtype)})
             losses = []
         if rank == 0 and done < t.steps and done % t.checkpoint_every == 0:
             run.save_teacher_progress(teacher.state_dict(), {**optim.state_dict(), "step": done,
@@ -441,6 +450,107 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     checkpoint to resume from; the learning-rate schedule spans ``train.steps``, whatever the pieces."""
     piece_start = time.perf_counter()
     rank, world = _dist()
+    run, torn, state = _open_run(cfg, out, resume, force, rank, world)
+    data = datasets(cfg, data_dir)
+    if rank == 0:
+        run.write_config(cfg.to_dict())
+    dev = train_device(cfg)
+    dtype, cl = autocast_dtype(cfg, dev), cfg.train.channels_last
+    cache, val_cache, teacher = _caches_and_teacher(cfg, data, run, rank, world, progress, resume, dtype)
+
+    model, optim = _model_and_optimizer(cfg, state, dev)
+    start = int(state["step"]) if state is not None else 0
+    seconds_before = float(state.get("seconds", 0.0)) if state is not None else 0.0
+    # the arithmetic of every piece so far, this one's included (a state from before it was kept: unrecorded)
+    kinds = sorted({precision_name(dtype)} | (set(state.get("precision", [UNRECORDED])) if state else set()))
+    model.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
+    net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
+    batches = _batches(cfg, data, cache, state, start, rank, world, dev)
+    if rank == 0:
+        _start_history(run, model, cfg, start, dtype, val_cache)
+    bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
+               disable=True if (not progress or rank) else None)
+    last: list[float] | None = None                      # this piece's latest step
+    since, first = _carried(state)
+    t0, done = time.perf_counter(), start
+    net.train()
+    for step in bar:
+        last = _step(net, optim, next(batches), teacher, cfg, dtype)
+        bar.set_postfix(loss=f"{last[0]:.3f}", bce=f"{last[1]:.3f}", kd=f"{last[2]:.4f}", depth=f"{last[3]:.3f}")
+        since.append(last)
+        first, done = first or last, step + 1
+        seconds = seconds_before + time.perf_counter() - t0
+        out_of_time = stop_after is not None and time.perf_counter() - piece_start >= stop_after \
+            and done < cfg.train.steps
+        if rank == 0 and cfg.train.eval_every and (done % cfg.train.eval_every == 0 or done == cfg.train.steps):
+            run.append_history(_record(model, cfg, since, done, world, seconds, dtype, val_cache))
+            since = []
+        if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps or out_of_time):
+            _checkpoint(run, model, optim, cfg, data, done, world, seconds, kinds, since, first)
+        if out_of_time:
+            break
+    summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "steps_run": done - start,
+                               "seconds": round(time.perf_counter() - t0, 1), "final_loss": last,
+                               "skipped_clips": [f"{name}: {why}" for name, why in data.skipped],
+                               "removed_torn_writes": [str(t) for t in torn]}
+    if done < cfg.train.steps:
+        summary["stopped_at"] = done
+    elif rank == 0:
+        summary.update(_finish(run, model, cfg, data, [first, last] if last else None))
+    if world > 1:
+        dist.barrier()
+    return summary
+
+
+def _caches_and_teacher(cfg: Config, data, run: Run, rank: int, world: int, progress: bool, resume: bool,
+                        dtype: torch.dtype | None):
+    """The training and validation sample caches, and the teacher (trained or taken as the config says,
+    its features attached to the training cache); None where there is none."""
+    show = progress and rank == 0
+    cache = sample_cache(cfg, data.train_ds, show, "caching training samples")
+    val_cache = None
+    if data.val_ds is not None and cfg.data.cache != "off":
+        val_cache = sample_cache(cfg, data.val_ds, show, "caching validation samples")
+    teacher = (train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val_cache, resume=resume)
+               if cfg.distill_weight > 0 else None)
+    cl = cfg.train.channels_last
+    if teacher is not None and cache is not None:
+        cache.attach_teacher(teacher, cfg.teacher.scale, cfg.train.distill_grid, progress=show,
+                             resize=lambda x, sc: _layout(scaled(x, sc), cl), dtype=dtype)
+    return cache, val_cache, teacher
+
+
+def _start_history(run: Run, model: BlindSpotNet, cfg: Config, start: int, dtype: torch.dtype | None,
+                   val_cache) -> None:
+    """The history from ``start`` on; a run started from another records where it begins (its gain is
+    then measured, not assumed)."""
+    run.trim_history("train", start)
+    if start == 0 and cfg.train.init and cfg.train.eval_every and val_cache is not None:
+        run.append_history({"phase": "train", "step": 0, "samples": 0, "seconds": 0.0,
+                            "precision": precision_name(dtype),
+                            **{f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
+                                                                  cfg.train.channels_last).items()}})
+
+
+def _step(net, optim: Optimizer, batch, teacher, cfg: Config, dtype: torch.dtype | None) -> list[float]:
+    """One optimizer step on ``batch``; its losses (total, BCE, distillation, depth)."""
+    loss, l_bce, l_kd, l_depth = losses(net, batch, teacher, cfg, dtype)
+    optim.step(loss)
+    return [loss.item(), l_bce.item(), l_kd.item(), l_depth.item()]
+
+
+def _carried(state: dict[str, Any] | None) -> tuple[list[list[float]], list[float] | None]:
+    """What the loss records carry across pieces: the losses since the last record (a record after a
+    stop between records averages the same steps as the uninterrupted run's) and the run's first step's."""
+    if state is None:
+        return [], None
+    return [list(x) for x in state.get("since", [])], state.get("first_loss")
+
+
+def _open_run(cfg: Config, out: str | Path, resume: bool, force: bool, rank: int,
+              world: int) -> tuple[Run, list[Path], dict[str, Any] | None]:
+    """The run folder (torn writes of a killed piece removed), the seeds set, and its saved state when
+    resuming: ``(run, torn, state)``."""
     run = prepare_run(out, resume, force) if rank == 0 else Run(out)
     torn = run.remove_torn_writes() if rank == 0 and (resume or force) else []
     if world > 1:
@@ -449,31 +559,45 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     np.random.seed(cfg.train.seed + rank)
     torch.set_num_threads(cfg.train.threads)
     state = run.load_state() if resume else None
-    if resume and state is None and run.exists() and not run.teacher_state_path.is_file():
+    if resume:
+        _check_resumable(run, cfg, state)
+    return run, torn, state
+
+
+def _batches(cfg: Config, data, cache, state: dict[str, Any] | None, start: int, rank: int, world: int,
+             dev: torch.device):
+    """The training batches from step ``start`` on, and the random draws where the saved state left them."""
+    batches = training_batches(data.train_ds, cache, cfg.train.batch_size, world, rank, cfg.train.seed,
+                               cfg.data.workers, start, device=dev)
+    if state is not None and "torch_rng" in state:
+        # dropout draws go on where they stopped (after the loader, which takes a draw of its own)
+        torch.set_rng_state(state["torch_rng"])
+    return batches
+
+
+def _checkpoint(run: Run, model: BlindSpotNet, optim: Optimizer, cfg: Config, data, done: int, world: int,
+                seconds: float, kinds: list[str], since: list[list[float]], first: list[float] | None) -> None:
+    """Save the weights and everything a resumed piece needs to go on as if never stopped."""
+    trained = {"samples": done * cfg.train.batch_size * world, "seconds": round(seconds, 1), "precision": kinds}
+    _save(run, model, cfg, data, done, threshold=None, trained=trained,
+          resume_state={**optim.state_dict(), "step": done, "torch_rng": torch.get_rng_state(),
+                        "seconds": seconds, "precision": kinds, "since": since, "first_loss": first})
+
+
+def _check_resumable(run: Run, cfg: Config, state: dict[str, Any] | None) -> None:
+    """``RunError`` when ``run`` cannot go on under ``cfg``: no state to resume from, or another model."""
+    if state is None and run.exists() and not run.teacher_state_path.is_file():
         raise RunError(f"{run.path}: no {Run.STATE} to resume from (made by an older version, or a run that "
                        "never checkpointed); --force starts it again")
-    if resume and run.config_path.is_file() and run.config().get("model", {}).get("name") not in (None, cfg.model.name):
+    if run.config_path.is_file() and run.config().get("model", {}).get("name") not in (None, cfg.model.name):
         raise RunError(f"{run.path} trains {run.config()['model']['name']!r}, the config asks for {cfg.model.name!r}")
-    data = datasets(cfg, data_dir)
-    if rank == 0:
-        run.write_config(cfg.to_dict())
-    show = progress and rank == 0
-    cache = sample_cache(cfg, data.train_ds, show, "caching training samples")
-    val_cache = None
-    if data.val_ds is not None and cfg.data.cache != "off":
-        val_cache = sample_cache(cfg, data.val_ds, show, "caching validation samples")
-    lam = cfg.distill_weight
-    teacher = (train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val_cache, resume=resume)
-               if lam > 0 else None)
-    dev = train_device(cfg)
-    dtype = autocast_dtype(cfg, dev)
-    cl = cfg.train.channels_last
-    if teacher is not None and cache is not None:
-        cache.attach_teacher(teacher, cfg.teacher.scale, cfg.train.distill_grid, progress=show,
-                             resize=lambda x, sc: _layout(scaled(x, sc), cl), dtype=dtype)
 
+
+def _model_and_optimizer(cfg: Config, state: dict[str, Any] | None,
+                         dev: torch.device) -> tuple[BlindSpotNet, Optimizer]:
+    """The model on ``dev`` and its optimizer: from the saved state, else from ``train.init``, else fresh
+    (from the encoder's ImageNet weights where the variant says so)."""
     spec = get_spec(cfg.model.name)
-    # a fresh run starts from the encoder's ImageNet weights where the variant says so
     model = create_model(cfg.model.name, pretrained=bool(spec.pretrained) and not cfg.train.init and state is None)
     if cfg.train.init:
         init, init_card = Run(cfg.train.init).load_model()
@@ -482,94 +606,37 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         except ValueError as e:
             raise ValueError(f"train.init {cfg.train.init}: {e}") from None
     model.to(dev)
-    start, seconds_before = 0, 0.0
     optim = Optimizer(param_groups(model, cfg.train.lr, cfg.train.encoder_lr if spec.pretrained else 1.0),
                       cfg.train.lr, cfg.train.steps, cfg.train)
     if state is not None:
         model.load_state_dict(state["weights"])
         optim.load_state_dict(state)
-        start = int(state["step"])
-        seconds_before = float(state.get("seconds", 0.0))
-    # the arithmetic of every piece so far, this one's included (a state from before it was kept: unrecorded)
-    kinds = sorted({precision_name(dtype)} | (set(state.get("precision", [UNRECORDED])) if state else set()))
-    model.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
-    net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
-    batches = training_batches(data.train_ds, cache, cfg.train.batch_size, world, rank, cfg.train.seed,
-                               cfg.data.workers, start, device=dev)
-    if state is not None and "torch_rng" in state:
-        # dropout draws go on where they stopped (after the loader, which takes a draw of its own)
-        torch.set_rng_state(state["torch_rng"])
-    if rank == 0:
-        run.trim_history("train", start)
-        if start == 0 and cfg.train.init and cfg.train.eval_every and val_cache is not None:
-            # where a run started from another begins: its gain is then measured, not assumed
-            run.append_history({"phase": "train", "step": 0, "samples": 0, "seconds": 0.0,
-                                "precision": precision_name(dtype),
-                                **{f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
-                                                                      cl).items()}})
-    bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
-               disable=True if (not progress or rank) else None)
-    last: list[float] | None = None                      # this piece's latest step
-    # losses since the last record, kept in the saved state: a record after a stop between records
-    # averages the same steps as the uninterrupted run's
-    since: list[list[float]] = [list(x) for x in state.get("since", [])] if state is not None else []
-    first: list[float] | None = state.get("first_loss") if state is not None else None   # the run's step 1
-    t0 = time.perf_counter()
-    done = start
-    net.train()
-    for step in bar:
-        b = next(batches)
-        loss, l_bce, l_kd, l_depth = losses(net, b, teacher, cfg, dtype)
-        optim.step(loss)
-        last = [loss.item(), l_bce.item(), l_kd.item(), l_depth.item()]
-        since.append(last)
-        first = first or last
-        bar.set_postfix(loss=f"{last[0]:.3f}", bce=f"{last[1]:.3f}", kd=f"{last[2]:.4f}", depth=f"{last[3]:.3f}")
-        done = step + 1
-        seconds = seconds_before + time.perf_counter() - t0
-        out_of_time = stop_after is not None and time.perf_counter() - piece_start >= stop_after \
-            and done < cfg.train.steps
-        if rank == 0 and cfg.train.eval_every and (done % cfg.train.eval_every == 0 or done == cfg.train.steps):
-            mean = np.mean(since, axis=0)
-            rec = {"phase": "train", "step": done, "samples": done * cfg.train.batch_size * world,
-                   "seconds": round(seconds, 1), "loss": float(mean[0]), "bce": float(mean[1]),
-                   "kd": float(mean[2]), "depth": float(mean[3]), "precision": precision_name(dtype)}
-            if val_cache is not None:
-                rec.update({f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
-                                                                cl).items()})
-            run.append_history(rec)
-            since = []
-        if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps or out_of_time):
-            _save(run, model, cfg, data, done, threshold=None,
-                  resume_state={**optim.state_dict(), "step": done,
-                                "torch_rng": torch.get_rng_state(), "seconds": seconds, "precision": kinds,
-                                "since": since, "first_loss": first},
-                  trained={"samples": done * cfg.train.batch_size * world, "seconds": round(seconds, 1),
-                           "precision": kinds})
-        if out_of_time:
-            break
-    elapsed = time.perf_counter() - t0
-    summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "steps_run": done - start,
-                               "seconds": round(elapsed, 1), "final_loss": last,
-                               "skipped_clips": [f"{name}: {why}" for name, why in data.skipped],
-                               "removed_torn_writes": [str(t) for t in torn]}
-    if done < cfg.train.steps:
-        summary["stopped_at"] = done
-        if world > 1:
-            dist.barrier()
-        return summary
-    if rank == 0:
-        threshold, val = UNCHOSEN_THRESHOLD, {}
-        if data.val_ds is not None:
-            threshold, val = choose_threshold(model, data.val_ds)
-        else:
-            summary["threshold_note"] = f"no validation clips: threshold left at {UNCHOSEN_THRESHOLD}"
-        card = _save(run, model, cfg, data, cfg.train.steps, threshold=threshold, val=val,
-                     loss_first_last=[first, last] if last else None)
-        summary.update(threshold=threshold, val=val, weights_sha256=card.weights_sha256)
-    if world > 1:
-        dist.barrier()
-    return summary
+    return model, optim
+
+
+def _record(model: BlindSpotNet, cfg: Config, since: list[list[float]], done: int, world: int, seconds: float,
+            dtype: torch.dtype | None, val_cache) -> dict[str, Any]:
+    """The history line at step ``done``: the losses averaged since the last one, and validation."""
+    mean = np.mean(since, axis=0)
+    rec = {"phase": "train", "step": done, "samples": done * cfg.train.batch_size * world,
+           "seconds": round(seconds, 1), "loss": float(mean[0]), "bce": float(mean[1]),
+           "kd": float(mean[2]), "depth": float(mean[3]), "precision": precision_name(dtype)}
+    if val_cache is not None:
+        rec.update({f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
+                                                        cfg.train.channels_last).items()})
+    return rec
+
+
+def _finish(run: Run, model: BlindSpotNet, cfg: Config, data, loss_first_last) -> dict[str, Any]:
+    """The threshold chosen on the validation clips and the final card written; what the summary adds."""
+    out: dict[str, Any] = {}
+    threshold, val = UNCHOSEN_THRESHOLD, {}
+    if data.val_ds is not None:
+        threshold, val = choose_threshold(model, data.val_ds)
+    else:
+        out["threshold_note"] = f"no validation clips: threshold left at {UNCHOSEN_THRESHOLD}"
+    card = _save(run, model, cfg, data, cfg.train.steps, threshold=threshold, val=val, loss_first_last=loss_first_last)
+    return {**out, "threshold": threshold, "val": val, "weights_sha256": card.weights_sha256}
 
 
 def _save(run: Run, model, cfg: Config, data: Datasets, step: int, threshold: float | None,
