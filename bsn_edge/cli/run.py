@@ -279,10 +279,12 @@ def _stopped_early(stopper: StopOnSignal) -> int:
 
 
 def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
+    if stopper.event.is_set():          # nothing is open yet: there is no bus to tell
+        return _stopped_early(stopper)
     from tqdm import tqdm
 
     from bsn_edge.runtime import run
-    if stopper.event.is_set():          # nothing is open yet: there is no bus to tell
+    if stopper.event.is_set():          # a signal while the runtime loaded: still nothing to tell
         return _stopped_early(stopper)
     try:
         senders = make_senders(args)
