@@ -239,7 +239,10 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
     lines = [f"{PROG}: {summary['frames']} frames ({summary['valid_frames']} valid) in {summary['seconds']:.1f} s: "
              f"{summary['fps']:.1f} frames/s, latency p50 {summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms"
              + (f", {summary['dropped']} dropped" if summary["dropped"] else "")]
-    faults = {k: v for k, v in summary["faults"].items() if v and k != "unsigned_model"}
+    from bsn_edge.alerts.health import Fault
+
+    # an unsigned model is said on its own line below, not as a fault
+    faults = {k: v for k, v in summary["faults"].items() if v and k != Fault.UNSIGNED_MODEL}
     lines.append("  faults: " + (", ".join(f"{k} {v}" for k, v in faults.items()) if faults else "none"))
     model = summary["model"]
     lines.append(f"  model: signed by key {model['signer']}" if model["authentic"]
