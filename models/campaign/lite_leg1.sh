@@ -11,8 +11,8 @@ if [ ! -f data/.made ]; then
   BIN=$BIN FIRST=16 "$REPO/models/campaign/make_data.sh" data
   touch data/.made
 fi
-resume=()
-[ -d lite1 ] && resume=(--resume)
+resume=()                       # go on from the last state; a run that never reached one starts again
+if [ -f lite1/state.pt ]; then resume=(--resume); elif [ -d lite1 ]; then resume=(--force); fi
 "$BIN/bsn-train" --config "$REPO/configs/campaign.toml" --data data --out lite1 "${resume[@]}" \
   --set 'model.name="lite-light"' --set "teacher.checkpoint=\"$REPO/models/default\"" \
   --set train.encoder_lr=0.1 --set train.seed=5
