@@ -149,8 +149,7 @@ def import_clip(source: str | Path, dest: Path, calib: Calibration | None, model
     h, w = size
     cam, how = _camera_of(source, calib, w, h, model_hfov_deg)
     cam.write(seq.calibration_path)
-    k = cam.intrinsics.scaled(w, h)
-    SequenceMeta(fps=rate / step, width=w, height=h, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy,
+    SequenceMeta(fps=rate / step, intrinsics=cam.intrinsics.scaled(w, h),
                  source=f"bsn-adapt: {source}", frames=n).write(dest)
     return Imported(dest.name, dest, str(source), n, rate / step, how)
 

@@ -9,19 +9,22 @@ from typing import Any
 from bsn_edge.labels.config import LabelConfig
 
 LABEL_DEPTHS = ("auto", "ground", "model")
+ADAPT_LABELS = LabelConfig(look_tol=8.0)   # bsn-label's defaults, with the look check for road-plane labels
 
 
 @dataclass(frozen=True)
 class AdaptConfig:
     """Labelling, fine-tuning and threshold choice of one adaptation.
 
-    rate, horizon_s, min_corr:  the T-frame labels (as ``bsn-label --rate --T --min-corr``)
+    labels:                     the T-frame labels, as ``bsn-label`` makes them (``--rate --T
+                                --min-corr``); its ``look_tol`` applies to clips labelled from the
+                                road plane only (below)
     label_depth:                depth the labels are made with: ``model`` (the run's depth head),
                                 ``ground`` (the road plane of the clip's mounting, things at their
                                 ground contact: needs a camera file with a mounting), ``auto`` (the
                                 depth head, and the road plane for a clip it does not fit when the
                                 clip's mounting is known)
-    look_tol:                   grey levels, for clips labelled from the road plane: warped road
+    labels.look_tol:            grey levels, for clips labelled from the road plane: warped road
                                 that looks like the label frame's picture where it lands is visible
                                 road, not a blind spot (``LabelConfig.look_tol``; 0 = off). The
                                 teacher's car outlines spill over the road by a few pixels and the
@@ -39,11 +42,8 @@ class AdaptConfig:
     seed:                       data order and augmentation
     """
 
-    rate: float = 5.0
-    horizon_s: float = 5.0
-    min_corr: float = 0.7
+    labels: LabelConfig = ADAPT_LABELS
     label_depth: str = "auto"
-    look_tol: float = 8.0
     holdout_fraction: float = 0.25
     steps: int = 300
     batch_size: int = 8
@@ -55,8 +55,8 @@ class AdaptConfig:
     threads: int = 2
 
     def __post_init__(self) -> None:
-        if not self.rate > 0 or not self.horizon_s > 0:
-            raise ValueError(f"rate and horizon must be positive, got {self.rate}, {self.horizon_s}")
+        if not isinstance(self.labels, LabelConfig):
+            raise ValueError(f"labels must be a LabelConfig, got {type(self.labels).__name__}")
         if self.label_depth not in LABEL_DEPTHS:
             raise ValueError(f"label_depth must be one of {', '.join(LABEL_DEPTHS)}, got {self.label_depth!r}")
         if not 0 < self.holdout_fraction < 1:
@@ -73,8 +73,7 @@ class AdaptConfig:
     def label_config(self, depth: str = "") -> LabelConfig:
         """The T-frame label settings of a clip labelled with the ``depth`` source spec (the look
         check is for the road plane's labels, ``ground``)."""
-        return LabelConfig(rate=self.rate, horizon_s=self.horizon_s, min_corr=self.min_corr,
-                           look_tol=self.look_tol if depth == "ground" else 0.0)
+        return dataclasses.replace(self.labels, look_tol=self.labels.look_tol if depth == "ground" else 0.0)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -98,8 +98,7 @@ def _labelling_settings(run_dir: str | Path, weights: str, videos: list[str | Pa
     c = cfg.to_dict()
     return {"run": str(Path(run_dir).resolve()), "weights_sha256": weights,
             "videos": [str(Path(v).resolve()) for v in videos], "calib": str(calib or ""), "fps": fps,
-            **{k: c[k] for k in ("rate", "horizon_s", "min_corr", "label_depth", "look_tol", "max_fps",
-                                 "min_moving_s")}}
+            **{k: c[k] for k in ("labels", "label_depth", "max_fps", "min_moving_s")}}
 
 
 def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: AdaptConfig,
@@ -130,10 +129,10 @@ def _import_all(videos: list[str | Path], folder: AdaptFolder, cfg: AdaptConfig,
             names.add(name)
             try:
                 imp = import_clip(v, folder.clip(name), calib, hfov, fps, cfg.max_fps, progress=bar.update)
-                need = cfg.horizon_s + 1.0 / cfg.rate
+                need = cfg.labels.horizon_s + 1.0 / cfg.labels.rate
                 if imp.frames / imp.fps < need:
                     raise UnusableClipError(f"too short: {imp.frames / imp.fps:.1f} s, a label needs {need:.1f} s "
-                                            f"(T = {cfg.horizon_s:g} s)")
+                                            f"(T = {cfg.labels.horizon_s:g} s)")
                 moving = moving_seconds(imp.path, imp.fps)
                 if moving < cfg.min_moving_s:
                     raise UnusableClipError(f"standing still: the image moves in {moving:.1f} s of "

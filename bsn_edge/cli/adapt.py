@@ -9,6 +9,7 @@ from pathlib import Path
 from bsn_edge.adapt import AdaptConfig, AdaptError, adapt
 from bsn_edge.adapt.config import LABEL_DEPTHS
 from bsn_edge.cli.common import fail
+from bsn_edge.labels.config import LabelConfig
 
 PROG = "bsn-adapt"
 
@@ -36,21 +37,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=float, default=None, help="frame rate of folders of images (videos say their own)")
     p.add_argument("--steps", type=int, default=d.steps, help=f"fine-tuning steps (default {d.steps})")
     p.add_argument("--lr", type=float, default=d.lr, help=f"fine-tuning learning rate (default {d.lr:g})")
-    p.add_argument("--T", dest="horizon", type=float, default=d.horizon_s,
-                   help=f"blind-spot horizon T, seconds (default {d.horizon_s:g})")
-    p.add_argument("--rate", type=float, default=d.rate, help=f"label rate, frames/s (default {d.rate:g})")
-    p.add_argument("--min-corr", type=float, default=d.min_corr,
+    p.add_argument("--T", dest="horizon", type=float, default=d.labels.horizon_s,
+                   help=f"blind-spot horizon T, seconds (default {d.labels.horizon_s:g})")
+    p.add_argument("--rate", type=float, default=d.labels.rate,
+                   help=f"label rate, frames/s (default {d.labels.rate:g})")
+    p.add_argument("--min-corr", type=float, default=d.labels.min_corr,
                    help="reject clips whose depth/landmark alignment correlation is below this "
-                        f"(default {d.min_corr:g}, as bsn-label)")
+                        f"(default {d.labels.min_corr:g}, as bsn-label)")
     p.add_argument("--label-depth", default=d.label_depth, choices=LABEL_DEPTHS,
                    help="depth the labels are made with: model (the run's depth head), ground (the road plane "
                         "of your camera's mounting, things at their ground contact; needs a camera file with a "
                         "mounting, from bsn-calibrate --mount), auto (the depth head, and the road plane for a clip "
                         f"it does not fit when the mounting is known; default {d.label_depth})")
-    p.add_argument("--look-tol", type=float, default=d.look_tol, metavar="GREY",
+    p.add_argument("--look-tol", type=float, default=d.labels.look_tol, metavar="GREY",
                    help="for clips labelled from the road plane: warped road that looks like the label frame "
                         "within this many grey levels (0-255) is visible, not a blind spot; 0 turns the check "
-                        f"off (default {d.look_tol:g}, see bsn-label)")
+                        f"off (default {d.labels.look_tol:g}, see bsn-label)")
     p.add_argument("--holdout", type=float, default=d.holdout_fraction,
                    help="share of the labelled frames held out to choose the threshold "
                         f"(default {d.holdout_fraction:g})")
@@ -78,8 +80,8 @@ def main(argv: list[str] | None = None) -> int:
         except (FileNotFoundError, ValueError) as e:
             return fail(PROG, str(e))
     try:
-        cfg = AdaptConfig(rate=args.rate, horizon_s=args.horizon, min_corr=args.min_corr,
-                          label_depth=args.label_depth, look_tol=args.look_tol, holdout_fraction=args.holdout,
+        labels = LabelConfig(rate=args.rate, horizon_s=args.horizon, min_corr=args.min_corr, look_tol=args.look_tol)
+        cfg = AdaptConfig(labels=labels, label_depth=args.label_depth, holdout_fraction=args.holdout,
                           steps=args.steps, lr=args.lr, seed=args.seed)
         rep = adapt(args.run, args.video, args.out, cfg, calib=args.calib, fps=args.fps, export=args.export,
                     resume=args.resume, force=args.force, progress=not args.quiet)

@@ -182,7 +182,7 @@ def resolve_camera(seq: Path, meta: SequenceMeta, sources: Sources
         return meta, None, None
     cal = Calibration.read(cam_path)
     k = cal.intrinsics.scaled(meta.width, meta.height)
-    meta = dataclasses.replace(meta, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy)
+    meta = dataclasses.replace(meta, intrinsics=k)
     lens = ModelFrame.undistort_only(k, cal.dist, cal.mounting or EARLY_MOUNTING) if cal.has_distortion else None
     return meta, cal, lens
 

@@ -20,12 +20,7 @@ class SequenceMeta:
     """What a stage needs to know about a clip: rate, size, intrinsics, where it came from."""
 
     fps: float
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
+    intrinsics: Intrinsics
     source: str
     frames: int
     seed: int | None = None
@@ -36,16 +31,20 @@ class SequenceMeta:
             raise ValueError(f"fps must be positive, got {self.fps}")
         if self.frames < 0:
             raise ValueError(f"frames must be >= 0, got {self.frames}")
-        self.intrinsics  # noqa: B018 - validates size and intrinsics
 
     @property
-    def intrinsics(self) -> Intrinsics:
-        return Intrinsics(self.fx, self.fy, self.cx, self.cy, self.width, self.height)
+    def width(self) -> int:
+        return self.intrinsics.width
+
+    @property
+    def height(self) -> int:
+        return self.intrinsics.height
 
     def to_json(self) -> str:
+        """The file's text: the intrinsics written flat beside the rest, as the format has always been."""
         d = asdict(self)
-        extra = d.pop("extra")
-        d.update(extra)
+        d.update(d.pop("intrinsics"))
+        d.update(d.pop("extra"))
         return json.dumps(d, indent=2, sort_keys=True)
 
     def write(self, seq_dir: str | os.PathLike) -> None:
@@ -67,8 +66,5 @@ class SequenceMeta:
 
             d["frames"] = SequenceFolder(seq_dir).count_frames()
         extra = {k: v for k, v in d.items() if k not in known}
-        return cls(
-            fps=float(d["fps"]), width=int(d["width"]), height=int(d["height"]),
-            fx=float(d["fx"]), fy=float(d["fy"]), cx=float(d["cx"]), cy=float(d["cy"]),
-            source=str(d.get("source", "user")), frames=int(d["frames"]), seed=d.get("seed"), extra=extra,
-        )
+        return cls(fps=float(d["fps"]), intrinsics=Intrinsics.from_dict(d, where=str(path)),
+                   source=str(d.get("source", "user")), frames=int(d["frames"]), seed=d.get("seed"), extra=extra)

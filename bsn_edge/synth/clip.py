@@ -202,9 +202,7 @@ def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bo
         "light": sc.world.look.light, "speed_mps": sc.speed, "pitch_deg": clip.rig.pitch_deg,
         "turns": sc.route.turns, "static_boxes": len(sc.world.static), "agents": len(sc.world.agents),
     }, indent=2) + "\n").encode())
-    k = clip.intrinsics
-    SequenceMeta(fps=cfg.fps, width=cfg.width, height=cfg.height, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy,
-                 source="synth", frames=cfg.frames, seed=cfg.seed,
+    SequenceMeta(fps=cfg.fps, intrinsics=clip.intrinsics, source="synth", frames=cfg.frames, seed=cfg.seed,
                  extra={"style": cfg.style, "video": SequenceFolder.VIDEO if video else None,
                         "camera_height": clip.rig.height_m, "bs_range": cfg.bs_range}).write(out)
     clip.rig.calibration(cfg.width, cfg.height).write(seq.calibration_path)

@@ -1,5 +1,6 @@
 """bsn-adapt: unlabelled clips in, an adapted run out; nothing reads a clip's ground truth."""
 
+import dataclasses
 import json
 import shutil
 
@@ -10,6 +11,7 @@ import torch
 
 from bsn_edge.adapt import clips as clips_mod
 from bsn_edge.adapt import pipeline
+from bsn_edge.adapt.config import ADAPT_LABELS
 from bsn_edge.adapt.labeller import export_teacher, load_teacher
 from bsn_edge.cli import adapt as adapt_cli
 from bsn_edge.cli import label as label_cli
@@ -21,6 +23,8 @@ from bsn_edge.sequence import read_depth
 from bsn_edge.synth import SynthConfig, write_clip
 from bsn_edge.train import Run
 from tests.fakes import SMOKE
+
+T1S = dataclasses.replace(ADAPT_LABELS, horizon_s=1.0)   # labels short enough for a smoke clip
 
 GROUND_TRUTH = ("depth", "semantic", "poses.txt", "bsgt", "boxes")
 
@@ -156,16 +160,16 @@ def test_a_clip_the_depth_head_does_not_fit_is_labelled_from_the_road_plane(run,
     monkeypatch.setattr(pipeline, "prepare_labeller",
                         lambda src, depth, teacher: {"depth": f"rel:{noise}:inverse", "seg": "hidden"})
     out = tmp_path / "adapted"
-    rep = pipeline.adapt(run, [seq], out, pipeline.AdaptConfig(horizon_s=1.0, steps=2), progress=False)
+    rep = pipeline.adapt(run, [seq], out, pipeline.AdaptConfig(labels=T1S, steps=2), progress=False)
     clip = rep["clips"]["drive"]
     assert clip["label_depth"] == "ground" and "depth" in clip["model_depth_rejected"]
     made = json.loads((out / "adapt" / "clips" / "drive" / "labels" / "T1s" / "report.json").read_text())
     assert made["sources_detail"]["depth"]["kind"] == "ground"
-    assert made["config"]["look_tol"] == pipeline.AdaptConfig().look_tol > 0
+    assert made["config"]["look_tol"] == pipeline.AdaptConfig().labels.look_tol > 0
     # resumed, the clip goes straight to the road plane and keeps its label files
     labels = out / "adapt" / "clips" / "drive" / "labels" / "T1s" / "blindspot"
     stamp = {p.name: p.stat().st_mtime_ns for p in labels.iterdir()}
-    rep = pipeline.adapt(run, [seq], out, pipeline.AdaptConfig(horizon_s=1.0, steps=2), resume=True, progress=False)
+    rep = pipeline.adapt(run, [seq], out, pipeline.AdaptConfig(labels=T1S, steps=2), resume=True, progress=False)
     assert rep["clips"]["drive"]["label_depth"] == "ground"
     assert {p.name: p.stat().st_mtime_ns for p in labels.iterdir()} == stamp
 
@@ -181,7 +185,7 @@ def test_ground_label_depth_without_a_mounting_is_refused_with_the_reason(run, u
     cal = Calibration.read(SequenceFolder(bare).calibration_path)
     Calibration.of(cal.intrinsics, cal.dist, method="chessboard only").write(SequenceFolder(bare).calibration_path)
     with pytest.raises(pipeline.AdaptError, match="mounting"):
-        pipeline.adapt(run, [bare], tmp_path / "o", pipeline.AdaptConfig(horizon_s=1.0, steps=2,
+        pipeline.adapt(run, [bare], tmp_path / "o", pipeline.AdaptConfig(labels=T1S, steps=2,
                                                                          label_depth="ground"), progress=False)
 
 

@@ -141,7 +141,7 @@ def test_calibration_file_replaces_the_intrinsics(seq, tmp_path):
     from bsn_edge.calibration import Calibration
     from bsn_edge.camera import Intrinsics
     from bsn_edge.sequence import SequenceMeta
-    m = SequenceMeta.read(seq)
+    m = SequenceMeta.read(seq).intrinsics
     # the same camera described at twice the size: rescaled, it is identical, so are the labels
     Calibration(Intrinsics(m.fx * 2, m.fy * 2, (m.cx + 0.5) * 2 - 0.5, (m.cy + 0.5) * 2 - 0.5, m.width * 2,
                            m.height * 2)).write(tmp_path / "c.json")
@@ -167,7 +167,7 @@ def test_the_calibrated_camera_is_recorded_where_training_reads_it(seq, tmp_path
     from bsn_edge.labels.generator import label_camera
     from bsn_edge.sequence import SequenceMeta
     from bsn_edge.sequence.folder import SequenceFolder
-    m = SequenceMeta.read(seq)
+    m = SequenceMeta.read(seq).intrinsics
     Calibration(Intrinsics(m.fx * 2.2, m.fy * 2.2, m.width, m.height, m.width * 2, m.height * 2)).write(
         tmp_path / "c.json")
     label_sequence(seq, CFG, Sources(calib=str(tmp_path / "c.json")))

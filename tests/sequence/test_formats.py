@@ -1,5 +1,6 @@
 """On-disk formats shared by every stage."""
 
+import json
 import signal
 import subprocess
 import sys
@@ -85,18 +86,25 @@ def test_tum_poses(tmp_path):
 
 
 def test_meta_roundtrip_and_errors(tmp_path):
-    m = SequenceMeta(fps=10, width=512, height=256, fx=300, fy=300, cx=256, cy=128, source="synth",
+    m = SequenceMeta(fps=10, intrinsics=Intrinsics(300, 300, 256, 128, 512, 256), source="synth",
                      frames=5, seed=1, extra={"style": "town"})
     m.write(tmp_path)
+    written = json.loads((tmp_path / "meta.json").read_text())
+    assert written == {"fps": 10, "width": 512, "height": 256, "fx": 300, "fy": 300, "cx": 256, "cy": 128,
+                       "source": "synth", "frames": 5, "seed": 1, "style": "town"}
     back = SequenceMeta.read(tmp_path)
-    assert back == m and back.intrinsics.K[0, 0] == 300
+    assert back == m and back.intrinsics.K[0, 0] == 300 and (back.width, back.height) == (512, 256)
     (tmp_path / "meta.json").write_text('{"fps": 10}')
     with pytest.raises(ValueError, match="missing keys"):
         SequenceMeta.read(tmp_path)
     with pytest.raises(FileNotFoundError, match="not a sequence folder"):
         SequenceMeta.read(tmp_path / "nowhere")
+    (tmp_path / "meta.json").write_text(json.dumps({**written, "fx": -1}))
     with pytest.raises(ValueError, match="focal"):
-        SequenceMeta(fps=10, width=8, height=8, fx=-1, fy=1, cx=4, cy=4, source="x", frames=1)
+        SequenceMeta.read(tmp_path)
+    (tmp_path / "meta.json").write_text(json.dumps({**written, "cy": "middle"}))
+    with pytest.raises(ValueError, match=r"meta\.json.*cy|cy.*meta\.json"):
+        SequenceMeta.read(tmp_path)
 
 
 def test_atomic_write_leaves_nothing_on_failure(tmp_path):
