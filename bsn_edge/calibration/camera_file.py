@@ -189,3 +189,20 @@ def clip_camera(path: str | os.PathLike, fallback_mounting: Mounting) -> Calibra
         cal = Calibration.read(seq.calibration_path)
         return cal if cal.mounting is not None else cal.with_mounting(fallback_mounting, method="assumed")
     return Calibration.of(SequenceMeta.read(path).intrinsics, (), fallback_mounting, method="assumed")
+
+
+def assumed_mounting(model_mounting: Mounting, height_m: float | None = None) -> Mounting:
+    """How ``bsn-run`` takes a camera to sit until online calibration has found its mounting: as the
+    model camera sits, at ``height_m`` when that is known."""
+    m = model_mounting
+    return Mounting(height_m or m.height_m, m.pitch_deg, m.yaw_deg, m.roll_deg)
+
+
+def assumed_camera(model: Intrinsics, model_mounting: Mounting, width: int, height: int,
+                   height_m: float | None = None) -> Calibration:
+    """The camera ``bsn-run`` takes for frames of ``width`` x ``height`` that come with no camera
+    file: the model camera's intrinsics rescaled to the frame (the picture is only resized), no lens,
+    sitting as :func:`assumed_mounting` says."""
+    cal = Calibration.of(model.scaled(width, height), (), assumed_mounting(model_mounting, height_m),
+                         method="assumed: as the model camera sits")
+    return replace(cal, intrinsics_method="assumed: the model camera's, rescaled (no camera file)")

@@ -33,6 +33,7 @@ from tqdm import tqdm
 
 from bsn_edge import semantics as sm
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD, BlindSpotDataset
+from bsn_edge.data.guessed_camera import ClipCamera
 from bsn_edge.data.repaint import Repaint, SeeThrough, draw_repaint, draw_see_through, repaint, see_through
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.images import DEPTH_SCALE, depth_to_png16
@@ -52,12 +53,15 @@ def default_cache_root() -> Path:
 
 
 def dataset_key(ds: BlindSpotDataset) -> str:
-    """What the samples of ``ds`` depend on: its items, size, model camera, label set, and the
+    """What the samples of ``ds`` depend on: its items, size, model camera, clips' cameras, label set, and the
     size and time of every clip's metadata and label report (relabelling or re-rendering a clip
     changes them)."""
     h = hashlib.sha256()
-    h.update(json.dumps({"v": CACHE_VERSION, "size": list(ds.size), "label": ds.label_name,
-                         "camera": ds.camera.to_dict(), "mounting": ds.mounting.to_dict()}, sort_keys=True).encode())
+    what = {"v": CACHE_VERSION, "size": list(ds.size), "label": ds.label_name,
+            "camera": ds.camera.to_dict(), "mounting": ds.mounting.to_dict()}
+    if ds.clip_camera is not ClipCamera.OWN:     # the clips' own cameras keep the keys of caches made before
+        what["clip_camera"] = ds.clip_camera.value
+    h.update(json.dumps(what, sort_keys=True).encode())
     seen: set[Path] = set()
     for clip, frame in ds.items:
         h.update(f"{clip.path.resolve()}:{frame};".encode())

@@ -14,6 +14,7 @@ from torch.utils.data import Dataset
 from bsn_edge import semantics as sm
 from bsn_edge.calibration.camera_file import clip_camera
 from bsn_edge.camera import Intrinsics
+from bsn_edge.data.guessed_camera import ClipCamera, Guess, guessed_camera
 from bsn_edge.data.repaint import draw_repaint, draw_see_through, repaint, see_through
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.model_frame import ModelFrame, model_camera
@@ -94,17 +95,40 @@ def split_clips(clips: list[Clip], val_fraction: float, test_fraction: float,
 
 class ClipWarps:
     """The warps of one clip into the model camera: its frames (with the clip's lens) and its
-    labels (made in the clip's undistorted camera, bsn-label's)."""
+    labels (made in the clip's undistorted camera, bsn-label's). With ``camera`` GUESSED the frames
+    are warped with the camera a user without a camera file gets (:mod:`~bsn_edge.data.guessed_camera`),
+    and everything else follows them: the labels are brought onto the raw frame first (through the
+    clip's lens), then warped as the frames are."""
 
-    def __init__(self, path: Path, label_name: str, model: Intrinsics, model_mounting: Mounting) -> None:
+    def __init__(self, path: Path, label_name: str, model: Intrinsics, model_mounting: Mounting,
+                 camera: ClipCamera = ClipCamera.OWN) -> None:
         meta = SequenceMeta.read(path)
-        cam = clip_camera(path, model_mounting)
+        own = clip_camera(path, model_mounting)
+        lab_cam = (label_camera(SequenceFolder(path).labels(label_name)) or own.intrinsics).scaled(meta.width,
+                                                                                                   meta.height)
+        self.guess: Guess | None = None
+        self._onto_raw: ModelFrame | None = None
+        if camera is ClipCamera.OWN:
+            cam = own
+            self.labels = ModelFrame(lab_cam, (), cam.mounting, model, model_mounting)
+        else:
+            cam, self.guess = guessed_camera(path, own, meta.width, meta.height, model, model_mounting)
+            self.labels = None
+            if own.has_distortion or lab_cam != own.intrinsics.scaled(meta.width, meta.height):
+                self._onto_raw = ModelFrame(own.intrinsics.scaled(meta.width, meta.height), own.dist, own.mounting,
+                                            lab_cam, own.mounting)
         self.frames = cam.model_frame(meta.width, meta.height, model, model_mounting)
-        lab_cam = label_camera(SequenceFolder(path).labels(label_name)) or cam.intrinsics
-        self.labels = ModelFrame(lab_cam.scaled(meta.width, meta.height), (), cam.mounting, model, model_mounting)
         # the clip camera's pose turned into the model camera's: T_wc_model = T_wc_raw [R_raw<-model]
         self.pose_fix = np.eye(4)
         self.pose_fix[:3, :3] = cam.mounting.rotation() @ model_mounting.rotation().T
+
+    def labels_to_model(self, mask: np.ndarray) -> np.ndarray:
+        """A label mask of the clip (bsn-label's camera) in the model camera, nearest."""
+        if self.labels is not None:
+            return self.labels.labels_to_model(mask)
+        if self._onto_raw is not None:
+            mask = self._onto_raw.to_raw(mask, cv2.INTER_NEAREST)
+        return self.frames.labels_to_model(mask)
 
 
 class BlindSpotDataset(Dataset):
@@ -118,13 +142,14 @@ class BlindSpotDataset(Dataset):
     the visibility mask is 0. ``augment`` flips horizontally (everything together, so left stays
     left of right in image, labels, depth and semantics alike), jitters brightness/contrast and
     repaints the vehicles and people of a share ``object_repaint`` of the samples
-    (:mod:`~bsn_edge.data.repaint`).
+    (:mod:`~bsn_edge.data.repaint`). ``clip_camera`` GUESSED warps every clip with the camera a user
+    without a camera file gets instead of its own (:mod:`~bsn_edge.data.guessed_camera`).
     """
 
     def __init__(self, clips: list[Clip], size: tuple[int, int], augment: bool = False,
                  label_name: str = "T5s", seed: int = 0, camera: Intrinsics | None = None,
                  mounting: Mounting | None = None, object_repaint: float = 0.0,
-                 object_see_through: float = 0.0) -> None:
+                 object_see_through: float = 0.0, clip_camera: ClipCamera = ClipCamera.OWN) -> None:
         for name, share in (("object_repaint", object_repaint), ("object_see_through", object_see_through)):
             if not 0.0 <= share <= 1.0:
                 raise ValueError(f"{name} is a share of samples in [0, 1], got {share}")
@@ -143,13 +168,15 @@ class BlindSpotDataset(Dataset):
         self.object_see_through = object_see_through
         self.label_name = label_name
         self.seed = seed
+        self.clip_camera = ClipCamera(clip_camera)
 
     def __len__(self) -> int:
         return len(self.items)
 
     def warps(self, clip: Clip) -> ClipWarps:
         if clip.path not in self._warps:
-            self._warps[clip.path] = ClipWarps(clip.path, self.label_name, self.camera, self.mounting)
+            self._warps[clip.path] = ClipWarps(clip.path, self.label_name, self.camera, self.mounting,
+                                               self.clip_camera)
         return self._warps[clip.path]
 
     def load(self, k: int) -> dict[str, np.ndarray]:
@@ -166,7 +193,7 @@ class BlindSpotDataset(Dataset):
         fr = warp.frames
         sem_m = fr.labels_to_model(sem)
         sem_m[~fr.seen] = sm.IGNORE
-        vis = warp.labels.labels_to_model(read_mask(lab.visibility(f)).astype(np.uint8))
+        vis = warp.labels_to_model(read_mask(lab.visibility(f)).astype(np.uint8))
         vis[~fr.seen] = 0                      # the clip's camera does not see there
         if sem_raw is not None:
             vis[sem_m == sm.IGNORE] = 0        # the car's own hood
@@ -174,7 +201,7 @@ class BlindSpotDataset(Dataset):
             "rgb": fr.to_model(rgb),
             "depth": fr.depth_to_model(depth),
             "semantic": sem_m,
-            "blindspot": warp.labels.labels_to_model(read_mask(lab.blindspot(f)).astype(np.uint8)),
+            "blindspot": warp.labels_to_model(read_mask(lab.blindspot(f)).astype(np.uint8)),
             "visibility": vis,
         }
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.calibration.camera_file import Calibration, assumed_camera, assumed_mounting
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.card import ModelCard
 from bsn_edge.model_frame import ModelFrame
@@ -86,7 +86,7 @@ class CameraState:
     def camera_file(self, width: int, height: int) -> Calibration:
         if self.calibration is not None:
             return self.calibration
-        return Calibration.of(self.card.camera.scaled(width, height), (), None)
+        return assumed_camera(self.card.camera, self.card.mounting, width, height, self.height_m)
 
     def observe(self, frame: np.ndarray) -> None:
         """Let online calibration see this frame (nothing once the mounting is known): the estimator is
@@ -111,8 +111,7 @@ class CameraState:
 
     @property
     def _guess(self) -> Mounting:
-        m = self.card.mounting
-        return Mounting(self.height_m, m.pitch_deg, m.yaw_deg, m.roll_deg)
+        return assumed_mounting(self.card.mounting, self.height_m)
 
     def _calibrate(self, frame: np.ndarray) -> None:
         # only the thread that warps frames feeds the estimator; the lock is held for the state it

@@ -46,9 +46,13 @@ class DataConfig:
     object_repaint: float = 0.0
     # share of training samples that show the scene through their vehicles and people (glass)
     object_see_through: float = 0.0
+    # share of training samples warped with the camera a user without a camera file gets instead of
+    # the clip's own (bsn_edge.data.guessed_camera: half as bsn-run starts, half midway through
+    # online calibration); they come from a second sample cache, so the cache cannot be "off"
+    guessed_camera: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("object_repaint", "object_see_through"):
+        for name in ("object_repaint", "object_see_through", "guessed_camera"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"data.{name} is a share of samples in [0, 1], got {getattr(self, name)}")
         if len(self.size) != 2 or min(self.size) < 32 or any(s % 32 for s in self.size):
@@ -57,6 +61,9 @@ class DataConfig:
             raise ValueError(f"data.fraction must be in (0, 1], got {self.fraction}")
         if not self.cache.strip():
             raise ValueError('data.cache must be "auto", "memory", "off" or a folder, got an empty string')
+        if self.guessed_camera > 0 and self.cache == "off":
+            raise ValueError('data.guessed_camera draws from a second sample cache: it needs data.cache other '
+                             'than "off"')
         self.model_camera()   # validates the camera
 
     def model_camera(self) -> tuple[Intrinsics, Mounting]:

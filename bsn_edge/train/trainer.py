@@ -28,6 +28,8 @@ from bsn_edge import semantics as sm
 from bsn_edge.card import BF16, FP32, UNCHOSEN_THRESHOLD, UNRECORDED, ModelCard
 from bsn_edge.data import BlindSpotDataset, Clip, find_clips, split_clips
 from bsn_edge.data.cache import SampleCache, default_cache_root
+from bsn_edge.data.camera_mix import CameraMix
+from bsn_edge.data.guessed_camera import ClipCamera
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.metrics import ThresholdSweep
 from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, create_model, create_teacher, get_spec, start_from
@@ -174,6 +176,9 @@ class Datasets:
     skipped: list[tuple[str, str]]
     train_ds: BlindSpotDataset
     val_ds: BlindSpotDataset | None
+    # the same samples warped with guessed cameras (data.guessed_camera > 0), else None
+    train_guessed_ds: BlindSpotDataset | None = None
+    val_guessed_ds: BlindSpotDataset | None = None
 
 
 def datasets(cfg: Config, data_dir: str | Path) -> Datasets:
@@ -191,12 +196,19 @@ def datasets(cfg: Config, data_dir: str | Path) -> Datasets:
         raise ValueError(f"no training clips (styles {styles or 'any'}) in {data_dir}")
     val = [c for c in split["val"] if not styles or c.style in styles]
     camera, mounting = cfg.data.model_camera()
-    return Datasets(split, train, val, skipped,
-                    BlindSpotDataset(train, cfg.data.size, augment=True, label_name=cfg.data.label, camera=camera,
-                                     mounting=mounting, seed=cfg.train.seed, object_repaint=cfg.data.object_repaint,
-                                     object_see_through=cfg.data.object_see_through),
-                    BlindSpotDataset(val, cfg.data.size, label_name=cfg.data.label, camera=camera,
-                                     mounting=mounting) if val else None)
+
+    def train_ds(cameras: ClipCamera) -> BlindSpotDataset:
+        return BlindSpotDataset(train, cfg.data.size, augment=True, label_name=cfg.data.label, camera=camera,
+                                mounting=mounting, seed=cfg.train.seed, object_repaint=cfg.data.object_repaint,
+                                object_see_through=cfg.data.object_see_through, clip_camera=cameras)
+
+    def val_ds(cameras: ClipCamera) -> BlindSpotDataset | None:
+        return BlindSpotDataset(val, cfg.data.size, label_name=cfg.data.label, camera=camera, mounting=mounting,
+                                clip_camera=cameras) if val else None
+
+    guessed = cfg.data.guessed_camera > 0
+    return Datasets(split, train, val, skipped, train_ds(ClipCamera.OWN), val_ds(ClipCamera.OWN),
+                    train_ds(ClipCamera.GUESSED) if guessed else None, val_ds(ClipCamera.GUESSED) if guessed else None)
 
 
 def _depth_weights(semantic: torch.Tensor, object_weight: float) -> torch.Tensor | None:
@@ -456,7 +468,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         run.write_config(cfg.to_dict())
     dev = train_device(cfg)
     dtype, cl = autocast_dtype(cfg, dev), cfg.train.channels_last
-    cache, val_cache, teacher = _caches_and_teacher(cfg, data, run, rank, world, progress, resume, dtype)
+    cache, val_caches, teacher = _caches_and_teacher(cfg, data, run, rank, world, progress, resume, dtype)
 
     model, optim = _model_and_optimizer(cfg, state, dev)
     start = int(state["step"]) if state is not None else 0
@@ -467,7 +479,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
     batches = _batches(cfg, data, cache, state, start, rank, world, dev)
     if rank == 0:
-        _start_history(run, model, cfg, start, dtype, val_cache)
+        _start_history(run, model, cfg, start, dtype, val_caches)
     bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
                disable=True if (not progress or rank) else None)
     last: list[float] | None = None                      # this piece's latest step
@@ -483,7 +495,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
         out_of_time = stop_after is not None and time.perf_counter() - piece_start >= stop_after \
             and done < cfg.train.steps
         if rank == 0 and cfg.train.eval_every and (done % cfg.train.eval_every == 0 or done == cfg.train.steps):
-            run.append_history(_record(model, cfg, since, done, world, seconds, dtype, val_cache))
+            run.append_history(_record(model, cfg, since, done, world, seconds, dtype, val_caches))
             since = []
         if rank == 0 and (done % cfg.train.checkpoint_every == 0 or done == cfg.train.steps or out_of_time):
             _checkpoint(run, model, optim, cfg, data, done, world, seconds, kinds, since, first)
@@ -504,32 +516,47 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
 
 def _caches_and_teacher(cfg: Config, data, run: Run, rank: int, world: int, progress: bool, resume: bool,
                         dtype: torch.dtype | None):
-    """The training and validation sample caches, and the teacher (trained or taken as the config says,
-    its features attached to the training cache); None where there is none."""
+    """The training batches' cache (a :class:`CameraMix` when guessed cameras are asked for), the
+    validation caches by the prefix of their history keys (``val_``, ``val_guessed_``), and the teacher
+    (trained or taken as the config says, its features attached to the training caches); None where
+    there is none."""
     show = progress and rank == 0
     cache = sample_cache(cfg, data.train_ds, show, "caching training samples")
-    val_cache = None
+    val_caches: dict[str, SampleCache] = {}
     if data.val_ds is not None and cfg.data.cache != "off":
-        val_cache = sample_cache(cfg, data.val_ds, show, "caching validation samples")
-    teacher = (train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val_cache, resume=resume)
-               if cfg.distill_weight > 0 else None)
+        val_caches["val_"] = sample_cache(cfg, data.val_ds, show, "caching validation samples")
+    guessed = sample_cache(cfg, data.train_guessed_ds, show, "caching samples, guessed cameras") \
+        if data.train_guessed_ds is not None else None
+    if data.val_guessed_ds is not None:
+        val_caches["val_guessed_"] = sample_cache(cfg, data.val_guessed_ds, show,
+                                                  "caching validation samples, guessed cameras")
+    teacher = (train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val_caches.get("val_"),
+                             resume=resume) if cfg.distill_weight > 0 else None)
     cl = cfg.train.channels_last
-    if teacher is not None and cache is not None:
-        cache.attach_teacher(teacher, cfg.teacher.scale, cfg.train.distill_grid, progress=show,
+    for c in (cache, guessed):
+        if teacher is not None and c is not None:
+            c.attach_teacher(teacher, cfg.teacher.scale, cfg.train.distill_grid, progress=show,
                              resize=lambda x, sc: _layout(scaled(x, sc), cl), dtype=dtype)
-    return cache, val_cache, teacher
+    if guessed is not None:
+        cache = CameraMix(cache, guessed, cfg.data.guessed_camera)
+    return cache, val_caches, teacher
+
+
+def _validation(model: BlindSpotNet, cfg: Config, dtype: torch.dtype | None,
+                val_caches: dict[str, SampleCache]) -> dict[str, float]:
+    """The history's validation figures: :func:`validate` on each cache, keys prefixed as named."""
+    return {f"{prefix}{k}": v for prefix, c in val_caches.items()
+            for k, v in validate(model, c, cfg.train.eval_frames, dtype, cfg.train.channels_last).items()}
 
 
 def _start_history(run: Run, model: BlindSpotNet, cfg: Config, start: int, dtype: torch.dtype | None,
-                   val_cache) -> None:
+                   val_caches: dict[str, SampleCache]) -> None:
     """The history from ``start`` on; a run started from another records where it begins (its gain is
     then measured, not assumed)."""
     run.trim_history("train", start)
-    if start == 0 and cfg.train.init and cfg.train.eval_every and val_cache is not None:
+    if start == 0 and cfg.train.init and cfg.train.eval_every and val_caches:
         run.append_history({"phase": "train", "step": 0, "samples": 0, "seconds": 0.0,
-                            "precision": precision_name(dtype),
-                            **{f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
-                                                                  cfg.train.channels_last).items()}})
+                            "precision": precision_name(dtype), **_validation(model, cfg, dtype, val_caches)})
 
 
 def _step(net, optim: Optimizer, batch, teacher, cfg: Config, dtype: torch.dtype | None) -> list[float]:
@@ -615,15 +642,13 @@ def _model_and_optimizer(cfg: Config, state: dict[str, Any] | None,
 
 
 def _record(model: BlindSpotNet, cfg: Config, since: list[list[float]], done: int, world: int, seconds: float,
-            dtype: torch.dtype | None, val_cache) -> dict[str, Any]:
+            dtype: torch.dtype | None, val_caches: dict[str, SampleCache]) -> dict[str, Any]:
     """The history line at step ``done``: the losses averaged since the last one, and validation."""
     mean = np.mean(since, axis=0)
     rec = {"phase": "train", "step": done, "samples": done * cfg.train.batch_size * world,
            "seconds": round(seconds, 1), "loss": float(mean[0]), "bce": float(mean[1]),
            "kd": float(mean[2]), "depth": float(mean[3]), "precision": precision_name(dtype)}
-    if val_cache is not None:
-        rec.update({f"val_{k}": v for k, v in validate(model, val_cache, cfg.train.eval_frames, dtype,
-                                                        cfg.train.channels_last).items()})
+    rec.update(_validation(model, cfg, dtype, val_caches))
     return rec
 
 
