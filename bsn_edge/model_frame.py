@@ -65,16 +65,22 @@ class ModelFrame:
 
     raw, dist, mounting:          the user's camera at the raw frame's size
     model, model_mounting:        the model camera (intrinsics at the model's input size)
+    blocked:                      raw-frame pixels that show the car itself (its hood): not ``seen``
     """
 
     def __init__(self, raw: Intrinsics, dist: tuple[float, ...], mounting: Mounting, model: Intrinsics,
-                 model_mounting: Mounting) -> None:
+                 model_mounting: Mounting, blocked: np.ndarray | None = None) -> None:
         self.raw, self.dist, self.mounting = raw, tuple(float(d) for d in dist), mounting
         self.model, self.model_mounting = model, model_mounting
         mx, my = warp_maps(raw, self.dist, mounting, model, model_mounting)
         # model pixels whose ray falls outside the raw picture see nothing
         self.seen = (mx >= -0.5) & (mx <= raw.width - 0.5) & (my >= -0.5) & (my <= raw.height - 0.5)
         self._fwd_float = (mx, my)     # masks and depth: nearest, at the raw frame's full size
+        if blocked is not None:        # nor do those that see the car itself (its hood)
+            if blocked.shape != (raw.height, raw.width):
+                raise ValueError(f"blocked must be {raw.height}x{raw.width} (the raw frame), got "
+                                 f"{blocked.shape[0]}x{blocked.shape[1]}")
+            self.seen &= self.labels_to_model(blocked.astype(np.uint8)) == 0
         # Pictures: a raw frame much finer than the model camera is low-passed first (a bilinear
         # remap alone would alias: every model pixel would sample one raw pixel of many). From twice
         # the model's scale up it is area-shrunk by the whole factor k = floor(factor) over k x k

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from bsn_edge.calibration.hood import Hood
 from bsn_edge.camera import Intrinsics
 from bsn_edge.fields import number, read_json_object
 from bsn_edge.model_frame import ModelFrame
@@ -42,6 +43,9 @@ class Calibration:
     mounting_report: dict[str, Any] = field(default_factory=dict)
     # how fx fy cx cy were found: "chessboard", "field of view: 60 degrees across"; "" when given
     intrinsics_method: str = ""
+    # the car's own hood in view, when it was looked for (bsn-calibrate --mount, bsn-run's first seconds);
+    # written only when known, so files made before it are read and written unchanged
+    hood: Hood | None = None
 
     def __post_init__(self) -> None:
         if len(self.dist) not in (0, 4, 5, 8, 12, 14):
@@ -60,6 +64,9 @@ class Calibration:
 
     def with_mounting(self, mounting: Mounting, **report: Any) -> Calibration:
         return replace(self, mounting=mounting, mounting_report=dict(report))
+
+    def with_hood(self, hood: Hood) -> Calibration:
+        return replace(self, hood=hood)
 
     def fit_to(self, width: int, height: int, where: str = "camera file") -> str:
         """Whether this camera file describes frames of ``width`` x ``height``: "" when its size is theirs,
@@ -83,8 +90,9 @@ class Calibration:
         ``mounting`` overrides the file's (online calibration); without either, the camera is taken
         to sit as the model camera does."""
         m = mounting or self.mounting or model_mounting
+        blocked = self.hood.mask(width, height) if self.hood is not None and self.hood.found else None
         # distortion coefficients act on normalised coordinates, so they hold at any frame size
-        return ModelFrame(self.intrinsics.scaled(width, height), self.dist, m, model, model_mounting)
+        return ModelFrame(self.intrinsics.scaled(width, height), self.dist, m, model, model_mounting, blocked)
 
     def to_dict(self) -> dict[str, Any]:
         """The file's fields, the intrinsics flat at the top (``fx``, ``fy``, ``cx``, ``cy``, ``width``,
@@ -92,6 +100,10 @@ class Calibration:
         d = asdict(self)
         d = {**d.pop("intrinsics"), **d}
         d["mounting"] = None if self.mounting is None else self.mounting.to_dict()
+        if self.hood is None:
+            d.pop("hood")
+        else:
+            d["hood"] = self.hood.to_dict()
         return d
 
     def write(self, path: str | os.PathLike) -> None:
@@ -108,12 +120,14 @@ class Calibration:
             intrinsic = {k: number(d, k, str(p)) for k in ("fx", "fy", "cx", "cy")}
             size = {k: number(d, k, str(p), int) for k in ("width", "height")}
             m = d.get("mounting")
+            hood = d.get("hood")
             rest = {k: v for k, v in d.items() if k in known and k != "intrinsics"}
             return cls(**{**rest, "intrinsics": Intrinsics(**intrinsic, **size), "dist": tuple(d.get("dist", ())),
                           "used": tuple(d.get("used", ())), "skipped": tuple(d.get("skipped", ())),
                           "board": tuple(d.get("board", (9, 6))),
                           "mounting": None if m is None else Mounting.from_dict(m, f"{p}: mounting"),
-                          "mounting_report": dict(d.get("mounting_report") or {})})
+                          "mounting_report": dict(d.get("mounting_report") or {}),
+                          "hood": None if hood is None else Hood.from_dict(hood, f"{p}: hood")})
         except TypeError as e:
             raise ValueError(f"{p}: not a camera file ({e})") from None
         except ValueError as e:

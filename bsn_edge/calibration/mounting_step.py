@@ -4,16 +4,20 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import numpy as np
+
 from bsn_edge.calibration.camera_file import Calibration
+from bsn_edge.calibration.hood import Hood, HoodConfig, find_hood
 from bsn_edge.calibration.lane_height import LaneHeight
 from bsn_edge.calibration.mount_fit import MountFit, MountFitConfig
 from bsn_edge.mounting import REFERENCE_HEIGHT_M, check_height
 from bsn_edge.sequence.media import read_video
 
 LANE_WIDTH_RANGE_M = (2.0, 6.0)   # marking centre to marking centre, narrow urban lanes to wide highway ones
+HOOD_SPAN = 120                   # frames the hood is looked for in, from the first
 
 
 class MountingRefusedError(ValueError):
@@ -66,7 +70,16 @@ def calibrate_mounting(video: str | os.PathLike, camera: Calibration, height_m: 
         m = type(m)(hm, m.pitch_deg, m.yaw_deg, m.roll_deg)
     else:
         report["height"] = {"method": "measured", "height_m": height_m}
-    return camera.with_mounting(m, **report)
+    return camera.with_mounting(m, **report).with_hood(hood_of(frames))
+
+
+def hood_of(frames: Sequence[np.ndarray]) -> Hood:
+    """The hood in a clip: looked for over its first seconds, ``HoodConfig.frames`` frames spread over
+    the first ``HOOD_SPAN`` (a clip's frame rate is not known here; about 3 s at 30 frames/s)."""
+    n = HoodConfig().frames
+    span = frames[:HOOD_SPAN]
+    step = max(1, len(span) // n)
+    return find_hood(span[::step][:n])
 
 
 def _why(report: dict, cfg: MountFitConfig) -> str:

@@ -93,6 +93,7 @@ def mount(args) -> int:
     hr = r["height"]
     print(f"height {m.height_m:.2f} m ({hr['method']}" + (f", spread {hr['spread_m']:.2f} m)" if "spread_m" in hr
                                                            else ")"))
+    print(f"hood: {cal.hood.describe()}")
     print(f"wrote {args.out}")
     return 0
 

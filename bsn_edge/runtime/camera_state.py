@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from bsn_edge.calibration.camera_file import Calibration, assumed_camera, assumed_mounting
+from bsn_edge.calibration.hood import Hood, HoodFinder
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.card import ModelCard
 from bsn_edge.model_frame import ModelFrame
@@ -63,6 +64,10 @@ class CameraState:
         self._calibrator: OnlineCalibrator | None = None
         self._frames: dict[tuple[int, int], ModelFrame] = {}
         self._lock = threading.RLock()
+        # the hood: the camera file's when it has looked, else looked for in the first seconds
+        self.hood: Hood | None = calibration.hood if calibration is not None else None
+        self._hood_finder = HoodFinder() if self.hood is None else None
+        self._hood_seen = 0
 
     @property
     def calibrating(self) -> bool:
@@ -84,15 +89,19 @@ class CameraState:
             self._calibrator.close()
 
     def camera_file(self, width: int, height: int) -> Calibration:
-        if self.calibration is not None:
-            return self.calibration
-        return assumed_camera(self.card.camera, self.card.mounting, width, height, self.height_m)
+        """The camera as known now: the camera file (else the assumed camera), with the hood once found."""
+        cal = self.calibration or assumed_camera(self.card.camera, self.card.mounting, width, height, self.height_m)
+        with self._lock:
+            return cal if self.hood is None or cal.hood is not None else cal.with_hood(self.hood)
 
     def observe(self, frame: np.ndarray) -> None:
         """Let online calibration see this frame (nothing once the mounting is known): the estimator is
         started on the first frame, fed one frame in ``calibrate_every``, and when it has converged the
         mounting is taken (and the camera file written, when asked). The runtime's frame path calls it
-        before :meth:`frame_for`, frame by frame in order."""
+        before :meth:`frame_for`, frame by frame in order. Until the hood is known (from the camera file,
+        or found in the frames fed, one in ``calibrate_every``) it is looked for too."""
+        if self._hood_finder is not None:
+            self._look_for_hood(frame)
         if self.calibrating:
             self._calibrate(frame)
 
@@ -108,6 +117,18 @@ class CameraState:
                                                         mounting=self.mounting or self._guess)
                 self._frames[key] = mf
             return mf
+
+    def _look_for_hood(self, frame: np.ndarray) -> None:
+        self._hood_seen += 1
+        if (self._hood_seen - 1) % (self.calibrate_every or 1):
+            return
+        finder = self._hood_finder
+        finder.add(frame)
+        if finder.ready:
+            hood = finder.result()
+            with self._lock:
+                self.hood, self._hood_finder = hood, None
+                self._frames.clear()            # the model frames are built again, the hood masked
 
     @property
     def _guess(self) -> Mounting:
@@ -138,6 +159,11 @@ class CameraState:
         if m is not None:
             self._calibrator.close()
 
+    def _hood_summary(self) -> dict[str, Any] | None:
+        """The hood as found (or said by the camera file); None while it is still looked for."""
+        with self._lock:
+            return None if self.hood is None else self.hood.to_dict()
+
     def progress(self) -> str:
         """Where online calibration stands, in a line: pairs used and the standard errors of pitch and
         yaw against what convergence needs ("" when not calibrating)."""
@@ -164,5 +190,5 @@ class CameraState:
             m, report = self.mounting, dict(self.report)
         return {"intrinsics": "assumed: the model camera's, rescaled (no camera file)" if self.assumed_intrinsics
                 else "camera file", "size_note": self.size_note, "mounting": None if m is None else m.to_dict(),
-                "calibrating": m is None, "calibration": report,
+                "calibrating": m is None, "calibration": report, "hood": self._hood_summary(),
                 "estimator_skipped": self._calibrator.skipped if self._calibrator is not None else 0}
