@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from bsn_edge.calibration.camera_file import Calibration, assumed_camera, assumed_mounting
-from bsn_edge.calibration.hood import Hood, HoodFinder
+from bsn_edge.calibration.hood import Hood, HoodConfig, HoodFinder
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.card import ModelCard
 from bsn_edge.model_frame import ModelFrame
@@ -41,9 +41,10 @@ class CameraState:
     def __init__(self, card: ModelCard, calibration: Calibration | None = None, height_m: float | None = None,
                  save_to: str | Path | None = None, calibrate_every: int | None = None,
                  background: bool = True, calibrate_nice: int = 10, estimator: MountFitConfig | None = None,
-                 calibrate_hz: float | None = None) -> None:
+                 calibrate_hz: float | None = None, hood: HoodConfig | None = None) -> None:
         """``estimator`` and ``calibrate_hz``: the online estimator's settings and how many frames a
-        second it is fed (the runtime's own unless given: benchmarks compare others)."""
+        second it is fed; ``hood``: how the hood is looked for (the runtime's own unless given:
+        benchmarks and tests compare others)."""
         self.card = card
         self.calibration = calibration
         self.save_to = Path(save_to) if save_to else None
@@ -66,7 +67,7 @@ class CameraState:
         self._lock = threading.RLock()
         # the hood: the camera file's when it has looked, else looked for in the first seconds
         self.hood: Hood | None = calibration.hood if calibration is not None else None
-        self._hood_finder = HoodFinder() if self.hood is None else None
+        self._hood_finder = HoodFinder(hood) if self.hood is None else None
         self._hood_seen = 0
 
     @property
