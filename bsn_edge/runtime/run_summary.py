@@ -9,7 +9,8 @@ same percentiles), ``stage_ms`` and ``stage_share`` (per stage: decode, preproce
 postprocess, send), ``faults`` (the counters, by :class:`~bsn_edge.alerts.health.Fault` name),
 ``cycles_sent``, ``senders`` (per sender: sent, errors, ...), ``senders_down`` (senders that could not
 send at the end), ``source_failure`` (why the source ended early, or null), ``stopped`` (by a signal
-or the caller), ``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report),
+or the caller), ``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report, hood: share of the rows,
+spread, columns agreeing, arch; null while still looked for),
 ``maps_written``, ``sinks`` (per output: written, dropped, failure), ``model`` (variant, size,
 threshold, quantization, kernels, self-test, signer, authentic, trust note); ``bsn-run`` adds
 ``signal``.
