@@ -255,8 +255,7 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
     elif m is not None:
         lines.append(f"  camera: height {m['height_m']:.2f} m, pitch {m['pitch_deg']:+.2f}, yaw {m['yaw_deg']:+.2f}, "
                      f"roll {m['roll_deg']:+.2f} deg ({summary['camera']['calibration'].get('source', 'camera file')})")
-    if camera.hood is not None:
-        lines.append(f"  hood: {camera.hood.describe()}")
+    lines.append(f"  hood: {camera.hood.describe() if camera.hood is not None else camera.hood_progress()}")
     outputs = [(name, getattr(args, key)) for name, key in (("overlay", "overlay"), ("frame log", "log"),
                                                                ("CAN log", "can_log"), ("maps", "save_maps"),
                                                                ("camera file", "save_calib"), ("summary", "summary"))

@@ -160,6 +160,14 @@ class CameraState:
         if m is not None:
             self._calibrator.close()
 
+    def hood_progress(self) -> str:
+        """Where the search for the hood stands, in words ("" once the hood is known)."""
+        with self._lock:
+            f = self._hood_finder
+            if f is None:
+                return ""
+            return f"still looked for: {len(f.frames)} of the {f.cfg.frames} frames it needs seen (nothing masked)"
+
     def _hood_summary(self) -> dict[str, Any] | None:
         """The hood as found (or said by the camera file); None while it is still looked for."""
         with self._lock:

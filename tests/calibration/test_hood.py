@@ -110,8 +110,13 @@ def test_bsn_run_without_a_camera_file_finds_the_hood_and_masks_it(clips):
     camera = CameraState(card, background=False, hood=HoodConfig(frames=FRAMES))
     camera.use_frame_rate(CameraState.CALIBRATE_HZ)      # every frame fed
     frames = frames_of(clips[HOODS[1]])
-    for f in frames:
+    for f in frames[:10]:
         camera.observe(f)
+    assert camera.hood is None and camera.summary()["hood"] is None
+    assert camera.hood_progress().startswith(f"still looked for: 10 of the {FRAMES} frames")
+    for f in frames[10:]:
+        camera.observe(f)
+    assert camera.hood_progress() == ""
     assert camera.hood is not None and abs(camera.hood.share - truth) < 0.015
     assert camera.summary()["hood"]["share"] == round(camera.hood.share, 4)
     seen = camera.frame_for(frames[-1]).seen
