@@ -37,14 +37,18 @@ class CameraMix:
     def batch(self, picks: Sequence[tuple[int, int]], augment: bool, seed: int, object_repaint: float = 0.0,
               object_see_through: float = 0.0) -> dict[str, torch.Tensor]:
         """As :meth:`SampleCache.batch`, each sample from the cache its draw chose (the own camera's
-        without ``augment``)."""
+        without ``augment``), and ``guessed`` ([N] bool) saying which came from the guessed one."""
         use = self.guessed_picks(picks, seed) if augment else np.zeros(len(picks), bool)
         args = (augment, seed, object_repaint, object_see_through)
         if not use.any():
-            return self.own.batch(picks, *args)
-        if use.all():
-            return self.guessed.batch(picks, *args)
-        a = self.own.batch([p for p, u in zip(picks, use, strict=True) if not u], *args)
-        b = self.guessed.batch([p for p, u in zip(picks, use, strict=True) if u], *args)
-        back = torch.from_numpy(np.argsort(np.concatenate([np.flatnonzero(~use), np.flatnonzero(use)]), kind="stable"))
-        return {k: torch.cat([a[k], b[k]])[back] for k in a}
+            out = self.own.batch(picks, *args)
+        elif use.all():
+            out = self.guessed.batch(picks, *args)
+        else:
+            a = self.own.batch([p for p, u in zip(picks, use, strict=True) if not u], *args)
+            b = self.guessed.batch([p for p, u in zip(picks, use, strict=True) if u], *args)
+            back = torch.from_numpy(np.argsort(np.concatenate([np.flatnonzero(~use), np.flatnonzero(use)]),
+                                               kind="stable"))
+            out = {k: torch.cat([a[k], b[k]])[back] for k in a}
+        out["guessed"] = torch.from_numpy(use)
+        return out

@@ -50,6 +50,9 @@ class DataConfig:
     # the clip's own (bsn_edge.data.guessed_camera: half as bsn-run starts, half midway through
     # online calibration); they come from a second sample cache, so the cache cannot be "off"
     guessed_camera: float = 0.0
+    # teach the guessed-camera samples' depth only up to a factor of their own: the field of view a
+    # picture was guessed with leaves its scale unknowable (bsn_edge.train.losses.depth_loss)
+    guessed_free_scale: bool = False
 
     def __post_init__(self) -> None:
         for name in ("object_repaint", "object_see_through", "guessed_camera"):

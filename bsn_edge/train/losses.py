@@ -32,7 +32,7 @@ def distillation_loss(student: Tensor, teacher: Tensor, grid: tuple[int, int] = 
 
 
 def depth_loss(pred: Tensor, target: Tensor, sky: Tensor | None = None, weight: Tensor | None = None,
-               grad_scales: int = 0) -> Tensor:
+               grad_scales: int = 0, free_scale: Tensor | None = None) -> Tensor:
     """L1 on log depth over pixels with depth; sky pixels (when given) are taught as far.
 
     ``weight`` ([N, 1, H, W], optional) weighs each pixel (e.g. more on cars and people, which
@@ -40,7 +40,12 @@ def depth_loss(pred: Tensor, target: Tensor, sky: Tensor | None = None, weight: 
     multi-scale gradient-matching term of Li & Snavely (MegaDepth, 2018): the L1 of the
     horizontal and vertical differences of the log-depth error at 1, 1/2, 1/4 ... resolution,
     which is zero for a prediction that is right up to a constant factor and large where an
-    object's edge is blurred into the road behind it."""
+    object's edge is blurred into the road behind it.
+
+    ``free_scale`` ([N] bool, optional) marks samples whose depth is taught only up to a factor of
+    their own: their log-depth error is taken about its (weighted) mean. A picture warped with a
+    guessed field of view shows the scene at a scale it cannot tell (a longer lens looks like a
+    nearer road), so its true metric depth is not in it to learn."""
     t = target.clamp(MIN_DEPTH_M, MAX_DEPTH_M)
     valid = target > 0
     if sky is not None:
@@ -48,6 +53,9 @@ def depth_loss(pred: Tensor, target: Tensor, sky: Tensor | None = None, weight: 
         valid = valid | sky
     r = pred.clamp_min(1e-3).log() - t.log()
     w = valid.to(r.dtype) if weight is None else valid.to(r.dtype) * weight
+    if free_scale is not None and bool(free_scale.any()):
+        mean = (r * w).sum(dim=(1, 2, 3), keepdim=True) / w.sum(dim=(1, 2, 3), keepdim=True).clamp_min(1e-6)
+        r = r - mean * free_scale.to(r.dtype).view(-1, 1, 1, 1)
     loss = (r.abs() * w).sum() / w.sum().clamp_min(1e-6)
     for k in range(grad_scales):
         s = 2 ** k

@@ -395,7 +395,7 @@ def losses(net: torch.nn.Module, b: dict[str, torch.Tensor], teacher: torch.nn.M
     logits, depth, feats = logits.float(), depth.float(), feats.float()
     l_bce = masked_bce(logits, b["blindspot"], b["visibility"])
     l_depth = depth_loss(depth, b["depth"], b["sky"], _depth_weights(b["semantic"], cfg.train.depth_object_weight),
-                         cfg.train.depth_grad_scales)
+                         cfg.train.depth_grad_scales, b.get("guessed") if cfg.data.guessed_free_scale else None)
     loss = l_bce + cfg.train.depth_weight * l_depth
     l_kd = torch.zeros((), device=dev)
     if teacher is not None:

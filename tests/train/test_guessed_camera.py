@@ -144,6 +144,7 @@ def test_a_mixed_batch_takes_each_sample_from_the_cache_its_draw_chose(two_cache
     use = mix.guessed_picks(picks, seed=2)
     assert 0 < use.sum() < len(picks)
     got = mix.batch(picks, augment=True, seed=2)
+    assert got["guessed"].tolist() == use.tolist()
     for r, (p, u) in enumerate(zip(picks, use, strict=True)):
         want = (guessed if u else own).batch([p], augment=True, seed=2)
         for name, v in want.items():
@@ -153,6 +154,7 @@ def test_a_mixed_batch_takes_each_sample_from_the_cache_its_draw_chose(two_cache
                        guessed.batch(picks, True, 2)["image"])
     # without augmentation (validation) every sample is the own camera's
     assert torch.equal(mix.batch(picks, False, 2)["image"], own.batch(picks, False, 2)["image"])
+    assert not mix.batch(picks, False, 2)["guessed"].any()
     many = CameraMix(own, guessed, 0.3).guessed_picks([(0, d) for d in range(2000)], seed=2)
     assert abs(many.mean() - 0.3) < 0.04
 
@@ -167,7 +169,8 @@ def test_guessed_cameras_need_a_cache_and_a_run_validates_on_both(tmp_path):
         clip_with_road_labels(data, f"run{i}", s)
     run = tmp_path / "run"
     assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet",
-                           "--set", "data.guessed_camera=0.5", "--set", 'data.cache="memory"',
+                           "--set", "data.guessed_camera=0.5", "--set", "data.guessed_free_scale=true",
+                           "--set", 'data.cache="memory"',
                            "--set", "data.size=[128, 256]", "--set", "train.steps=2", "--set", "train.eval_every=2",
                            "--set", "data.val_fraction=0.5"]) == 0
     last = [json.loads(x) for x in (run / "history.jsonl").read_text().splitlines()][-1]

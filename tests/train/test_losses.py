@@ -1,5 +1,7 @@
 """The losses of BlindSpotNet training."""
 
+import math
+
 import torch
 
 from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce
@@ -36,3 +38,18 @@ def test_depth_loss_is_zero_at_the_truth_and_teaches_sky_as_far():
     sky[..., 0, 0] = True
     t[..., 0, 0] = 0.0
     assert depth_loss(torch.full((1, 1, 2, 2), 10.0), t, sky).item() > 0.1
+
+
+def test_a_free_scale_sample_is_taught_its_depth_up_to_a_factor_of_its_own():
+    torch.manual_seed(0)
+    t = torch.rand(2, 1, 8, 16) * 30 + 5
+    pred = t * torch.tensor([1.6, 0.7]).view(2, 1, 1, 1)       # each sample right but for its scale
+    # metric: the mean |log| of each factor; free scale: nothing to learn on that sample
+    assert abs(depth_loss(pred, t).item() - (math.log(1.6) + abs(math.log(0.7))) / 2) < 1e-5
+    assert depth_loss(pred, t, free_scale=torch.tensor([True, True])).item() < 1e-5
+    half = depth_loss(pred, t, free_scale=torch.tensor([False, True])).item()
+    assert abs(half - math.log(1.6) / 2) < 1e-5
+    # a wrong shape is still taught in a free-scale sample
+    bent = pred.clone()
+    bent[..., :4, :] *= 2.0
+    assert depth_loss(bent, t, free_scale=torch.tensor([True, True])).item() > 0.3
