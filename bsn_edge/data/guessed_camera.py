@@ -33,6 +33,16 @@ class ClipCamera(Enum):
     GUESSED = "guessed"   # the one a user without a camera file gets (:func:`guessed_camera`)
 
 
+class GuessedDepth(Enum):
+    """What a guessed-camera sample teaches D. A guessed field of view leaves the picture's scale
+    unknowable (a longer lens shows a road as a wider one shows a nearer road), so its metric depth
+    is not in the picture to learn."""
+
+    METRIC = "metric"           # the true metric depth, as a calibrated sample
+    SCALE_FREE = "scale-free"   # the depth up to a factor of the sample's own
+    NONE = "none"               # nothing: the sample teaches the blind spots and distillation only
+
+
 class Guess(Enum):
     """How far ``bsn-run`` has come with a camera it has no file for."""
 

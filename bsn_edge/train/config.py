@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.data.guessed_camera import GuessedDepth
 from bsn_edge.model_frame import MODEL_HFOV_DEG, MODEL_PITCH_DEG, model_camera
 from bsn_edge.models import get_spec
 from bsn_edge.mounting import REFERENCE_HEIGHT_M, Mounting
@@ -50,11 +51,14 @@ class DataConfig:
     # the clip's own (bsn_edge.data.guessed_camera: half as bsn-run starts, half midway through
     # online calibration); they come from a second sample cache, so the cache cannot be "off"
     guessed_camera: float = 0.0
-    # teach the guessed-camera samples' depth only up to a factor of their own: the field of view a
-    # picture was guessed with leaves its scale unknowable (bsn_edge.train.losses.depth_loss)
-    guessed_free_scale: bool = False
+    # what the guessed-camera samples teach D (bsn_edge.data.guessed_camera.GuessedDepth): "metric",
+    # "scale-free" (up to a factor of their own) or "none"
+    guessed_depth: str = GuessedDepth.METRIC.value
 
     def __post_init__(self) -> None:
+        if self.guessed_depth not in {g.value for g in GuessedDepth}:
+            raise ValueError(f"data.guessed_depth must be one of {', '.join(g.value for g in GuessedDepth)}, "
+                             f"got {self.guessed_depth!r}")
         for name in ("object_repaint", "object_see_through", "guessed_camera"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"data.{name} is a share of samples in [0, 1], got {getattr(self, name)}")

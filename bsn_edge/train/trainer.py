@@ -29,7 +29,7 @@ from bsn_edge.card import BF16, FP32, UNCHOSEN_THRESHOLD, UNRECORDED, ModelCard
 from bsn_edge.data import BlindSpotDataset, Clip, find_clips, split_clips
 from bsn_edge.data.cache import SampleCache, default_cache_root
 from bsn_edge.data.camera_mix import CameraMix
-from bsn_edge.data.guessed_camera import ClipCamera
+from bsn_edge.data.guessed_camera import ClipCamera, GuessedDepth
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.metrics import ThresholdSweep
 from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, create_model, create_teacher, get_spec, start_from
@@ -209,6 +209,20 @@ def datasets(cfg: Config, data_dir: str | Path) -> Datasets:
     guessed = cfg.data.guessed_camera > 0
     return Datasets(split, train, val, skipped, train_ds(ClipCamera.OWN), val_ds(ClipCamera.OWN),
                     train_ds(ClipCamera.GUESSED) if guessed else None, val_ds(ClipCamera.GUESSED) if guessed else None)
+
+
+def depth_weights(b: dict[str, torch.Tensor], cfg: Config) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+    """D's loss terms for batch ``b``: per-pixel weights ``[N, 1, H, W]`` (None: a plain mean) and
+    which samples are taught their depth only up to a scale (None: none), by what the config says
+    a guessed-camera sample teaches (``data.guessed_depth``)."""
+    weight = _depth_weights(b["semantic"], cfg.train.depth_object_weight)
+    guessed, teach = b.get("guessed"), GuessedDepth(cfg.data.guessed_depth)
+    if guessed is None or not bool(guessed.any()) or teach is GuessedDepth.METRIC:
+        return weight, None
+    if teach is GuessedDepth.SCALE_FREE:
+        return weight, guessed
+    keep = (~guessed).to(b["semantic"].device, torch.float32).view(-1, 1, 1, 1)
+    return (keep if weight is None else weight * keep), None
 
 
 def _depth_weights(semantic: torch.Tensor, object_weight: float) -> torch.Tensor | None:
@@ -394,8 +408,8 @@ def losses(net: torch.nn.Module, b: dict[str, torch.Tensor], teacher: torch.nn.M
         logits, depth, feats = outputs(net, _layout(b["image"], cl), b)
     logits, depth, feats = logits.float(), depth.float(), feats.float()
     l_bce = masked_bce(logits, b["blindspot"], b["visibility"])
-    l_depth = depth_loss(depth, b["depth"], b["sky"], _depth_weights(b["semantic"], cfg.train.depth_object_weight),
-                         cfg.train.depth_grad_scales, b.get("guessed") if cfg.data.guessed_free_scale else None)
+    weight, free_scale = depth_weights(b, cfg)
+    l_depth = depth_loss(depth, b["depth"], b["sky"], weight, cfg.train.depth_grad_scales, free_scale)
     loss = l_bce + cfg.train.depth_weight * l_depth
     l_kd = torch.zeros((), device=dev)
     if teacher is not None:

@@ -26,6 +26,7 @@ from bsn_edge.sequence.frames import read_rgb
 from bsn_edge.synth import SynthConfig, write_clip
 from bsn_edge.synth.rig import Rig
 from bsn_edge.train.config import load_config
+from bsn_edge.train.trainer import depth_weights
 from tests.fakes import SMOKE
 
 MODEL = Intrinsics.from_fov(256, 128, 80.0)
@@ -164,14 +165,35 @@ def test_guessed_cameras_need_a_cache_and_a_run_validates_on_both(tmp_path):
         load_config(SMOKE, ["data.guessed_camera=0.5", 'data.cache="off"'])
     with pytest.raises(ValueError, match="guessed_camera"):
         load_config(SMOKE, ["data.guessed_camera=1.5"])
+    with pytest.raises(ValueError, match="metric, scale-free, none"):
+        load_config(SMOKE, ['data.guessed_depth="free"'])
     data = tmp_path / "data"
     for i, s in enumerate((3, 8, 11, 14)):
         clip_with_road_labels(data, f"run{i}", s)
     run = tmp_path / "run"
     assert train_cli.main(["--config", SMOKE, "--data", str(data), "--out", str(run), "--quiet",
-                           "--set", "data.guessed_camera=0.5", "--set", "data.guessed_free_scale=true",
+                           "--set", "data.guessed_camera=0.5", "--set", 'data.guessed_depth="scale-free"',
                            "--set", 'data.cache="memory"',
                            "--set", "data.size=[128, 256]", "--set", "train.steps=2", "--set", "train.eval_every=2",
                            "--set", "data.val_fraction=0.5"]) == 0
     last = [json.loads(x) for x in (run / "history.jsonl").read_text().splitlines()][-1]
     assert {"val_iou", "val_guessed_iou"} <= last.keys()
+
+
+def test_what_a_guessed_sample_teaches_d_is_chosen_by_the_config():
+    sem = torch.zeros(2, 1, 4, 8, dtype=torch.long)
+    sem[..., 0, 0] = sm.ROAD_USERS[0]
+    b = {"semantic": sem[:, 0], "guessed": torch.tensor([True, False])}
+    for name, object_weight in (("metric", 5.0), ("scale-free", 1.0), ("none", 5.0), ("none", 1.0)):
+        cfg = load_config(SMOKE, [f'data.guessed_depth="{name}"', f"train.depth_object_weight={object_weight}"])
+        weight, free = depth_weights(b, cfg)
+        if name == "scale-free":
+            assert free.tolist() == [True, False] and weight is None
+            continue
+        assert free is None
+        weight = torch.broadcast_to(weight, sem.shape)
+        if name == "metric":
+            assert weight[0, 0, 0, 0] == weight[1, 0, 0, 0] == 5.0 and weight[0, 0, 1, 1] == 1.0
+        else:   # the guessed sample teaches no depth; the other keeps its weights
+            assert float(weight[0].abs().sum()) == 0.0
+            assert float(weight[1, 0, 0, 0]) == object_weight and float(weight[1, 0, 1, 1]) == 1.0
