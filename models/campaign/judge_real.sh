@@ -18,6 +18,9 @@ for d in calib bystyle/highway bystyle/suburb bystyle/town bystyle/urban; do
   [ -d "$d" ] || { echo "judge_real.sh: no $d in $HERE: run it from the campaign folder" >&2; exit 2; }
 done
 [ -f "$RUN/checkpoint.json" ] || { echo "judge_real.sh: $RUN has no checkpoint.json: not a bsn-train run" >&2; exit 2; }
+if ! "$B/python" -c "import json, sys; sys.exit(json.load(open(sys.argv[1]))['card'].get('threshold') is None)" "$RUN/checkpoint.json"; then
+  echo "judge_real.sh: $RUN has not chosen its threshold yet (its training or final sweep is still running)" >&2; exit 2
+fi
 if [ -e "$OUT" ] && [ -z "${FORCE:-}" ]; then
   echo "judge_real.sh: $OUT exists; FORCE=1 writes into it" >&2; exit 2
 fi
