@@ -127,3 +127,42 @@ def test_bsn_run_without_a_camera_file_finds_the_hood_and_masks_it(clips):
     hidden = ~seen & painted.labels_to_model(np.ones((128, 256), np.uint8)).astype(bool)
     assert (hidden == want).mean() > 0.98 and want.sum() > 500
     assert cv2.countNonZero(hidden.astype(np.uint8)) > 0
+
+
+def _corner_hood(width: int, height: int) -> np.ndarray:
+    """A hood seen in the right-hand corner only, as a camera mounted to the left of the car's axis
+    sees it: its outline (a quadratic, with x from -1 to 1) leaves the bottom edge at 60 % of the
+    width (x = 0.2) and rises to 9 % of the rows at the right edge."""
+    t = ((np.arange(width) + 0.5 - width / 2.0) / (width / 2.0) - 0.2) / 0.8
+    top = height * (1.0 - 0.09 * (0.6 * t + 0.4 * t ** 2))
+    return np.arange(height)[:, None] + 0.5 >= top[None, :]
+
+
+def test_a_hood_in_one_corner_is_found_and_only_it_is_masked(clips):
+    frames = frames_of(clips[BARE[0]])
+    hood = _corner_hood(256, 128)
+    painted = []
+    for i, f in enumerate(frames):
+        g = f.copy()
+        # a glossy hood: bright paint with a faint mirror of the scene that changes with it
+        g[hood] = np.clip(200 + 0.05 * f[hood].astype(np.float32) + (i % 3), 0, 255).astype(np.uint8)
+        painted.append(g)
+    found = find_hood(painted)
+    assert found.found and abs(found.share - 0.09) < 0.015 + 3 * found.spread, found
+    mask = found.mask(256, 128)
+    assert (mask & hood).sum() / (mask | hood).sum() > 0.8
+    assert not mask[:, :128].any()                           # the left half shows no hood
+
+
+def test_a_real_hood_in_one_corner_is_found():
+    """mountain_highway.mp4: a glossy white hood in the bottom-right corner, which mirrors the sky.
+    Read by eye: its outline leaves the bottom edge near 60 % of the width and rises to about 7 %
+    of the rows at the right edge; none at the left."""
+    clip = REAL / "mountain_highway.mp4"
+    if not clip.is_file():
+        pytest.skip(f"real data absent: {clip}")
+    frames = read_video(clip, max_frames=100)[::2]          # about online calibration's rate (12.5 Hz)
+    hood = find_hood(frames)
+    assert hood.found and 0.04 < hood.share < 0.09, hood
+    mask = hood.mask(640, 360)
+    assert mask[350:, 600:].mean() > 0.9 and not mask[:, :320].any()
