@@ -15,6 +15,7 @@ from bsn_edge.data.guessed_camera import GuessedDepth
 from bsn_edge.model_frame import MODEL_HFOV_DEG, MODEL_PITCH_DEG, model_camera
 from bsn_edge.models import get_spec
 from bsn_edge.mounting import REFERENCE_HEIGHT_M, Mounting
+from bsn_edge.train.encoder_norm import EncoderNorm
 
 
 @dataclass(frozen=True)
@@ -98,6 +99,9 @@ class TrainConfig:
     checkpoint_every: int = 100
     init: str = ""                           # start from this run's weights (fine-tuning)
     encoder_lr: float = 1.0                  # share of lr for an encoder that starts from ImageNet weights
+    # what the frame encoder's batch norm normalises with in training (bsn_edge.train.encoder_norm.
+    # EncoderNorm): "batch" (each batch's statistics) or "frozen" (the statistics it came with)
+    encoder_bn: str = EncoderNorm.BATCH.value
     # arithmetic of the forward and backward passes: fp32, bf16 (autocast; weights and losses stay
     # fp32) or auto (bf16 where the CPU has native bf16: AMX or AVX-512 BF16; CUDA: fp32)
     precision: str = "auto"
@@ -114,6 +118,9 @@ class TrainConfig:
             raise ValueError(f"train.encoder_lr must be in (0, 1], got {self.encoder_lr}")
         if self.depth_object_weight <= 0 or not 0 <= self.depth_grad_scales <= 6:
             raise ValueError("train.depth_object_weight must be positive, train.depth_grad_scales in 0..6")
+        if self.encoder_bn not in {n.value for n in EncoderNorm}:
+            raise ValueError(f"train.encoder_bn must be one of {', '.join(n.value for n in EncoderNorm)}, "
+                             f"got {self.encoder_bn!r}")
         if self.device not in ("cpu", "cuda", "auto"):
             raise ValueError(f"train.device must be cpu, cuda or auto, got {self.device!r}")
         if self.precision not in ("fp32", "bf16", "auto"):

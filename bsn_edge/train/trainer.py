@@ -36,6 +36,7 @@ from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, create_model
 from bsn_edge.sequence import SequenceMeta
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.train.config import Config
+from bsn_edge.train.encoder_norm import EncoderNorm, freeze_norm_stats
 from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce
 from bsn_edge.train.optim import Optimizer
 from bsn_edge.train.run import Run, RunError
@@ -646,6 +647,8 @@ def _model_and_optimizer(cfg: Config, state: dict[str, Any] | None,
             start_from(model, cfg.model.name, init, init_card.variant)
         except ValueError as e:
             raise ValueError(f"train.init {cfg.train.init}: {e}") from None
+    if EncoderNorm(cfg.train.encoder_bn) is EncoderNorm.FROZEN:
+        _freeze_encoder_stats(model, cfg, spec.pretrained)
     model.to(dev)
     optim = Optimizer(param_groups(model, cfg.train.lr, cfg.train.encoder_lr if spec.pretrained else 1.0),
                       cfg.train.lr, cfg.train.steps, cfg.train)
@@ -653,6 +656,18 @@ def _model_and_optimizer(cfg: Config, state: dict[str, Any] | None,
         model.load_state_dict(state["weights"])
         optim.load_state_dict(state)
     return model, optim
+
+
+def _freeze_encoder_stats(model: BlindSpotNet, cfg: Config, pretrained: str) -> None:
+    """Keep the frame encoder's batch-norm statistics as they came (``train.encoder_bn = "frozen"``)."""
+    encoder = getattr(model, "frame_encoder", None)
+    if encoder is None:
+        raise ValueError(f'train.encoder_bn = "frozen": {cfg.model.name} has no one frame encoder to freeze the '
+                         "statistics of (a shared-encoder variant has)")
+    if not pretrained and not cfg.train.init:
+        raise ValueError(f'train.encoder_bn = "frozen" keeps the statistics an encoder came with, and '
+                         f"{cfg.model.name}'s starts from none (no ImageNet weights; set train.init to a run)")
+    freeze_norm_stats(encoder)
 
 
 def _record(model: BlindSpotNet, cfg: Config, since: list[list[float]], done: int, world: int, seconds: float,
