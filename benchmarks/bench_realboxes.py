@@ -34,6 +34,7 @@ from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_camera
 from benchmarks.bench_realview import city_pair_camera
 from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration
+from bsn_edge.calibration.exif import from_exif
 from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
@@ -47,11 +48,13 @@ PANEL_WIDTH = 640
 
 
 class Frame:
-    """One scored frame: the frames fed before it (online calibration), its camera file, its boxes."""
+    """One scored frame: the frames fed before it (online calibration), its camera file, its boxes,
+    and its file when it is a picture (whose EXIF ``bsn-run`` reads when there is no camera file)."""
 
     def __init__(self, name: str, frames: list[np.ndarray], calibration: Calibration | None,
-                 boxes: list[dict[str, Any]], credit: str) -> None:
+                 boxes: list[dict[str, Any]], credit: str, picture: Path | None = None) -> None:
         self.name, self.frames, self.calibration, self.boxes, self.credit = name, frames, calibration, boxes, credit
+        self.picture = picture
 
     @property
     def image(self) -> np.ndarray:
@@ -89,15 +92,19 @@ def load_frames(spec: dict[str, Any]) -> list[Frame]:
         if tuple(frames[-1].shape[1::-1]) != tuple(f["size"]):
             raise ValueError(f"{name}: the boxes were drawn on {f['size']} but the frame is "
                              f"{frames[-1].shape[1]}x{frames[-1].shape[0]}")
-        out.append(Frame(name, frames, cal, f["boxes"], credit))
+        out.append(Frame(name, frames, cal, f["boxes"], credit, path if f["source"] == "image" else None))
     return out
 
 
 def blind_spots(engine: Engine, frame: Frame, withheld: bool = False) -> np.ndarray:
     """The blind-spot mask on ``frame``'s raw pixels at the model's threshold, as ``bsn-run`` sees it
     (``withheld``: as it sees it when the user gives no camera file)."""
-    cal = None if withheld else frame.calibration
-    state = CameraState(engine.card, cal, background=False)   # the estimate of these frames
+    cal, exif = frame.calibration, None
+    if withheld:
+        h, w = frame.image.shape[:2]
+        cal = exif = from_exif(frame.picture, w, h) if frame.picture is not None else None
+    state = CameraState(engine.card, cal, background=False,   # the estimate of these frames
+                        intrinsics_from=exif.intrinsics_method if exif is not None else "camera file")
     mf = None
     for f in frame.frames:
         state.observe(f)

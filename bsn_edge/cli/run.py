@@ -331,6 +331,7 @@ def _start(args: argparse.Namespace):
     """What the run needs before its first frame, each piece checked: ``(engine, camera, source, cfg,
     maps)``; ``FileNotFoundError``, ``ValueError`` or ``OSError`` names what is wrong."""
     from bsn_edge.calibration.camera_file import Calibration
+    from bsn_edge.calibration.exif import from_exif
     from bsn_edge.modelfile.trust import TrustPolicy
     from bsn_edge.mounting import check_height
     from bsn_edge.runtime import Engine, RuntimeConfig, open_source
@@ -350,8 +351,15 @@ def _start(args: argparse.Namespace):
     if not engine.authentic:
         print(f"{PROG}: warning: {engine.verdict.note}; it runs because of --allow-unsigned, and the status says "
               "Model_Unsigned on every cycle", file=sys.stderr)
-    camera = CameraState(engine.card, calibration, args.height, args.save_calib)
     source = open_source(args.source, pace=args.pace, stall_s=args.stall)
+    intrinsics_from = "camera file"
+    if calibration is None and source.picture is not None and source.size is not None:
+        calibration = from_exif(source.picture, *source.size)
+        if calibration is not None:
+            intrinsics_from = calibration.intrinsics_method
+            print(f"{PROG}: note: no camera file: the intrinsics from the {intrinsics_from}; pitch and yaw are "
+                  "calibrated online", file=sys.stderr)
+    camera = CameraState(engine.card, calibration, args.height, args.save_calib, intrinsics_from=intrinsics_from)
     if calibration is not None and source.size is not None:
         try:
             camera.size_note = calibration.fit_to(*source.size, where=f"--calib {args.calib}")

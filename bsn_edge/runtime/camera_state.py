@@ -41,14 +41,18 @@ class CameraState:
     def __init__(self, card: ModelCard, calibration: Calibration | None = None, height_m: float | None = None,
                  save_to: str | Path | None = None, calibrate_every: int | None = None,
                  background: bool = True, calibrate_nice: int = 10, estimator: MountFitConfig | None = None,
-                 calibrate_hz: float | None = None, hood: HoodConfig | None = None) -> None:
+                 calibrate_hz: float | None = None, hood: HoodConfig | None = None,
+                 intrinsics_from: str = "camera file") -> None:
         """``estimator`` and ``calibrate_hz``: the online estimator's settings and how many frames a
         second it is fed; ``hood``: how the hood is looked for (the runtime's own unless given:
-        benchmarks and tests compare others)."""
+        benchmarks and tests compare others); ``intrinsics_from``: where ``calibration``'s intrinsics
+        came from, for the summary (a picture's EXIF, when there is no camera file)."""
         self.card = card
         self.calibration = calibration
         self.save_to = Path(save_to) if save_to else None
         self.assumed_intrinsics = calibration is None
+        self.intrinsics_from = "assumed: the model camera's, rescaled (no camera file)" if calibration is None \
+            else intrinsics_from
         self.height_m = height_m or (calibration.mounting.height_m if calibration and calibration.mounting
                                      else card.mounting.height_m)
         self.mounting: Mounting | None = calibration.mounting if calibration is not None else None
@@ -197,7 +201,7 @@ class CameraState:
     def summary(self) -> dict[str, Any]:
         with self._lock:
             m, report = self.mounting, dict(self.report)
-        return {"intrinsics": "assumed: the model camera's, rescaled (no camera file)" if self.assumed_intrinsics
-                else "camera file", "size_note": self.size_note, "mounting": None if m is None else m.to_dict(),
+        return {"intrinsics": self.intrinsics_from, "size_note": self.size_note,
+                "mounting": None if m is None else m.to_dict(),
                 "calibrating": m is None, "calibration": report, "hood": self._hood_summary(),
                 "estimator_skipped": self._calibrator.skipped if self._calibrator is not None else 0}

@@ -19,7 +19,7 @@ import numpy as np
 
 from bsn_edge.runtime.slot import LatestSlot
 from bsn_edge.sequence.folder import SequenceFolder
-from bsn_edge.sequence.media import IMAGE_EXTS
+from bsn_edge.sequence.media import IMAGE_EXTS, is_image
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,7 @@ class Source:
     unread = 0                   # frames of a file that never decoded at its end (counted as decode errors)
     failure: str | None = None
     size: tuple[int, int] | None = None   # (width, height) of its frames when known before the first one
+    picture: Path | None = None           # the first frame's file when the frames are pictures (EXIF: the lens)
 
     def __init__(self) -> None:
         self._stop = threading.Event()
@@ -111,6 +112,7 @@ class VideoFileSource(Source):
         self.fps = self.cap.get(cv2.CAP_PROP_FPS) or 10.0
         self.total = int(self.cap.get(cv2.CAP_PROP_FRAME_COUNT)) or None
         self.size = capture_size(self.cap)
+        self.picture = self.path if is_image(self.path) else None
         self.pace, self.give_up = pace, give_up
         self.skipped = 0                 # frames the decoder jumped over or could not decode
 
@@ -174,8 +176,9 @@ class ImageFolderSource(Source):
             raise ValueError(f"{self.folder}: no images ({', '.join(IMAGE_EXTS)})")
         self.fps = fps
         self.total = len(self.files)
-        first = cv2.imread(str(self.files[0]), cv2.IMREAD_UNCHANGED)
+        first = cv2.imread(str(self.files[0]), cv2.IMREAD_COLOR)     # as the frames are read: EXIF rotation applied
         self.size = None if first is None else (first.shape[1], first.shape[0])
+        self.picture = self.files[0]
 
     def _frames(self) -> Iterator[Captured]:
         for i, p in enumerate(self.files):

@@ -2,9 +2,12 @@
 limit (exit 2, UNAVAILABLE on the bus), never run with OK and nonsense levels, never an OpenCV assertion."""
 
 import json
+import math
 
 import can
+import cv2
 import pytest
+from PIL import Image
 
 from bsn_edge.alerts import SystemState
 from bsn_edge.alerts.can_codec import decode
@@ -92,3 +95,25 @@ def test_a_camera_file_of_the_same_aspect_at_another_size_is_rescaled_and_said(s
     note = json.loads(summ.read_text())["camera"]["size_note"]
     assert "384x192" in note and "192x96" in note and "same aspect" in note
     assert "note: --calib" in capsys.readouterr().err
+
+
+def test_bsn_run_takes_the_lens_of_pictures_without_a_camera_file(setup, tmp_path, capsys):
+    model, clip = setup
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for i in range(3):
+        rgb = cv2.cvtColor(cv2.imread(str(clip / "rgb" / f"{i:06d}.png")), cv2.COLOR_BGR2RGB)
+        exif = Image.Exif()
+        exif.get_ifd(0x8769)[0xA405] = 30
+        Image.fromarray(rgb).save(folder / f"{i:03d}.jpg", exif=exif)
+    assert run_cli.main(["--model", str(model), "--source", str(folder), "--summary", str(tmp_path / "s.json")]) == 0
+    camera = json.loads((tmp_path / "s.json").read_text())["camera"]
+    hfov = 2 * math.degrees(math.atan(96 / (30 * math.hypot(192, 96) / math.hypot(36, 24))))
+    assert camera["intrinsics"] == f"EXIF of 000.jpg: 30 mm (35 mm equivalent), {hfov:.1f} degrees across"
+    assert camera["calibrating"]                            # pitch and yaw are still calibrated online
+    assert "the intrinsics from the EXIF of 000.jpg" in capsys.readouterr().err
+    # the same pictures without the record: the model camera, rescaled
+    for p in folder.iterdir():
+        cv2.imwrite(str(p), cv2.imread(str(p)))
+    assert run_cli.main(["--model", str(model), "--source", str(folder), "--summary", str(tmp_path / "s.json")]) == 0
+    assert json.loads((tmp_path / "s.json").read_text())["camera"]["intrinsics"].startswith("assumed")
