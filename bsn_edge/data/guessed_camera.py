@@ -46,8 +46,9 @@ class GuessedDepth(Enum):
 class Guess(Enum):
     """How far ``bsn-run`` has come with a camera it has no file for."""
 
-    AT_START = "at start"   # the assumed camera, sitting as the model camera sits
-    MIDWAY = "midway"       # the assumed intrinsics, pitch and yaw from online calibration with its error
+    AT_START = "at start"   # the assumed camera, sitting as the model camera sits (no road lines found)
+    MIDWAY = "midway"       # the assumed intrinsics, pitch and yaw with an estimate's error (the road's
+                            # vanishing point, or online calibration midway)
 
 
 def guess_of(clip: str | Path) -> tuple[Guess, np.random.Generator]:

@@ -1,12 +1,14 @@
 """The runtime's camera: the warp of each frame into the model camera, and online calibration.
 
 With a camera file that carries a mounting, that mounting is used from the first frame. Without
-one, the camera is calibrated online as openpilot's calibration daemon does: frames are warped as
-if the camera sat like the model camera while pitch and yaw are estimated from the focus of
-expansion of forward driving (:mod:`bsn_edge.calibration.mount_fit`); the status on the bus says
-CALIBRATING until the estimate has converged, then the estimate is used (and saved, when asked).
-Without a camera file at all the intrinsics are taken as the model camera's, rescaled to the
-frame (the picture is only resized): the overlay and summary say so.
+one, the camera is calibrated online as openpilot's calibration daemon does: frames are warped with
+a first guess (the pitch and yaw of the road's vanishing point in the first frames,
+:mod:`bsn_edge.calibration.vanishing_point`; else as the model camera sits) while pitch and yaw are
+estimated from the focus of expansion of forward driving (:mod:`bsn_edge.calibration.mount_fit`); the
+status on the bus says CALIBRATING until the estimate has converged, then the estimate is used (and
+saved, when asked). Without a camera file at all the intrinsics are taken as the model camera's,
+rescaled to the frame (the picture is only resized; a photo's EXIF lens when the caller read one):
+the overlay and summary say so.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 from bsn_edge.calibration.camera_file import Calibration, assumed_camera, assumed_mounting
 from bsn_edge.calibration.hood import Hood, HoodConfig, HoodFinder
 from bsn_edge.calibration.mount_fit import MountFitConfig
+from bsn_edge.calibration.vanishing_point import VanishingGuess
 from bsn_edge.card import ModelCard
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.mounting import Mounting
@@ -73,6 +76,9 @@ class CameraState:
         self.hood: Hood | None = calibration.hood if calibration is not None else None
         self._hood_finder = HoodFinder(hood) if self.hood is None else None
         self._hood_seen = 0
+        # until online calibration has converged: pitch and yaw from the road's vanishing point
+        self._vanishing = VanishingGuess() if self.mounting is None else None
+        self._guess_seen = 0
 
     @property
     def calibrating(self) -> bool:
@@ -108,6 +114,7 @@ class CameraState:
         if self._hood_finder is not None:
             self._look_for_hood(frame)
         if self.calibrating:
+            self._look_for_vanishing_point(frame)
             self._calibrate(frame)
 
     def frame_for(self, frame: np.ndarray) -> ModelFrame:
@@ -135,9 +142,23 @@ class CameraState:
                 self.hood, self._hood_finder = hood, None
                 self._frames.clear()            # the model frames are built again, the hood masked
 
+    def _look_for_vanishing_point(self, frame: np.ndarray) -> None:
+        guess = self._vanishing
+        self._guess_seen += 1
+        if guess is None or guess.done or (self._guess_seen - 1) % (self.calibrate_every or 1):
+            return
+        h, w = frame.shape[:2]
+        cam = self.camera_file(w, h)
+        found = guess.look(frame, cam.intrinsics.scaled(w, h), cam.dist)
+        with self._lock:
+            guess.record(found)
+
     @property
     def _guess(self) -> Mounting:
-        return assumed_mounting(self.card.mounting, self.height_m)
+        """The mounting while calibrating: the vanishing point's, else the model camera's."""
+        assumed = assumed_mounting(self.card.mounting, self.height_m)
+        seen = self._vanishing.mounting(assumed.height_m, assumed.roll_deg) if self._vanishing is not None else None
+        return seen or assumed
 
     def _calibrate(self, frame: np.ndarray) -> None:
         # only the thread that warps frames feeds the estimator; the lock is held for the state it
@@ -190,13 +211,22 @@ class CameraState:
         need = self._calibrator.fit.cfg if self._calibrator is not None else None
         if need is None or not r.get("pairs"):
             seen = self._calibrator.seen if self._calibrator is not None else 0
-            return f"calibrating: {seen} frames seen, no usable frame pair yet (needs forward driving)"
+            return (f"calibrating: {seen} frames seen, no usable frame pair yet (needs forward driving)"
+                    + self._meanwhile())
         text = f"calibrating: {r['used']} of {r['pairs']} frame pairs used (needs {need.min_pairs})"
         se = r.get("standard_error_deg")
         if se:
             text += (f", standard error pitch {se['pitch']:.2f} yaw {se['yaw']:.2f} deg "
                      f"(needs {need.max_spread_deg:g})")
-        return text
+        return text + self._meanwhile()
+
+    def _meanwhile(self) -> str:
+        g = self._vanishing
+        if g is None or not g.found:
+            return ""
+        m = g.mounting(1.0)
+        return (f"; meanwhile pitch {m.pitch_deg:+.2f} yaw {m.yaw_deg:+.2f} deg from the road's vanishing point "
+                f"({len(g.found)} of {g.looked} frames)")
 
     def summary(self) -> dict[str, Any]:
         with self._lock:
@@ -204,4 +234,5 @@ class CameraState:
         return {"intrinsics": self.intrinsics_from, "size_note": self.size_note,
                 "mounting": None if m is None else m.to_dict(),
                 "calibrating": m is None, "calibration": report, "hood": self._hood_summary(),
+                "first_guess": self._vanishing.to_dict() if self._vanishing is not None else None,
                 "estimator_skipped": self._calibrator.skipped if self._calibrator is not None else 0}
