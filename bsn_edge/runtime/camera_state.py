@@ -53,7 +53,6 @@ class CameraState:
         self.card = card
         self.calibration = calibration
         self.save_to = Path(save_to) if save_to else None
-        self.assumed_intrinsics = calibration is None
         self.intrinsics_from = "assumed: the model camera's, rescaled (no camera file)" if calibration is None \
             else intrinsics_from
         self.height_m = height_m or (calibration.mounting.height_m if calibration and calibration.mounting

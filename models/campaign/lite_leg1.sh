@@ -3,8 +3,14 @@
 # campaign's data (make_data.sh, seeds 0-31 per style: leg 3's 160 clips), the default's teacher, the
 # encoder at a tenth of the learning rate. Resumable: run it again and it goes on from its last state.
 #   cd ~/.cache/bsn-edge/campaign && REPO=/path/to/bsn-edge /path/to/bsn-edge/models/campaign/lite_leg1.sh
+# Leg L1F, the same with the encoder's batch-norm statistics frozen at ImageNet's, shipped (fp16) into
+# the checkout when it ends:
+#   RUN=lite1f BN=frozen SHIP=/path/to/bsn-edge/models/campaign/lite1f REPO=... .../lite_leg1.sh
 set -euo pipefail
 REPO=${REPO:?set REPO to the checkout}
+RUN=${RUN:-lite1}               # the run's folder here
+BN=${BN:-batch}                 # train.encoder_bn: batch or frozen
+SHIP=${SHIP:-}                  # where the finished run is shipped (fp16), if anywhere
 BIN=$REPO/.venv/bin
 if [ ! -f data/.made ]; then
   BIN=$BIN "$REPO/models/campaign/make_data.sh" data
@@ -12,7 +18,11 @@ if [ ! -f data/.made ]; then
   touch data/.made
 fi
 resume=()                       # go on from the last state; a run that never reached one starts again
-if [ -f lite1/state.pt ]; then resume=(--resume); elif [ -d lite1 ]; then resume=(--force); fi
-"$BIN/bsn-train" --config "$REPO/configs/campaign.toml" --data data --out lite1 "${resume[@]}" \
+if [ -f "$RUN/state.pt" ]; then resume=(--resume); elif [ -d "$RUN" ]; then resume=(--force); fi
+"$BIN/bsn-train" --config "$REPO/configs/campaign.toml" --data data --out "$RUN" "${resume[@]}" \
   --set 'model.name="lite-light"' --set "teacher.checkpoint=\"$REPO/models/default\"" \
-  --set train.encoder_lr=0.1 --set train.seed=5
+  --set train.encoder_lr=0.1 --set "train.encoder_bn=\"$BN\"" --set train.seed=5
+if [ -n "$SHIP" ] && [ ! -e "$SHIP" ]; then
+  "$BIN/python" -c "import sys; from bsn_edge.train.run import Run; Run(sys.argv[1]).ship(sys.argv[2])" "$RUN" "$SHIP"
+  echo "shipped $RUN to $SHIP"
+fi
