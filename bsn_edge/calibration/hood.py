@@ -209,16 +209,18 @@ def _fit_arch(rows: np.ndarray, clear: np.ndarray, h: int, fit_px: float, trials
         if np.ptp(xs[pick]) < 0.1:                  # three neighbours say nothing of a curve
             continue
         arch = np.polyfit(xs[pick], rows[pick], 2)
-        if score(arch) > best_n:
-            best, best_n = arch, score(arch)
+        n = score(arch)
+        if n > best_n:
+            best, best_n = arch, n
     for _ in range(3 if best is not None else 0):   # least squares on its outlines, while no worse
         shown = _agreeing(best, xs, rows, clear, h, fit_px)[0]
         if shown.sum() < 3:
             break
         refined = np.polyfit(xs[shown], rows[shown], 2)
-        if score(refined) < best_n:
+        n = score(refined)
+        if n < best_n:
             break
-        best, best_n = refined, score(refined)
+        best, best_n = refined, n
     return best
 
 
