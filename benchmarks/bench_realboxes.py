@@ -35,7 +35,9 @@ from benchmarks.bench_realview import city_pair_camera
 from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.exif import from_exif
+from bsn_edge.card import ModelCard
 from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.media import read_video
@@ -96,20 +98,27 @@ def load_frames(spec: dict[str, Any]) -> list[Frame]:
     return out
 
 
-def blind_spots(engine: Engine, frame: Frame, withheld: bool = False) -> np.ndarray:
-    """The blind-spot mask on ``frame``'s raw pixels at the model's threshold, as ``bsn-run`` sees it
-    (``withheld``: as it sees it when the user gives no camera file)."""
+def model_frame(card: ModelCard, frame: Frame, withheld: bool = False) -> ModelFrame:
+    """How ``bsn-run`` warps ``frame`` into ``card``'s model camera after the frames fed before it
+    (``withheld``: as it does when the user gives no camera file)."""
     cal, exif = frame.calibration, None
     if withheld:
         h, w = frame.image.shape[:2]
         cal = exif = from_exif(frame.picture, w, h) if frame.picture is not None else None
-    state = CameraState(engine.card, cal, background=False,   # the estimate of these frames
+    state = CameraState(card, cal, background=False,   # the estimate of these frames
                         intrinsics_from=exif.intrinsics_method if exif is not None else "camera file")
     mf = None
     for f in frame.frames:
         state.observe(f)
         mf = state.frame_for(f)
     state.close()
+    return mf
+
+
+def blind_spots(engine: Engine, frame: Frame, withheld: bool = False) -> np.ndarray:
+    """The blind-spot mask on ``frame``'s raw pixels at the model's threshold, as ``bsn-run`` sees it
+    (``withheld``: as it sees it when the user gives no camera file)."""
+    mf = model_frame(engine.card, frame, withheld)
     prob, _ = engine.infer(mf.to_model(frame.image)[None])
     return mf.to_raw(prob) >= engine.card.threshold
 

@@ -82,7 +82,7 @@ class Setup:
         self.model = create_model(model_name)
         cl = lever["channels_last"]
         self.model.to(memory_format=torch.channels_last if cl else torch.contiguous_format).train()
-        self.teacher = create_teacher(18, 128).eval()
+        self.teacher = create_teacher("resnet18", 128).eval()
         self.teacher.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
         self.opt = Optimizer(self.model.parameters(), 1e-3, 100_000, self.cfg.train, fused=lever["fused"])
         self.dtype = autocast_dtype(self.cfg, torch.device("cpu"))
@@ -136,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     cache = SampleCache.for_dataset(ds, None)
     build_s = (time.perf_counter() - t0) / len(ds)
     grid_cache = SampleCache(cache.arrays, cache.items, cache.key)
-    teacher = create_teacher(18, 128)
+    teacher = create_teacher("resnet18", 128)
     t0 = time.perf_counter()
     grid_cache.attach_teacher(teacher.eval(), 0.5, (8, 16), resize=lambda x, s: _layout(scaled(x, s), True))
     teacher_s = (time.perf_counter() - t0) / len(ds)

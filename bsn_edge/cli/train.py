@@ -8,7 +8,7 @@ import sys
 
 from bsn_edge.cli.common import fail
 from bsn_edge.train.config import load_config
-from bsn_edge.train.trainer import train
+from bsn_edge.train.trainer import train, train_teacher_alone
 
 PROG = "bsn-train"
 
@@ -37,6 +37,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="end this piece of a long training after MINUTES, with a checkpoint; run the same "
                         "command with --resume to go on (the learning-rate schedule spans train.steps, "
                         "whatever the pieces)")
+    p.add_argument("--teacher-only", action="store_true",
+                   help="train the segmentation teacher alone (teacher.*; RUN/teacher/teacher.pt) and stop, for "
+                        "later runs to distil from with --set teacher.checkpoint=RUN; --resume goes on from its "
+                        "last state")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
@@ -49,9 +53,16 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     if args.stop_after is not None and not args.stop_after > 0:
         return fail(PROG, f"--stop-after must be a positive number of minutes, got {args.stop_after:g}")
+    if args.teacher_only and args.stop_after is not None:
+        return fail(PROG, "--stop-after ends a student's piece; a teacher trained alone stops when killed and goes "
+                          "on with --resume from its last state (every teacher.checkpoint_every steps)")
     try:
-        summary = train(cfg, args.data, args.out, resume=args.resume, progress=not args.quiet, force=args.force,
-                        stop_after=None if args.stop_after is None else args.stop_after * 60.0)
+        if args.teacher_only:
+            summary = train_teacher_alone(cfg, args.data, args.out, resume=args.resume, progress=not args.quiet,
+                                          force=args.force)
+        else:
+            summary = train(cfg, args.data, args.out, resume=args.resume, progress=not args.quiet, force=args.force,
+                            stop_after=None if args.stop_after is None else args.stop_after * 60.0)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     for line in summary.get("skipped_clips", []):

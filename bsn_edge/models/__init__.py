@@ -3,6 +3,7 @@
 from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, ORACLE_DEPTH_NOTE, BlindSpotNet, DepthNet, depth_feature
 from bsn_edge.models.registry import (
     MODELS,
+    TEACHER_ENCODERS,
     ModelSpec,
     build,
     create_model,
@@ -10,6 +11,7 @@ from bsn_edge.models.registry import (
     describe,
     get_spec,
     start_from,
+    teacher_encoder,
     weights_bytes,
 )
 
@@ -18,6 +20,7 @@ __all__ = [
     "MIN_DEPTH_M",
     "MODELS",
     "ORACLE_DEPTH_NOTE",
+    "TEACHER_ENCODERS",
     "BlindSpotNet",
     "DepthNet",
     "ModelSpec",
@@ -28,5 +31,6 @@ __all__ = [
     "describe",
     "get_spec",
     "start_from",
+    "teacher_encoder",
     "weights_bytes",
 ]

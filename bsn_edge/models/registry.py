@@ -13,7 +13,8 @@ from bsn_edge.camera import Intrinsics
 from bsn_edge.card import ModelCard
 from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, DepthNet
 from bsn_edge.models.deeplab import EncoderDecoder
-from bsn_edge.models.encoders import encoder_info, make_encoder
+from bsn_edge.models.encoders import ENCODERS, encoder_info, make_encoder
+from bsn_edge.models.resnet import DEPTHS as RESNET_DEPTHS
 from bsn_edge.models.resnet import ResNetEncoder
 from bsn_edge.models.shared import SharedEncoderBSN
 from bsn_edge.models.unet import UNet
@@ -143,10 +144,36 @@ def start_from(model: BlindSpotNet, name: str, source: BlindSpotNet, source_name
     return "D"
 
 
-def create_teacher(encoder_depth: int = 18, width: int = 128) -> EncoderDecoder:
-    """The DeepLabV3+ segmentation teacher (Cityscapes trainIds); its decoder output is the
-    distillation target."""
-    return EncoderDecoder(ResNetEncoder(encoder_depth, 3), NUM_CLASSES, width)
+#: the encoders a segmentation teacher can be built on: ResNets at output stride 16, and the
+#: encoders of :data:`~bsn_edge.models.encoders.ENCODERS` that publish pretrained weights
+TEACHER_ENCODERS: tuple[str, ...] = (*(f"resnet{d}" for d in RESNET_DEPTHS),
+                                     *(n for n, i in ENCODERS.items() if i.load_pretrained is not None))
+
+
+def teacher_encoder(name: str | int, pretrained: bool = False) -> str:
+    """``name`` as a teacher encoder's name (a whole number N, as runs written before names record
+    it, is ``resnetN``); ValueError naming the valid ones for any other, or for ``pretrained`` on an
+    encoder without published weights."""
+    canon = f"resnet{name}" if isinstance(name, int) and not isinstance(name, bool) else name
+    if canon not in TEACHER_ENCODERS:
+        raise ValueError(f"unknown teacher encoder {name!r}; valid: {', '.join(TEACHER_ENCODERS)}")
+    if pretrained and canon.startswith("resnet"):
+        pretrained_ones = [n for n in TEACHER_ENCODERS if not n.startswith("resnet")]
+        raise ValueError(f"teacher encoder {canon!r} has no pretrained weights; those with: "
+                         f"{', '.join(pretrained_ones)}")
+    return canon
+
+
+def create_teacher(encoder: str | int = "resnet18", width: int = 128, pretrained: bool = False) -> EncoderDecoder:
+    """The DeepLabV3+ segmentation teacher (Cityscapes trainIds) on ``encoder`` (one of
+    :data:`TEACHER_ENCODERS`); its decoder output is the distillation target. ``pretrained``: the
+    encoder starts from its published weights (ImageNet), for a teacher about to be trained."""
+    name = teacher_encoder(encoder, pretrained)
+    if name.startswith("resnet"):
+        enc: nn.Module = ResNetEncoder(int(name.removeprefix("resnet")), 3)
+    else:
+        enc = make_encoder(name, 3, max(encoder_info(name).output_strides), pretrained=pretrained)
+    return EncoderDecoder(enc, NUM_CLASSES, width)
 
 
 def describe(name: str, model: nn.Module, camera: Intrinsics, threshold: float | None = None,

@@ -13,7 +13,7 @@ from typing import Any
 from bsn_edge.camera import Intrinsics
 from bsn_edge.data.guessed_camera import GuessedDepth
 from bsn_edge.model_frame import MODEL_HFOV_DEG, MODEL_PITCH_DEG, model_camera
-from bsn_edge.models import get_spec
+from bsn_edge.models import get_spec, teacher_encoder
 from bsn_edge.mounting import REFERENCE_HEIGHT_M, Mounting
 from bsn_edge.train.encoder_norm import EncoderNorm
 
@@ -134,7 +134,10 @@ class TeacherConfig:
     steps: int = 300
     batch_size: int = 8
     lr: float = 1e-3
-    encoder: int = 18
+    encoder: str = "resnet18"                # resnet18/34/50/101, or efficientnet-lite0 (TEACHER_ENCODERS);
+                                             # a whole number N is resnetN (runs written before names)
+    pretrained: bool = False                 # a new teacher starts from the encoder's ImageNet weights
+    encoder_lr: float = 1.0                  # share of lr for the encoder of a pretrained teacher
     width: int = 128
     scale: float = 0.5                       # the teacher sees the frame at this scale (its features
                                              # are pooled to a coarse grid for distillation anyway)
@@ -144,8 +147,14 @@ class TeacherConfig:
     checkpoint_every: int = 500              # steps between saved training states (--resume goes on from the last)
 
     def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "encoder", teacher_encoder(self.encoder, self.pretrained))
+        except ValueError as e:
+            raise ValueError(f"teacher.encoder: {e}") from None
         if self.checkpoint_every < 1:
             raise ValueError(f"teacher.checkpoint_every must be >= 1, got {self.checkpoint_every}")
+        if not 0 < self.encoder_lr <= 1:
+            raise ValueError(f"teacher.encoder_lr must be in (0, 1], got {self.encoder_lr}")
         if not 0.1 <= self.scale <= 1.0:
             raise ValueError(f"teacher.scale must be in [0.1, 1], got {self.scale}")
         if self.checkpoint and self.init:

@@ -200,6 +200,9 @@ class Run:
             teacher = f"trained in the run, {cfg.get('teacher', {}).get('steps', '?')} steps"
             if t_init := cfg.get("teacher", {}).get("init", ""):
                 teacher += f" on from {_last_parts(t_init)}"
+        built = self.teacher_config()
+        if teacher and built.encoder != TeacherConfig().encoder:
+            teacher += f" ({built.encoder}{' from ImageNet' if built.pretrained else ''})"
         samples, hours = float(trained["samples"]), trained["seconds"] / 3600
         init = str(cfg.get("train", {}).get("init", ""))
         start = _last_parts(init)
@@ -299,24 +302,32 @@ class Run:
         src = Path(checkpoint)
         return cls(src.parent) if src.name == cls.TEACHER else cls(src)
 
+    def teacher_holder(self) -> Run | None:
+        """The run whose ``teacher/teacher.pt`` is this run's teacher: itself, else the run its
+        config's ``teacher.checkpoint`` names (a run that trained with a teacher from elsewhere);
+        None when neither holds one."""
+        if self.teacher_path.is_file():
+            return self
+        named = self.config().get("teacher", {}).get("checkpoint", "")
+        src = Run.of_teacher(named) if named else None
+        if src is None or src.path.resolve() == self.path.resolve() or not src.teacher_path.is_file():
+            return None
+        return src
+
     def load_teacher_state(self) -> dict[str, torch.Tensor] | None:
-        """The teacher's weights: the run's own, else those of the run its config's
-        ``teacher.checkpoint`` names (a run that trained with a teacher from elsewhere); None if it
-        has none. Checked against the sha256 the holding run's ``checkpoint.json`` records for it,
-        where it records one (shipped runs do)."""
-        if not self.teacher_path.is_file():
-            named = self.config().get("teacher", {}).get("checkpoint", "")
-            src = Run.of_teacher(named) if named else None
-            if src is None or src.path.resolve() == self.path.resolve() or not src.teacher_path.is_file():
-                return None
-            return src.load_teacher_state()
-        data = self.teacher_path.read_bytes()
-        if self.checkpoint_path.is_file():
-            want = self.info().get("teacher_sha256")
+        """The teacher's weights (from :meth:`teacher_holder`); None if it has none. Checked against
+        the sha256 the holding run's ``checkpoint.json`` records for it, where it records one
+        (shipped runs do)."""
+        holder = self.teacher_holder()
+        if holder is None:
+            return None
+        data = holder.teacher_path.read_bytes()
+        if holder.checkpoint_path.is_file():
+            want = holder.info().get("teacher_sha256")
             if want and hashlib.sha256(data).hexdigest() != want:
-                raise RunError(f"{self.teacher_path}: the teacher does not match {self.CHECKPOINT} (sha256 differs): "
-                               "the file is damaged or was replaced")
-        return _from_bytes(data, self.teacher_path)
+                raise RunError(f"{holder.teacher_path}: the teacher does not match {holder.CHECKPOINT} (sha256 "
+                               "differs): the file is damaged or was replaced")
+        return _from_bytes(data, holder.teacher_path)
 
     def teacher_config(self) -> TeacherConfig:
         """How the run's teacher is built and fed: its config's ``teacher`` section, with the
@@ -325,11 +336,12 @@ class Run:
         return TeacherConfig(**{k: v for k, v in self.config().get("teacher", {}).items() if k in known})
 
     def load_teacher(self) -> torch.nn.Module | None:
-        """The run's segmentation teacher in eval mode, built as its config says (None without one)."""
+        """The run's segmentation teacher in eval mode, built as the config of the run that holds it
+        says (None without one)."""
         state = self.load_teacher_state()
         if state is None:
             return None
-        t = self.teacher_config()
+        t = self.teacher_holder().teacher_config()
         teacher = create_teacher(t.encoder, t.width)
         teacher.load_state_dict(state)
         return teacher.eval()

@@ -9,6 +9,7 @@ trained on the dataset's metric depth so the fused model can report distances). 
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 import time
@@ -268,21 +269,33 @@ def teacher_miou(teacher: torch.nn.Module, cache: SampleCache, scale: float, fra
     return out
 
 
+def with_teachers_build(cfg: Config) -> Config:
+    """``cfg`` with a ``teacher.checkpoint``'s build (encoder, its start, width, input scale) as that
+    teacher was trained, so the run's config says what its teacher is and the teacher sees frames as it
+    learnt to."""
+    t = cfg.teacher
+    if not t.checkpoint:
+        return cfg
+    held = Run.of_teacher(t.checkpoint).teacher_config()
+    return dataclasses.replace(cfg, teacher=dataclasses.replace(t, encoder=held.encoder, pretrained=held.pretrained,
+                                                                width=held.width, scale=held.scale))
+
+
 def _teacher_to_start(cfg: Config, run: Run) -> tuple[torch.nn.Module, bool]:
     """The teacher to start from, and whether it is finished: ``teacher.checkpoint``'s, or the run's own
     finished one; else a new one (from ``teacher.init``'s weights when given) to train."""
     t = cfg.teacher
-    teacher = create_teacher(t.encoder, t.width)
     if t.checkpoint:
-        state = Run.of_teacher(t.checkpoint).load_teacher_state()
-        if state is None:
+        teacher = Run.of_teacher(t.checkpoint).load_teacher()
+        if teacher is None:
             raise FileNotFoundError(f"teacher.checkpoint {t.checkpoint}: no teacher/teacher.pt there")
-        teacher.load_state_dict(state)
         return teacher, True
     state = run.load_teacher_state()
     if state is not None:
+        teacher = create_teacher(t.encoder, t.width)
         teacher.load_state_dict(state)
         return teacher, True
+    teacher = create_teacher(t.encoder, t.width, pretrained=t.pretrained and not t.init)
     if t.init:
         state = Run.of_teacher(t.init).load_teacher_state()
         if state is None:
@@ -315,7 +328,8 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
     teacher.to(dev).to(memory_format=torch.channels_last if cl else torch.contiguous_format)
     dtype = autocast_dtype(cfg, dev)
     model = torch.nn.parallel.DistributedDataParallel(teacher) if world > 1 else teacher
-    optim = Optimizer(model.parameters(), t.lr, t.steps, cfg.train)
+    optim = Optimizer(param_groups(teacher, teacher.encoder, t.lr, t.encoder_lr if t.pretrained else 1.0), t.lr,
+                      t.steps, cfg.train)
     start, seconds_before = 0, 0.0
     if saved is not None:
         optim.load_state_dict(saved)
@@ -456,10 +470,10 @@ def validate(model: torch.nn.Module, cache: SampleCache, frames: int, dtype: tor
             "road_abs_rel": road_err / road_n if road_n else float("nan")}
 
 
-def param_groups(model: torch.nn.Module, lr: float, encoder_share: float) -> list[dict]:
-    """Adam's parameter groups: the frame encoder of a shared-encoder model at ``encoder_share`` of
-    ``lr`` (a pretrained encoder keeps more of what it learnt on real photographs), the rest at ``lr``."""
-    encoder = getattr(model, "frame_encoder", None)
+def param_groups(model: torch.nn.Module, encoder: torch.nn.Module | None, lr: float,
+                 encoder_share: float) -> list[dict]:
+    """Adam's parameter groups: ``model``'s ``encoder`` at ``encoder_share`` of ``lr`` (a pretrained
+    encoder keeps more of what it learnt on real photographs), the rest at ``lr``."""
     if encoder is None or encoder_share == 1.0:
         return [{"params": list(model.parameters())}]
     own = {id(p) for p in encoder.parameters()}
@@ -477,6 +491,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     checkpoint to resume from; the learning-rate schedule spans ``train.steps``, whatever the pieces."""
     piece_start = time.perf_counter()
     rank, world = _dist()
+    cfg = with_teachers_build(cfg)
     run, torn, state = _open_run(cfg, out, resume, force, rank, world)
     data = datasets(cfg, data_dir)
     if rank == 0:
@@ -527,6 +542,29 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     if world > 1:
         dist.barrier()
     return summary
+
+
+def train_teacher_alone(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = False,
+                        progress: bool = True, force: bool = False) -> dict[str, Any]:
+    """Train the segmentation teacher alone into ``out`` (``teacher/teacher.pt``, ``config.json`` and
+    the history), for later runs to distil from with ``teacher.checkpoint``: no student, no teacher
+    features cached. ``resume`` goes on from the teacher's last state; a teacher trained already is
+    left as it is."""
+    if cfg.teacher.checkpoint:
+        raise ValueError("training a teacher alone: teacher.checkpoint names one trained already")
+    rank, world = _dist()
+    run, torn, _ = _open_run(cfg, out, resume, force, rank, world)
+    data = datasets(cfg, data_dir)
+    if rank == 0:
+        run.write_config(cfg.to_dict())
+    show = progress and rank == 0
+    cache = sample_cache(cfg, data.train_ds, show, "caching training samples")
+    val = sample_cache(cfg, data.val_ds, show, "caching validation samples") \
+        if data.val_ds is not None and cfg.data.cache != "off" else None
+    train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val, resume=resume)
+    return {"teacher_steps": cfg.teacher.steps, "teacher": str(run.teacher_path),
+            "skipped_clips": [f"{name}: {why}" for name, why in data.skipped],
+            "removed_torn_writes": [str(t) for t in torn]}
 
 
 def _caches_and_teacher(cfg: Config, data, run: Run, rank: int, world: int, progress: bool, resume: bool,
@@ -650,7 +688,8 @@ def _model_and_optimizer(cfg: Config, state: dict[str, Any] | None,
     if EncoderNorm(cfg.train.encoder_bn) is EncoderNorm.FROZEN:
         _freeze_encoder_stats(model, cfg, spec.pretrained)
     model.to(dev)
-    optim = Optimizer(param_groups(model, cfg.train.lr, cfg.train.encoder_lr if spec.pretrained else 1.0),
+    optim = Optimizer(param_groups(model, getattr(model, "frame_encoder", None), cfg.train.lr,
+                                   cfg.train.encoder_lr if spec.pretrained else 1.0),
                       cfg.train.lr, cfg.train.steps, cfg.train)
     if state is not None:
         model.load_state_dict(state["weights"])

