@@ -32,6 +32,7 @@ import torch
 from tqdm import tqdm
 
 from bsn_edge import semantics as sm
+from bsn_edge.data.camera_look import CameraLook, camera_look, draw_camera_look
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD, BlindSpotDataset
 from bsn_edge.data.guessed_camera import ClipCamera
 from bsn_edge.data.repaint import Repaint, SeeThrough, draw_repaint, draw_see_through, repaint, see_through
@@ -199,11 +200,11 @@ class SampleCache:
 
     def images(self, idx: np.ndarray, flip: np.ndarray, gain: np.ndarray, bias: np.ndarray,
                paints: Sequence[Repaint | None] = (), semantic: torch.Tensor | None = None,
-               throughs: Sequence[SeeThrough | None] = ()) -> torch.Tensor:
+               throughs: Sequence[SeeThrough | None] = (), looks: Sequence[CameraLook | None] = ()) -> torch.Tensor:
         """Normalised RGB ``[B, 3, H, W]`` of samples ``idx``, flipped where ``flip``, with
-        ``rgb * gain + bias`` clipped to [0, 1] and the objects of ``semantic`` (as flipped) repainted
-        by ``paints`` and seen through by ``throughs`` when given (the dataset's augmentation, as a
-        batch)."""
+        ``rgb * gain + bias`` clipped to [0, 1], the objects of ``semantic`` (as flipped) repainted
+        by ``paints`` and seen through by ``throughs``, then each frame through its camera of ``looks``,
+        when given (the dataset's augmentation, as a batch)."""
         bgr = np.asarray(self.arrays["rgb"][idx])
         bgr[flip] = bgr[flip][:, :, ::-1]
         x = torch.from_numpy(bgr).flip(-1).permute(0, 3, 1, 2).float().div_(255.0)   # RGB, [B, 3, H, W]
@@ -217,6 +218,8 @@ class SampleCache:
             x = repaint(x, semantic, paints)
         if any(t is not None for t in throughs):
             x = see_through(x, semantic, throughs)
+        if any(look is not None for look in looks):
+            x = camera_look(x, looks)
         mean = torch.from_numpy(IMAGENET_MEAN)[None, :, None, None]
         std = torch.from_numpy(IMAGENET_STD)[None, :, None, None]
         return (x - mean) / std
@@ -228,7 +231,8 @@ class SampleCache:
             yield self.batch([(int(k), 0) for k in idx[lo:lo + batch]], augment=False, seed=0)
 
     def batch(self, picks: Sequence[tuple[int, int]], augment: bool, seed: int,
-              object_repaint: float = 0.0, object_see_through: float = 0.0) -> dict[str, torch.Tensor]:
+              object_repaint: float = 0.0, object_see_through: float = 0.0,
+              camera_look: float = 0.0) -> dict[str, torch.Tensor]:
         """The batch of ``picks`` (``(sample, draw)`` pairs, as the trainer's stream gives them), in
         the layout of :class:`BlindSpotDataset` items stacked, plus ``teacher_grid`` when a teacher
         is attached. Augmentation draws exactly what the dataset draws for the same ``draw``."""
@@ -237,6 +241,7 @@ class SampleCache:
         flip, gain, bias = np.zeros(n, bool), np.ones(n), np.zeros(n)
         paints: list[Repaint | None] = [None] * n
         throughs: list[SeeThrough | None] = [None] * n
+        looks: list[CameraLook | None] = [None] * n
         if augment:
             size = tuple(self.arrays["rgb"].shape[1:3])
             for r, (_, draw) in enumerate(picks):
@@ -245,6 +250,7 @@ class SampleCache:
                 gain[r], bias[r] = rng.uniform(0.8, 1.2), rng.uniform(-0.08, 0.08)
                 paints[r] = draw_repaint(rng, object_repaint, size)
                 throughs[r] = draw_see_through(rng, object_see_through, size)
+                looks[r] = draw_camera_look(rng, camera_look, size)
         order = np.argsort(idx, kind="stable")                  # memory maps read faster in order
         back = np.empty(n, int)
         back[order] = np.arange(n)
@@ -258,7 +264,7 @@ class SampleCache:
         sem = gather("semantic")
         masks = gather("masks")
         out = {
-            "image": self.images(idx, flip, gain, bias, paints, sem, throughs),
+            "image": self.images(idx, flip, gain, bias, paints, sem, throughs, looks),
             "depth": gather("depth")[:, None].float().div_(DEPTH_SCALE),
             "semantic": sem.long(),
             "blindspot": (masks & BLINDSPOT_BIT).bool()[:, None].float(),

@@ -35,11 +35,11 @@ class CameraMix:
                         bool)
 
     def batch(self, picks: Sequence[tuple[int, int]], augment: bool, seed: int, object_repaint: float = 0.0,
-              object_see_through: float = 0.0) -> dict[str, torch.Tensor]:
+              object_see_through: float = 0.0, camera_look: float = 0.0) -> dict[str, torch.Tensor]:
         """As :meth:`SampleCache.batch`, each sample from the cache its draw chose (the own camera's
         without ``augment``), and ``guessed`` ([N] bool) saying which came from the guessed one."""
         use = self.guessed_picks(picks, seed) if augment else np.zeros(len(picks), bool)
-        args = (augment, seed, object_repaint, object_see_through)
+        args = (augment, seed, object_repaint, object_see_through, camera_look)
         if not use.any():
             out = self.own.batch(picks, *args)
         elif use.all():

@@ -14,6 +14,7 @@ from torch.utils.data import Dataset
 from bsn_edge import semantics as sm
 from bsn_edge.calibration.camera_file import clip_camera
 from bsn_edge.camera import Intrinsics
+from bsn_edge.data.camera_look import camera_look, draw_camera_look
 from bsn_edge.data.guessed_camera import ClipCamera, Guess, guessed_camera
 from bsn_edge.data.repaint import draw_repaint, draw_see_through, repaint, see_through
 from bsn_edge.labels.generator import label_camera
@@ -142,15 +143,18 @@ class BlindSpotDataset(Dataset):
     the visibility mask is 0. ``augment`` flips horizontally (everything together, so left stays
     left of right in image, labels, depth and semantics alike), jitters brightness/contrast and
     repaints the vehicles and people of a share ``object_repaint`` of the samples
-    (:mod:`~bsn_edge.data.repaint`). ``clip_camera`` GUESSED warps every clip with the camera a user
+    (:mod:`~bsn_edge.data.repaint`) and shows a share ``camera_look`` through a camera of their own
+    (:mod:`~bsn_edge.data.camera_look`). ``clip_camera`` GUESSED warps every clip with the camera a user
     without a camera file gets instead of its own (:mod:`~bsn_edge.data.guessed_camera`).
     """
 
     def __init__(self, clips: list[Clip], size: tuple[int, int], augment: bool = False,
                  label_name: str = "T5s", seed: int = 0, camera: Intrinsics | None = None,
                  mounting: Mounting | None = None, object_repaint: float = 0.0,
-                 object_see_through: float = 0.0, clip_camera: ClipCamera = ClipCamera.OWN) -> None:
-        for name, share in (("object_repaint", object_repaint), ("object_see_through", object_see_through)):
+                 object_see_through: float = 0.0, clip_camera: ClipCamera = ClipCamera.OWN,
+                 camera_look: float = 0.0) -> None:
+        for name, share in (("object_repaint", object_repaint), ("object_see_through", object_see_through),
+                            ("camera_look", camera_look)):
             if not 0.0 <= share <= 1.0:
                 raise ValueError(f"{name} is a share of samples in [0, 1], got {share}")
         self.items = [(c, f) for c in clips for f in c.frames]
@@ -166,6 +170,7 @@ class BlindSpotDataset(Dataset):
         self.augment = augment
         self.object_repaint = object_repaint
         self.object_see_through = object_see_through
+        self.camera_look = camera_look
         self.label_name = label_name
         self.seed = seed
         self.clip_camera = ClipCamera(clip_camera)
@@ -219,13 +224,16 @@ class BlindSpotDataset(Dataset):
             rgb = np.clip(rgb * rng.uniform(0.8, 1.2) + rng.uniform(-0.08, 0.08), 0, 1)
             paint = draw_repaint(rng, self.object_repaint, rgb.shape[:2])
             through = draw_see_through(rng, self.object_see_through, rgb.shape[:2])
-            if paint is not None or through is not None:
+            look = draw_camera_look(rng, self.camera_look, rgb.shape[:2])
+            if paint is not None or through is not None or look is not None:
                 x = torch.from_numpy(np.ascontiguousarray(rgb.transpose(2, 0, 1)))[None]
                 sem_t = torch.from_numpy(np.ascontiguousarray(a["semantic"]))[None]
                 if paint is not None:
                     x = repaint(x, sem_t, [paint])
                 if through is not None:
                     x = see_through(x, sem_t, [through])
+                if look is not None:
+                    x = camera_look(x, [look])
                 rgb = x[0].numpy().transpose(1, 2, 0)
         img = (rgb - IMAGENET_MEAN) / IMAGENET_STD
         sem = a["semantic"].astype(np.int64)

@@ -48,6 +48,9 @@ class DataConfig:
     object_repaint: float = 0.0
     # share of training samples that show the scene through their vehicles and people (glass)
     object_see_through: float = 0.0
+    # share of training samples shown through a camera of their own: white balance, contrast,
+    # saturation, tone curve, blur and noise (bsn_edge.data.camera_look)
+    camera_look: float = 0.0
     # share of training samples warped with the camera a user without a camera file gets instead of
     # the clip's own (bsn_edge.data.guessed_camera: half as bsn-run starts, half midway through
     # online calibration); they come from a second sample cache, so the cache cannot be "off"
@@ -60,7 +63,7 @@ class DataConfig:
         if self.guessed_depth not in {g.value for g in GuessedDepth}:
             raise ValueError(f"data.guessed_depth must be one of {', '.join(g.value for g in GuessedDepth)}, "
                              f"got {self.guessed_depth!r}")
-        for name in ("object_repaint", "object_see_through", "guessed_camera"):
+        for name in ("object_repaint", "object_see_through", "camera_look", "guessed_camera"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"data.{name} is a share of samples in [0, 1], got {getattr(self, name)}")
         if len(self.size) != 2 or min(self.size) < 32 or any(s % 32 for s in self.size):

@@ -111,7 +111,8 @@ def training_batches(ds, cache: SampleCache | None, batch: int, world: int, rank
         return batch_stream(ds, batch, world, rank, seed, workers, start, device)
     stream = BatchStream(len(cache), batch, seed, start, world, rank)
     dev = device or torch.device("cpu")
-    return (_to(cache.batch(picks, ds.augment, ds.seed, ds.object_repaint, ds.object_see_through), dev)
+    return (_to(cache.batch(picks, ds.augment, ds.seed, ds.object_repaint, ds.object_see_through, ds.camera_look),
+                dev)
             for picks in stream)
 
 
@@ -202,7 +203,8 @@ def datasets(cfg: Config, data_dir: str | Path) -> Datasets:
     def train_ds(cameras: ClipCamera) -> BlindSpotDataset:
         return BlindSpotDataset(train, cfg.data.size, augment=True, label_name=cfg.data.label, camera=camera,
                                 mounting=mounting, seed=cfg.train.seed, object_repaint=cfg.data.object_repaint,
-                                object_see_through=cfg.data.object_see_through, clip_camera=cameras)
+                                object_see_through=cfg.data.object_see_through, clip_camera=cameras,
+                                camera_look=cfg.data.camera_look)
 
     def val_ds(cameras: ClipCamera) -> BlindSpotDataset | None:
         return BlindSpotDataset(val, cfg.data.size, label_name=cfg.data.label, camera=camera, mounting=mounting,

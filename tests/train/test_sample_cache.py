@@ -85,6 +85,22 @@ def test_see_through_batches_are_the_datasets_and_touch_only_vehicles_and_people
         cache.images(np.array([0]), np.zeros(1, bool), np.ones(1), np.zeros(1), throughs=[through])
 
 
+def test_camera_look_batches_are_the_datasets_and_leave_the_labels(clips):
+    kw = dict(augment=True, label_name="T1s", seed=3)
+    ds = BlindSpotDataset(clips, (64, 128), object_repaint=0.5, camera_look=0.7, **kw)
+    cache = SampleCache.for_dataset(ds, None)
+    picks = [(k, 900 + k) for k in range(0, len(ds), max(1, len(ds) // 6))]
+    got = cache.batch(picks, augment=True, seed=3, object_repaint=0.5, camera_look=0.7)
+    before = cache.batch(picks, augment=True, seed=3, object_repaint=0.5)
+    changed = 0
+    for r, (k, draw) in enumerate(picks):
+        torch.testing.assert_close(got["image"][r], ds[(k, draw)]["image"], atol=1e-5, rtol=0)
+        changed += int(not torch.equal(got["image"][r], before["image"][r]))
+        for name in ("depth", "semantic", "blindspot", "visibility"):
+            assert torch.equal(got[name][r], before[name][r]), name
+    assert changed >= 2, "a share of 0.7 must show some samples through a camera of their own"
+
+
 def test_a_disk_cache_is_reused_and_a_relabelled_clip_makes_a_new_one(clips, tmp_path):
     ds = BlindSpotDataset(clips[:1], (64, 128), label_name="T1s")
     first = SampleCache.for_dataset(ds, tmp_path)
