@@ -272,13 +272,13 @@ def teacher_miou(teacher: torch.nn.Module, cache: SampleCache, scale: float, fra
 
 
 def with_teachers_build(cfg: Config) -> Config:
-    """``cfg`` with a ``teacher.checkpoint``'s build (encoder, its start, width, input scale) as that
-    teacher was trained, so the run's config says what its teacher is and the teacher sees frames as it
-    learnt to."""
+    """``cfg`` with the build (encoder, its start, width, input scale) of the teacher that
+    ``teacher.checkpoint`` or ``teacher.init`` names, as that teacher was trained, so the run's config
+    says what its teacher is and the teacher sees frames as it learnt to."""
     t = cfg.teacher
-    if not t.checkpoint:
+    if not (t.checkpoint or t.init):
         return cfg
-    held = Run.of_teacher(t.checkpoint).teacher_config()
+    held = Run.of_teacher(t.checkpoint or t.init).teacher_config()
     return dataclasses.replace(cfg, teacher=dataclasses.replace(t, encoder=held.encoder, pretrained=held.pretrained,
                                                                 width=held.width, scale=held.scale))
 

@@ -6,15 +6,17 @@
 # Leg L1F, the same with the encoder's batch-norm statistics frozen at ImageNet's, shipped (fp16) into
 # the checkout when it ends:
 #   RUN=lite1f BN=frozen SHIP=/path/to/bsn-edge/models/campaign/lite1f REPO=... .../lite_leg1.sh
-# Leg L1T, the real-photo bundle: the teacher on Lite0 from ImageNet (teacher_lite0.sh) and half the
-# samples' vehicles and people repainted and shown see-through (as leg S5):
-#   RUN=lite1t TEACHER=$PWD/teacher_lite0 OBJECTS=0.5 SEED=7 SHIP=... REPO=... .../lite_leg1.sh
+# Leg L1T, the real-photo bundle: the teacher on Lite0 from ImageNet (teacher_lite0.sh), half the
+# samples' vehicles and people repainted and shown see-through (as leg S5) and half the samples
+# through a camera of their own (data.camera_look):
+#   RUN=lite1t TEACHER=$PWD/teacher_lite0 OBJECTS=0.5 LOOK=0.5 SEED=7 SHIP=... REPO=... .../lite_leg1.sh
 set -euo pipefail
 REPO=${REPO:?set REPO to the checkout}
 RUN=${RUN:-lite1}               # the run's folder here
 BN=${BN:-batch}                 # train.encoder_bn: batch or frozen
 TEACHER=${TEACHER:-$REPO/models/default}   # teacher.checkpoint: the run whose teacher B distils from
 OBJECTS=${OBJECTS:-0}           # data.object_repaint and data.object_see_through: shares of samples
+LOOK=${LOOK:-0}                 # data.camera_look: share of samples
 SEED=${SEED:-5}                 # train.seed
 SHIP=${SHIP:-}                  # where the finished run is shipped (fp16), if anywhere
 BIN=$REPO/.venv/bin
@@ -28,7 +30,7 @@ if [ -f "$RUN/state.pt" ]; then resume=(--resume); elif [ -d "$RUN" ]; then resu
 "$BIN/bsn-train" --config "$REPO/configs/campaign.toml" --data data --out "$RUN" "${resume[@]}" \
   --set 'model.name="lite-light"' --set "teacher.checkpoint=\"$TEACHER\"" \
   --set train.encoder_lr=0.1 --set "train.encoder_bn=\"$BN\"" --set "train.seed=$SEED" \
-  --set "data.object_repaint=$OBJECTS" --set "data.object_see_through=$OBJECTS"
+  --set "data.object_repaint=$OBJECTS" --set "data.object_see_through=$OBJECTS" --set "data.camera_look=$LOOK"
 if [ -n "$SHIP" ] && [ ! -e "$SHIP" ]; then
   "$BIN/python" -c "import sys; from bsn_edge.train.run import Run; Run(sys.argv[1]).ship(sys.argv[2])" "$RUN" "$SHIP"
   echo "shipped $RUN to $SHIP"

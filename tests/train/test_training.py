@@ -667,11 +667,17 @@ def test_a_student_of_another_runs_teacher_says_what_that_teacher_is(data, tmp_p
                                                                                    bool(pretrained))
     origin = " from ImageNet" if pretrained else ""
     assert Run(second).card().training.teacher == f"{tmp_path.name}/a (efficientnet-lite0{origin})"
+    # a teacher trained on from it is built as it was
+    third = tmp_path / "c"
+    train(load_config(SMOKE, [*sets, f"teacher.init=\"{first}\""]), data, third, progress=False)
+    assert Run(third).config()["teacher"]["encoder"] == "efficientnet-lite0"
+    assert Run(third).card().training.teacher == (f"trained in the run, 1 steps on from {tmp_path.name}/a "
+                                                   f"(efficientnet-lite0{origin})")
     assert isinstance(Run(second).load_teacher().encoder, EfficientNetLite0)
     shipped = Run(second).ship(tmp_path / "shipped")
     assert shipped.config()["teacher"]["checkpoint"] == "" and isinstance(shipped.load_teacher().encoder,
                                                                            EfficientNetLite0)
-    assert Run(tmp_path / "c").teacher_holder() is None
+    assert Run(tmp_path / "d").teacher_holder() is None
 
 
 TEACHER = ["--config", SMOKE, "--quiet", "--set", "data.label=\"T2s\"", "--set", "train.distill_weight=0.5",
