@@ -6,10 +6,10 @@
 # Leg L1F, the same with the encoder's batch-norm statistics frozen at ImageNet's, shipped (fp16) into
 # the checkout when it ends:
 #   RUN=lite1f BN=frozen SHIP=/path/to/bsn-edge/models/campaign/lite1f REPO=... .../lite_leg1.sh
-# Leg L1T, the real-photo bundle: the teacher on Lite0 from ImageNet (teacher_lite0.sh), half the
-# samples' vehicles and people repainted and shown see-through (as leg S5) and half the samples
-# through a camera of their own (data.camera_look):
-#   RUN=lite1t TEACHER=$PWD/teacher_lite0 OBJECTS=0.5 LOOK=0.5 SEED=7 SHIP=... REPO=... .../lite_leg1.sh
+# Leg L1T, L1 with domain randomisation: half the samples' vehicles and people repainted and shown
+# see-through (as leg S5) and half the samples through a camera of their own (data.camera_look):
+#   RUN=lite1t OBJECTS=0.5 LOOK=0.5 SHIP=/path/to/bsn-edge/models/campaign/lite1t REPO=... .../lite_leg1.sh
+# TEACHER=$PWD/teacher_lite0 distils from the teacher on Lite0 (teacher_lite0.sh) instead of the default's.
 set -euo pipefail
 REPO=${REPO:?set REPO to the checkout}
 RUN=${RUN:-lite1}               # the run's folder here
