@@ -159,10 +159,16 @@ def panel(image: np.ndarray, mask: np.ndarray, rows: list[dict[str, Any]], title
     """The frame with its blind spots in red and each box: green marked, orange missed, blue open road."""
     img = image.copy()
     img[mask] = (0.45 * img[mask] + 0.55 * np.array([0, 0, 255])).astype(np.uint8)
+    return boxed(img, rows, "marked", title)
+
+
+def boxed(img: np.ndarray, rows: list[dict[str, Any]], hit: str, title: str) -> np.ndarray:
+    """``img`` (drawn on) with each box of ``rows``: green where ``hit`` is true, orange where not,
+    blue open road; resized to the report's width and titled."""
     for r in rows:
         x0, y0, x1, y1 = r["box"]
-        colour = (255, 128, 0) if r["class"] == "open_road" else (0, 200, 0) if r["marked"] else (0, 140, 255)
-        cv2.rectangle(img, (x0, y0), (x1 - 1, y1 - 1), colour, max(1, image.shape[1] // 400))
+        colour = (255, 128, 0) if r["class"] == "open_road" else (0, 200, 0) if r[hit] else (0, 140, 255)
+        cv2.rectangle(img, (x0, y0), (x1 - 1, y1 - 1), colour, max(1, img.shape[1] // 400))
     s = PANEL_WIDTH / img.shape[1]
     img = cv2.resize(img, (PANEL_WIDTH, round(img.shape[0] * s)), interpolation=cv2.INTER_AREA)
     cv2.putText(img, title, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 3, cv2.LINE_AA)
@@ -170,7 +176,7 @@ def panel(image: np.ndarray, mask: np.ndarray, rows: list[dict[str, Any]], title
     return img
 
 
-def _frac(pair: list[int]) -> str:
+def frac(pair: list[int]) -> str:
     return f"{pair[0]} of {pair[1]}" + (f" ({100 * pair[0] / pair[1]:.0f} %)" if pair[1] else "")
 
 
@@ -222,11 +228,11 @@ def main(argv: list[str] | None = None) -> int:
         s = summary(per_model[name])
         result["models"][name] = {"threshold": engine.card.threshold, **s}
         g = s["groups"]
-        table.append(f"| {name} ({engine.card.threshold:.2f}) | {_frac(s['near'])} | {_frac(s['all'])} | "
-                     f"{_frac(g['vehicles']['near'])} / {_frac(g['vehicles']['all'])} | "
-                     f"{_frac(g['people']['near'])} / {_frac(g['people']['all'])} | "
-                     f"{_frac(g['cyclists']['near'])} / {_frac(g['cyclists']['all'])} | "
-                     f"{100 * s['open_road_flagged']:.1f} % ({_frac(s['open_road_boxes_over_2pct'])}) |")
+        table.append(f"| {name} ({engine.card.threshold:.2f}) | {frac(s['near'])} | {frac(s['all'])} | "
+                     f"{frac(g['vehicles']['near'])} / {frac(g['vehicles']['all'])} | "
+                     f"{frac(g['people']['near'])} / {frac(g['people']['all'])} | "
+                     f"{frac(g['cyclists']['near'])} / {frac(g['cyclists']['all'])} | "
+                     f"{100 * s['open_road_flagged']:.1f} % ({frac(s['open_road_boxes_over_2pct'])}) |")
     withheld = (" Only the frames that have a camera file are scored, each model with it and without it "
                 "(as `bsn-run` sees a camera nobody calibrated: the model camera's intrinsics rescaled, online "
                 "calibration over the frames fed, the hood looked for).") if args.withhold_camera else ""

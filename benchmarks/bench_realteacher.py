@@ -31,8 +31,9 @@ from benchmarks.bench_realboxes import (
     GROUPS,
     MARKED_SHARE,
     OCCLUDERS,
-    PANEL_WIDTH,
     Frame,
+    boxed,
+    frac,
     load_frames,
     model_frame,
 )
@@ -125,20 +126,7 @@ def summary(rows: list[dict[str, Any]], elsewhere: list[tuple[int, int]]) -> dic
 def panel(image: np.ndarray, colour: np.ndarray, rows: list[dict[str, Any]], title: str) -> np.ndarray:
     """The frame under the teacher's labels (half and half) with each box: green seen, orange missed,
     blue open road."""
-    img = cv2.addWeighted(image, 0.5, colour, 0.5, 0.0)
-    for r in rows:
-        x0, y0, x1, y1 = r["box"]
-        c = (255, 128, 0) if r["class"] == "open_road" else (0, 200, 0) if r["seen"] else (0, 140, 255)
-        cv2.rectangle(img, (x0, y0), (x1 - 1, y1 - 1), c, max(1, image.shape[1] // 400))
-    s = PANEL_WIDTH / img.shape[1]
-    img = cv2.resize(img, (PANEL_WIDTH, round(img.shape[0] * s)), interpolation=cv2.INTER_AREA)
-    for width, ink in ((3, (0, 0, 0)), (1, (255, 255, 255))):
-        cv2.putText(img, title, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, ink, width, cv2.LINE_AA)
-    return img
-
-
-def _frac(pair: list[int]) -> str:
-    return f"{pair[0]} of {pair[1]}" + (f" ({100 * pair[0] / pair[1]:.0f} %)" if pair[1] else "")
+    return boxed(cv2.addWeighted(image, 0.5, colour, 0.5, 0.0), rows, "seen", title)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -191,11 +179,11 @@ def main(argv: list[str] | None = None) -> int:
         s = summary(per[name], elsewhere[name])
         result["teachers"][name] = {"encoder": encoder, "pretrained": pretrained, "scale": scale, **s}
         g = s["groups"]
-        table.append(f"| {name} ({encoder}{', ImageNet' if pretrained else ''}) | {_frac(s['near'])} | "
-                     f"{_frac(s['all'])} | {100 * s['near_mean_share']:.0f} % / {100 * s['all_mean_share']:.0f} % | "
-                     f"{_frac(g['vehicles']['near'])} / {_frac(g['vehicles']['all'])} | "
-                     f"{_frac(g['people']['near'])} / {_frac(g['people']['all'])} | "
-                     f"{_frac(g['cyclists']['near'])} / {_frac(g['cyclists']['all'])} | "
+        table.append(f"| {name} ({encoder}{', ImageNet' if pretrained else ''}) | {frac(s['near'])} | "
+                     f"{frac(s['all'])} | {100 * s['near_mean_share']:.0f} % / {100 * s['all_mean_share']:.0f} % | "
+                     f"{frac(g['vehicles']['near'])} / {frac(g['vehicles']['all'])} | "
+                     f"{frac(g['people']['near'])} / {frac(g['people']['all'])} | "
+                     f"{frac(g['cyclists']['near'])} / {frac(g['cyclists']['all'])} | "
                      f"{100 * s['open_road_labelled_road']:.1f} % | {100 * s['objects_outside_boxes']:.1f} % |")
     md = ["# Real occluders and road as the segmentation teachers label them", "",
           f"{len(frames)} real frames, the boxes of `realboxes` (`benchmarks/realboxes/boxes.json`). Each frame is "
