@@ -17,6 +17,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from bsn_edge.data.repaint import draw_share
+
 WHITE_BALANCE = (0.8, 1.25)   # per-channel gain range, about a neutral grey
 CONTRAST = (0.6, 1.4)         # scale of the distance from the frame's mean
 SATURATION = (0.3, 1.5)       # scale of the distance from the pixel's luma
@@ -42,7 +44,8 @@ class CameraLook:
 
     @classmethod
     def draw(cls, rng: np.random.Generator, size: tuple[int, int]) -> CameraLook:
-        """A camera for an image of ``size`` (H, W), drawn from ``rng`` in a fixed order."""
+        """A camera for an image of ``size`` (H, W; every image gets the same kind of camera), drawn
+        from ``rng`` in a fixed order."""
         wb = tuple(float(g) for g in rng.uniform(*WHITE_BALANCE, 3))
         return cls(wb, float(rng.uniform(*CONTRAST)), float(rng.uniform(*SATURATION)), float(rng.uniform(*GAMMA)),
                    float(rng.uniform(*BLUR)), float(rng.uniform(*NOISE)), int(rng.integers(2**31 - 1)))
@@ -80,9 +83,7 @@ def gaussian_blur(img: torch.Tensor, sigma: float) -> torch.Tensor:
 def draw_camera_look(rng: np.random.Generator, share: float, size: tuple[int, int]) -> CameraLook | None:
     """With probability ``share`` a :class:`CameraLook`, else None; draws nothing when ``share`` is 0,
     so the rest of an augmentation stream is the same as without it."""
-    if share <= 0.0:
-        return None
-    return CameraLook.draw(rng, size) if rng.random() < share else None
+    return draw_share(CameraLook, rng, share, size)
 
 
 def camera_look(rgb: torch.Tensor, looks: Sequence[CameraLook | None]) -> torch.Tensor:

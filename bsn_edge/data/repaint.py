@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Protocol, TypeVar
 
 import numpy as np
 import torch
@@ -97,10 +97,17 @@ class SeeThrough:
         return img * (1.0 - alpha) + shown * alpha
 
 
-Look = TypeVar("Look", Repaint, SeeThrough)
+Look = TypeVar("Look", bound="Drawable")
 
 
-def _draw(kind: type[Look], rng: np.random.Generator, share: float, size: tuple[int, int]) -> Look | None:
+class Drawable(Protocol):
+    """A sample's look, drawn for an image size from a generator in a fixed order."""
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, size: tuple[int, int]) -> Drawable: ...
+
+
+def draw_share(kind: type[Look], rng: np.random.Generator, share: float, size: tuple[int, int]) -> Look | None:
     """With probability ``share`` a ``kind`` drawn for ``size``, else None; draws nothing when ``share``
     is 0, so the rest of an augmentation stream is the same as without it."""
     if share <= 0.0:
@@ -111,12 +118,12 @@ def _draw(kind: type[Look], rng: np.random.Generator, share: float, size: tuple[
 
 def draw_repaint(rng: np.random.Generator, share: float, size: tuple[int, int]) -> Repaint | None:
     """With probability ``share`` a :class:`Repaint`, else None; draws nothing when ``share`` is 0."""
-    return _draw(Repaint, rng, share, size)
+    return draw_share(Repaint, rng, share, size)
 
 
 def draw_see_through(rng: np.random.Generator, share: float, size: tuple[int, int]) -> SeeThrough | None:
     """With probability ``share`` a :class:`SeeThrough`, else None; draws nothing when ``share`` is 0."""
-    return _draw(SeeThrough, rng, share, size)
+    return draw_share(SeeThrough, rng, share, size)
 
 
 def _on_objects(rgb: torch.Tensor, semantic: torch.Tensor, looks: Sequence[Repaint | SeeThrough | None],

@@ -319,15 +319,17 @@ class Run:
         the sha256 the holding run's ``checkpoint.json`` records for it, where it records one
         (shipped runs do)."""
         holder = self.teacher_holder()
-        if holder is None:
-            return None
-        data = holder.teacher_path.read_bytes()
-        if holder.checkpoint_path.is_file():
-            want = holder.info().get("teacher_sha256")
+        return None if holder is None else holder._own_teacher_state()
+
+    def _own_teacher_state(self) -> dict[str, torch.Tensor]:
+        """This run's own ``teacher/teacher.pt``, checked against its ``checkpoint.json``."""
+        data = self.teacher_path.read_bytes()
+        if self.checkpoint_path.is_file():
+            want = self.info().get("teacher_sha256")
             if want and hashlib.sha256(data).hexdigest() != want:
-                raise RunError(f"{holder.teacher_path}: the teacher does not match {holder.CHECKPOINT} (sha256 "
+                raise RunError(f"{self.teacher_path}: the teacher does not match {self.CHECKPOINT} (sha256 "
                                "differs): the file is damaged or was replaced")
-        return _from_bytes(data, holder.teacher_path)
+        return _from_bytes(data, self.teacher_path)
 
     def teacher_config(self) -> TeacherConfig:
         """How the run's teacher is built and fed: its config's ``teacher`` section, with the
@@ -338,10 +340,11 @@ class Run:
     def load_teacher(self) -> torch.nn.Module | None:
         """The run's segmentation teacher in eval mode, built as the config of the run that holds it
         says (None without one)."""
-        state = self.load_teacher_state()
-        if state is None:
+        holder = self.teacher_holder()
+        if holder is None:
             return None
-        t = self.teacher_holder().teacher_config()
+        state = holder._own_teacher_state()
+        t = holder.teacher_config()
         teacher = create_teacher(t.encoder, t.width)
         teacher.load_state_dict(state)
         return teacher.eval()
