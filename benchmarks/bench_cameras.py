@@ -5,8 +5,12 @@
 
 Each model runs as ``bsn-run`` runs it: every clip warped into the model's own camera (its card),
 uint8 frames into the int8 graph, its own threshold. IoU, recall and precision inside V against the
-T-frame labels (warped the same way), pooled over every labelled frame of the set's clips; and the
-depth's AbsRel on vehicle and on road pixels, 5-10, 10-20 and 20-40 m, against the clips' exact depth.
+T-frame labels (warped the same way), pooled over every labelled frame of the set's clips; the
+depth's AbsRel on vehicle and on road pixels, 5-10, 10-20 and 20-40 m, against the clips' exact depth;
+and the road users marked as ``realboxes`` counts them on real frames (at least 15 % of an occluder's
+box blind spot; boxes from the clips' own semantics and depth, ``benchmarks/road_users.py``), by
+kind and near (under 20 m) or all, for the model and for the labels themselves: what the T-frame
+definition marks is the most a model trained on it learns to mark.
 """
 
 from __future__ import annotations
@@ -18,7 +22,9 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.bench_realboxes import MARKED_SHARE, frac, score, summary
 from benchmarks.common import write_result
+from benchmarks.road_users import NEAR_M, road_users
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.metrics import Counts, DepthBins
 from bsn_edge.runtime.engine import Engine
@@ -35,6 +41,7 @@ def evaluate(engine: Engine, clips, label: str = "T5s") -> dict[str, Any]:
     counts = Counts()
     frames = 0
     pooled = {c: DepthBins(DEPTH_BINS_M) for c in DEPTH_CLASSES}
+    marked: dict[str, list[dict[str, Any]]] = {"model": [], "labels": []}
     for clip in clips:
         ds = BlindSpotDataset([clip], card.input_size, label_name=label, camera=card.camera, mounting=card.mounting)
         for k in range(len(ds)):
@@ -42,12 +49,16 @@ def evaluate(engine: Engine, clips, label: str = "T5s") -> dict[str, Any]:
             prob, depth = engine.infer(item["rgb"][None])
             counts.add(prob >= card.threshold, item["blindspot"] > 0, item["visibility"] > 0)
             pred, true, sem = np.asarray(depth).reshape(item["depth"].shape), item["depth"], item["semantic"]
+            boxes = road_users(sem, true)
+            marked["model"] += score(prob >= card.threshold, boxes)
+            marked["labels"] += score(item["blindspot"] > 0, boxes)
             for c, ids in DEPTH_CLASSES.items():
                 on = np.isin(sem, ids)
                 pooled[c].add(pred[on], true[on])
             frames += 1
     depth_abs_rel = {c: pooled[c].abs_rel() for c in DEPTH_CLASSES}
-    return {**counts.metrics(), "frames": frames, "depth_abs_rel": depth_abs_rel}
+    return {**counts.metrics(), "frames": frames, "depth_abs_rel": depth_abs_rel,
+            "road_users": {k: summary(v) for k, v in marked.items()}}
 
 
 def _fmt(v: float | None) -> str:
@@ -65,6 +76,20 @@ def _row(label: str, name: str, m: dict[str, Any]) -> str:
     return (f"| {label} | {name} | {m['frames']} | {m['iou']:.3f} | {m['recall']:.3f} | {m['precision']:.3f} | "
             + " / ".join(_fmt(v) for v in d["vehicle"].values()) + " | "
             + " / ".join(_fmt(v) for v in d["road"].values()) + " |")
+
+
+def _users_row(label: str, name: str, m: dict[str, Any]) -> list[str]:
+    if "road_users" not in m:          # a row kept from a report written before road users were counted
+        return []
+    rows = []
+    for who in ("model", "labels"):
+        s = m["road_users"][who]
+        g = s["groups"]
+        rows.append(f"| {label} | {name} | {who} | {frac(s['near'])} / {frac(s['all'])} | "
+                    f"{frac(g['vehicles']['near'])} / {frac(g['vehicles']['all'])} | "
+                    f"{frac(g['people']['near'])} / {frac(g['people']['all'])} | "
+                    f"{frac(g['cyclists']['near'])} / {frac(g['cyclists']['all'])} |")
+    return rows
 
 
 def kept_models(path: Path, sets: dict[str, list[str]], measured: list[str]) -> dict[str, Any]:
@@ -85,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--model", action="append", required=True, metavar="[NAME=]MODEL.onnx",
                    help="a model to evaluate, named in the report by NAME (default: its file name)")
     p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--name", default="cameras", help="the report's name in --out")
     p.add_argument("--keep", action="store_true",
                    help="keep the rows of models the existing report measured on the same sets (models whose "
                         "files are gone), first; a model named again is measured again")
@@ -99,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
               for spec in args.model]
     if args.keep:
         try:
-            result["models"] = kept_models(Path(args.out) / "cameras.json", result["sets"], [lb for lb, _ in labels])
+            result["models"] = kept_models(Path(args.out) / f"{args.name}.json", result["sets"],
+                                           [lb for lb, _ in labels])
         except ValueError as e:
             print(f"bench_cameras: {e}")
             return 2
@@ -111,8 +138,17 @@ def main(argv: list[str] | None = None) -> int:
                     "Inside V, at each model's own threshold, int8 through onnxruntime as bsn-run runs it.", "",
                     "| model | clips | frames | IoU | recall | precision | vehicle depth AbsRel 5-10 / 10-20 / 20-40 m "
                     "| road depth AbsRel |", "|---|---|---|---|---|---|---|---|", *rows, "",
-                    *[f"- {n}: {', '.join(c.path.name for c in cs)}" for n, cs in sets]])
-    write_result(args.out, "cameras", result, md)
+                    *[f"- {n}: {', '.join(c.path.name for c in cs)}" for n, cs in sets], "",
+                    "## Road users marked", "",
+                    f"As `realboxes` counts real occluders: marked when at least {100 * MARKED_SHARE:.0f} % of its box "
+                    "is blind spot (the model at its threshold; the labels as they are). Boxes from each frame's "
+                    "semantics and depth in the model camera (`benchmarks/road_users.py`); near: median depth under "
+                    f"{NEAR_M:.0f} m.", "",
+                    "| model | clips | marked by | near / all | vehicles near / all | people near / all | "
+                    "cyclists near / all |", "|---|---|---|---|---|---|---|",
+                    *[r for label, res in result["models"].items() for name, m in res.items()
+                      for r in _users_row(label, name, m)]])
+    write_result(args.out, args.name, result, md)
     print(md)
     return 0
 
