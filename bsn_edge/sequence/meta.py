@@ -13,6 +13,7 @@ from bsn_edge.fields import read_json_object
 from bsn_edge.sequence.images import atomic_write_bytes
 
 META_NAME = "meta.json"
+RENDERED = "synth"           # the source of clips bsn-synth rendered: their depth and classes are exact
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,11 @@ class SequenceMeta:
             raise ValueError(f"fps must be positive, got {self.fps}")
         if self.frames < 0:
             raise ValueError(f"frames must be >= 0, got {self.frames}")
+
+    @property
+    def rendered(self) -> bool:
+        """Whether ``bsn-synth`` rendered the clip (exact depth, classes and poses)."""
+        return self.source == RENDERED
 
     @property
     def width(self) -> int:

@@ -19,6 +19,7 @@ from bsn_edge.camera import Intrinsics, look_pose
 from bsn_edge.sequence import SequenceMeta, write_depth, write_image, write_kitti_poses, write_mask
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.images import atomic_write_bytes
+from bsn_edge.sequence.meta import RENDERED
 from bsn_edge.synth.config import SynthConfig
 from bsn_edge.synth.populate import Scenario, build_scenario
 from bsn_edge.synth.render import Frame, Renderer
@@ -202,7 +203,7 @@ def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bo
         "light": sc.world.look.light, "speed_mps": sc.speed, "pitch_deg": clip.rig.pitch_deg,
         "turns": sc.route.turns, "static_boxes": len(sc.world.static), "agents": len(sc.world.agents),
     }, indent=2) + "\n").encode())
-    SequenceMeta(fps=cfg.fps, intrinsics=clip.intrinsics, source="synth", frames=cfg.frames, seed=cfg.seed,
+    SequenceMeta(fps=cfg.fps, intrinsics=clip.intrinsics, source=RENDERED, frames=cfg.frames, seed=cfg.seed,
                  extra={"style": cfg.style, "video": SequenceFolder.VIDEO if video else None,
                         "camera_height": clip.rig.height_m, "bs_range": cfg.bs_range}).write(out)
     clip.rig.calibration(cfg.width, cfg.height).write(seq.calibration_path)

@@ -111,6 +111,10 @@ class TrainConfig:
     channels_last: bool = True               # NHWC activations (oneDNN's native layout on CPUs)
     eval_every: int = 0                      # steps between validation records in the run's history (0: off)
     eval_frames: int = 256                   # validation frames per record (evenly spaced over the split)
+    # BCE over the labels' V (the paper's L: surfaces nearer than 16 m, where depth from a model can
+    # be trusted) widened to every pixel the clip sees nearer than this many metres: far occluders
+    # are taught as well. Rendered clips only, whose depth is exact (0: V as labelled)
+    bce_range_m: float = 0.0
 
     def __post_init__(self) -> None:
         if self.steps < 1 or self.batch_size < 1:
@@ -130,6 +134,8 @@ class TrainConfig:
             raise ValueError(f"train.precision must be fp32, bf16 or auto, got {self.precision!r}")
         if self.eval_every < 0 or self.eval_frames < 1:
             raise ValueError("train.eval_every must be >= 0 and train.eval_frames >= 1")
+        if self.bce_range_m < 0:
+            raise ValueError(f"train.bce_range_m is metres (0: off), got {self.bce_range_m}")
 
 
 @dataclass(frozen=True)

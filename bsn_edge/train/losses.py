@@ -7,6 +7,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M
+from bsn_edge.semantics import IGNORE
 
 
 def masked_bce(logits: Tensor, target: Tensor, valid: Tensor) -> Tensor:
@@ -15,6 +16,14 @@ def masked_bce(logits: Tensor, target: Tensor, valid: Tensor) -> Tensor:
     loss = F.binary_cross_entropy_with_logits(logits, target, reduction="none")
     v = valid.to(loss.dtype)
     return (loss * v).sum() / v.sum().clamp_min(1.0)
+
+
+def visible_out_to(visibility: Tensor, depth: Tensor, semantic: Tensor, range_m: float) -> Tensor:
+    """The visibility mask V ([N, 1, H, W]) widened to every pixel the clip sees (``semantic``
+    [N, H, W] not ignored: inside the clip's view, off the car's hood) whose exact ``depth``
+    ([N, 1, H, W], metres, 0 = none) is under ``range_m``."""
+    seen = (semantic != IGNORE)[:, None]
+    return torch.maximum(visibility, (seen & (depth > 0) & (depth < range_m)).to(visibility.dtype))
 
 
 def pairwise_similarity(feats: Tensor, grid: tuple[int, int]) -> Tensor:

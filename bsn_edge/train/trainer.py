@@ -38,7 +38,7 @@ from bsn_edge.sequence import SequenceMeta
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.train.config import Config
 from bsn_edge.train.encoder_norm import EncoderNorm, freeze_norm_stats
-from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce
+from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce, visible_out_to
 from bsn_edge.train.optim import Optimizer
 from bsn_edge.train.run import Run, RunError
 
@@ -197,6 +197,13 @@ def datasets(cfg: Config, data_dir: str | Path) -> Datasets:
         train = train[: max(1, round(cfg.data.fraction * len(train)))]
     if not train:
         raise ValueError(f"no training clips (styles {styles or 'any'}) in {data_dir}")
+    if cfg.train.bce_range_m > 0:
+        for c in train:
+            meta = SequenceMeta.read(c.path)
+            if not meta.rendered:
+                raise ValueError(f"train.bce_range_m teaches B beyond the labels' V from exact depth, which only "
+                                 f"rendered clips have: {c.path} was not rendered (its meta.json source is "
+                                 f"{meta.source!r}); leave it at 0 for this data")
     val = [c for c in split["val"] if not styles or c.style in styles]
     camera, mounting = cfg.data.model_camera()
 
@@ -416,7 +423,8 @@ def prepare_run(out: str | Path, resume: bool = False, force: bool = False) -> R
 
 def losses(net: torch.nn.Module, b: dict[str, torch.Tensor], teacher: torch.nn.Module | None, cfg: Config,
            dtype: torch.dtype | None) -> tuple[torch.Tensor, ...]:
-    """``(loss, bce, distillation, depth)`` of one batch: BCE inside V, D's depth loss, and lambda x the
+    """``(loss, bce, distillation, depth)`` of one batch: BCE inside V (out to ``train.bce_range_m``
+    when set), D's depth loss, and lambda x the
     pairwise-similarity distillation against the batch's cached ``teacher_grid`` or, without one,
     a pass of ``teacher``. The networks run under ``dtype`` autocast; the losses are fp32."""
     cl = cfg.train.channels_last
@@ -424,7 +432,10 @@ def losses(net: torch.nn.Module, b: dict[str, torch.Tensor], teacher: torch.nn.M
     with _autocast(dev, dtype):
         logits, depth, feats = outputs(net, _layout(b["image"], cl), b)
     logits, depth, feats = logits.float(), depth.float(), feats.float()
-    l_bce = masked_bce(logits, b["blindspot"], b["visibility"])
+    valid = b["visibility"]
+    if cfg.train.bce_range_m > 0:
+        valid = visible_out_to(valid, b["depth"], b["semantic"], cfg.train.bce_range_m)
+    l_bce = masked_bce(logits, b["blindspot"], valid)
     weight, free_scale = depth_weights(b, cfg)
     l_depth = depth_loss(depth, b["depth"], b["sky"], weight, cfg.train.depth_grad_scales, free_scale)
     loss = l_bce + cfg.train.depth_weight * l_depth

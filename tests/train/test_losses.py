@@ -53,3 +53,15 @@ def test_a_free_scale_sample_is_taught_its_depth_up_to_a_factor_of_its_own():
     bent = pred.clone()
     bent[..., :4, :] *= 2.0
     assert depth_loss(bent, t, free_scale=torch.tensor([True, True])).item() > 0.3
+
+
+def test_v_widens_to_every_seen_pixel_nearer_than_the_range_and_no_farther():
+    from bsn_edge.semantics import CAR, IGNORE, ROAD, SKY
+    from bsn_edge.train.losses import visible_out_to
+
+    v = torch.tensor([[[[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]]]])
+    depth = torch.tensor([[[[40.0, 5.0, 29.9, 30.0, 0.0, 8.0]]]])
+    sem = torch.tensor([[[SKY, CAR, CAR, ROAD, ROAD, IGNORE]]])
+    # kept (V), near car, car just inside, road at the range, no depth, the hood or outside the view
+    assert visible_out_to(v, depth, sem, 30.0).flatten().tolist() == [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]
+    assert visible_out_to(v, depth, sem, 4.0).flatten().tolist() == v.flatten().tolist()

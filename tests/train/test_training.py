@@ -212,6 +212,30 @@ def test_cli_errors_are_explained(data, tmp_path, capsys):
     assert "not a training run" in capsys.readouterr().err
 
 
+def test_bce_beyond_v_takes_rendered_clips_and_refuses_a_users(data, tmp_path, capsys):
+    from bsn_edge.models import create_model
+    from bsn_edge.train.trainer import losses
+
+    cfg = load_config(SMOKE, [])
+    far = load_config(SMOKE, ["train.bce_range_m=1000"])
+    ds = BlindSpotDataset(find_clips(data, "T2s"), cfg.data.size, label_name="T2s")
+    b = {k: v[None] for k, v in ds[0].items()}
+    assert (b["visibility"] == 0).any() and (b["depth"] > 0).any()
+    torch.manual_seed(0)
+    net = create_model(cfg.model.name).eval()
+    near_only, wide = losses(net, b, None, cfg, None)[1], losses(net, b, None, far, None)[1]
+    assert near_only.item() != pytest.approx(wide.item()), "the range changes which pixels B is taught on"
+    user = tmp_path / "data"
+    shutil.copytree(data, user)
+    meta = user / "town_1" / "meta.json"
+    meta.write_text(json.dumps({**json.loads(meta.read_text()), "source": "video"}))
+    argv = ["--config", str(SMOKE), "--data", str(user), "--out", str(tmp_path / "r"),
+            "--set", "data.label=\"T2s\"", "--set", "train.bce_range_m=40"]
+    assert train_cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "town_1" in err and "rendered" in err and "'video'" in err
+
+
 def test_the_ranks_share_out_one_process_s_global_batch():
     """Two ranks of batch 4 see, step by step across epochs, the samples one process sees at batch 8,
     each sample once, every augmentation seed of a step distinct."""
