@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.bench_realboxes import MARKED_SHARE, frac, score, summary
-from benchmarks.common import write_result
+from benchmarks.common import named, write_result
 from benchmarks.road_users import NEAR_M, road_users
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.metrics import Counts, DepthBins
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--set", action="append", required=True, metavar="NAME=DIR[:CLIP,CLIP]",
                    help="a named set of labelled clips: a folder, optionally only the named clips")
     p.add_argument("--model", action="append", required=True, metavar="[NAME=]MODEL.onnx",
-                   help="a model to evaluate, named in the report by NAME (default: its file name)")
+                   help="a model to evaluate, named in the report by NAME (default: its file's stem)")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--name", default="cameras", help="the report's name in --out")
     p.add_argument("--keep", action="store_true",
@@ -121,8 +121,10 @@ def main(argv: list[str] | None = None) -> int:
         clips = [c for c in find_clips(folder) if not names or c.path.name in names]
         sets.append((name, clips))
     result: dict[str, Any] = {"sets": {n: [c.path.name for c in cs] for n, cs in sets}, "models": {}}
-    labels = [(spec.rpartition("=")[0] or Path(spec.rpartition("=")[2]).name, spec.rpartition("=")[2])
-              for spec in args.model]
+    try:
+        labels = list(named(args.model).items())
+    except ValueError as e:
+        p.error(str(e))
     if args.keep:
         try:
             result["models"] = kept_models(Path(args.out) / f"{args.name}.json", result["sets"],

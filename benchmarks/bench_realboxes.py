@@ -32,7 +32,7 @@ import numpy as np
 
 from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_camera
 from benchmarks.bench_realview import city_pair_camera
-from benchmarks.common import write_result
+from benchmarks.common import named, write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.exif import from_exif
 from bsn_edge.card import ModelCard
@@ -193,10 +193,10 @@ def main(argv: list[str] | None = None) -> int:
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to score")
         return 0
-    models = {}
-    for spec in args.model or [str(DEFAULT_MODEL)]:
-        name, _, path = spec.rpartition("=")
-        models[name or Path(path).stem] = Engine(path)
+    try:
+        models = {name: Engine(path) for name, path in named(args.model or [str(DEFAULT_MODEL)]).items()}
+    except ValueError as e:
+        p.error(str(e))
     frames = load_frames(json.loads(BOXES.read_text()))
     runs = [(name, engine, False) for name, engine in models.items()]
     if args.withhold_camera:

@@ -40,7 +40,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.common import write_result
+from benchmarks.common import named, write_result
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.calibration.mounting_step import calibrate_mounting
@@ -371,13 +371,15 @@ def picture(sample: Sample, depth: np.ndarray, prob: np.ndarray, threshold: floa
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
-    p.add_argument("--model", action="append", help="exported models to compare (default: the shipped one)")
+    p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
+                   help="exported models to compare, named in the report by NAME (default: its file's stem); the "
+                        "first is the one the others' differences are taken from (default: the shipped one)")
     args = p.parse_args(argv)
-    models = args.model or [str(DEFAULT_MODEL)]
-    stems = [Path(m).stem for m in models]
-    if len(set(stems)) < len(stems):
-        p.error(f"models are reported by file name and two are named alike ({', '.join(stems)}): "
-                "copy one under another name")
+    try:
+        models = named(args.model or [str(DEFAULT_MODEL)])
+    except ValueError as e:
+        p.error(str(e))
+    names = list(models)
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to measure")
         return 0
@@ -404,9 +406,8 @@ def main(argv: list[str] | None = None) -> int:
              f"in view), its nearest ({NEAREST_PCT}th percentile) depth, binned by the true distance: what "
              "the bus carries. Frames: " + ", ".join(f"{t} {len(s)}" for _, t, s, _ in sets) + ".", ""]
     errors: dict[str, dict[str, FrameErrors]] = {}       # "data / reading" -> model -> its frames' errors
-    for mp in models:
+    for name, mp in models.items():
         engine = Engine(mp)
-        name = Path(mp).stem
         res: dict[str, Any] = {}
         lines += [f"## {name}", "", "| data | reading | way | " + " | ".join(f"{lo}-{hi} m AbsRel / median / d1"
                                                                           for lo, hi in BINS) + " |",
@@ -445,11 +446,11 @@ def main(argv: list[str] | None = None) -> int:
                            if samples), "",
                   "Frames: " + "; ".join(sorted({licence("ddad" if key.startswith("ddad") else key)
                                                  for key, _, samples, _ in sets if samples})).rstrip(".") + ".", ""]
-    table, results["intervals"] = interval_table(errors, stems)
+    table, results["intervals"] = interval_table(errors, names)
     lo, hi = SPAN_M
     lines += [f"## Model camera, {lo}-{hi} m: AbsRel and its 90 % interval over the frames", "",
               f"The frames resampled with replacement {RESAMPLES:,} times (a frame's points together); "
-              f"each model after the first also as its difference from `{stems[0]}` over the same "
+              f"each model after the first also as its difference from `{names[0]}` over the same "
               "resamples (`*`: the interval leaves out 0). A difference without `*` is within what these "
               "frames' own spread gives; one with it holds on these frames, not necessarily on other cars "
               "and scenes (the resampling draws only the frames there are).", "", *table, ""]

@@ -38,7 +38,7 @@ from benchmarks.bench_realboxes import (
     model_frame,
 )
 from benchmarks.bench_realcam import REAL
-from benchmarks.common import write_result
+from benchmarks.common import named, write_result
 from bsn_edge import semantics as sm
 from bsn_edge.card import ModelCard
 from bsn_edge.cli.common import CHECKOUT
@@ -141,8 +141,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no real data at {REAL}: nothing to score")
         return 0
     teachers = {}
-    for spec in args.teacher or [f"default={CHECKOUT / 'models' / 'default'}"]:
-        name, _, path = spec.rpartition("=")
+    try:
+        specs = named(args.teacher or [f"default={CHECKOUT / 'models' / 'default'}"])
+    except ValueError as e:
+        p.error(str(e))
+    for name, path in specs.items():
         run = Run(path)
         teacher = run.load_teacher()
         if teacher is None:

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_samples
-from benchmarks.common import write_result
+from benchmarks.common import named, write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.demo import DEFAULT_MODEL
@@ -121,11 +121,10 @@ def main(argv: list[str] | None = None) -> int:
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to show")
         return 0
-    specs = args.model or [str(DEFAULT_MODEL)]
-    models = {}
-    for spec in specs:
-        name, _, path = spec.rpartition("=")
-        models[name or Path(path).stem] = Engine(path)
+    try:
+        models = {name: Engine(path) for name, path in named(args.model or [str(DEFAULT_MODEL)]).items()}
+    except ValueError as e:
+        p.error(str(e))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     lines = ["# Real images by eye", "",

@@ -39,6 +39,20 @@ def cpu_named(m: dict[str, Any]) -> str:
     return m["cpu"] + (f" ({', '.join(m['isa'])})" if m["isa"] else "")
 
 
+def named(specs: list[str]) -> dict[str, str]:
+    """``[NAME=]PATH`` arguments (``--model``, ``--teacher``) as ``{name: path}`` in their order; a path
+    given without a name is named by its file's stem. ValueError when two get the same name, which
+    would report one model's figures under the other's."""
+    out: dict[str, str] = {}
+    for spec in specs:
+        name, _, path = spec.rpartition("=")
+        name = name or Path(path).stem
+        if name in out:
+            raise ValueError(f"two models are named {name!r} ({out[name]} and {path}): name them, NAME=PATH")
+        out[name] = path
+    return out
+
+
 def class_name(base: str) -> str:
     """A per-machine report's name for this CPU's int8 class: ``base`` with VNNI, ``base_avx2`` on an x86
     CPU without it, ``base_<arch>`` elsewhere (so one class's results never overwrite another's)."""

@@ -36,6 +36,6 @@ cd "$REPO"
 sets=()
 for s in highway suburb town urban; do sets+=(--set "$s=$HERE/bystyle/$s"); done
 "$B/python" -m benchmarks.bench_cameras --out "$OUT/cameras" "${sets[@]}" "${models[@]}"
-"$B/python" -m benchmarks.bench_realcam --out "$OUT/realcam" --model "$SHIPPED" --model "$MODEL"
+"$B/python" -m benchmarks.bench_realcam --out "$OUT/realcam" "${models[@]}"
 "$B/python" -m benchmarks.bench_realview --out "$OUT/realview" "${models[@]}"
 echo "judged $RUN: $OUT (realboxes/, withheld/, cameras/, realcam/, realview/)"

@@ -120,5 +120,15 @@ def test_two_models_of_one_file_name_are_refused_before_anything_runs(tmp_path, 
     from benchmarks.bench_realcam import main
     with pytest.raises(SystemExit) as e:
         main(["--out", str(tmp_path / "out"), "--model", "a/model.onnx", "--model", "b/model.onnx"])
-    assert e.value.code == 2 and "named alike" in capsys.readouterr().err
+    assert e.value.code == 2 and "two models are named 'model'" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_models_are_named_by_name_or_by_file_stem_in_their_order():
+    from benchmarks.common import named
+
+    assert named(["default=a/model.onnx", "b/leg.onnx", "control=c/model.onnx"]) == {
+        "default": "a/model.onnx", "leg": "b/leg.onnx", "control": "c/model.onnx"}
+    assert list(named(["z=1.onnx", "a=2.onnx"])) == ["z", "a"]
+    with pytest.raises(ValueError, match="two models are named 'leg'"):
+        named(["a/leg.onnx", "leg=b/x.onnx"])
