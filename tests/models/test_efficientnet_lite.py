@@ -9,7 +9,7 @@ import torch
 
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
-from bsn_edge.models import create_model, create_teacher, get_spec, teacher_encoder
+from bsn_edge.models import carried_over, create_model, create_teacher, get_spec, start_from, teacher_encoder
 from bsn_edge.models.efficientnet_lite import EfficientNetLite0, load_imagenet
 from bsn_edge.semantics import NUM_CLASSES
 
@@ -98,6 +98,27 @@ def test_features_at_strides_4_to_32_and_the_variant_builds_on_them():
         type(spec)(encoder="mobilenet", shared_encoder=True)
     with pytest.raises(ValueError, match="output stride"):
         type(spec)(encoder="efficientnet-lite0", shared_encoder=True, output_stride=16)
+
+
+def test_the_full_size_variant_is_the_same_network_on_the_frame_as_it_comes():
+    """``lite-full`` runs lite-light's modules on the model frame at its full size: it takes all of a
+    lite-light run's weights, and then its outputs are lite-light's networks on that frame unshrunk."""
+    assert get_spec("lite-full").input_scale == 1.0 and get_spec("lite-light").input_scale == 0.5
+    assert carried_over("lite-full", "lite-light") == carried_over("lite-light", "lite-full") == "all"
+    torch.manual_seed(0)
+    light = create_model("lite-light").eval()
+    torch.manual_seed(1)
+    full = create_model("lite-full").eval()
+    assert start_from(full, "lite-full", light, "lite-light") == "all"
+    x = torch.randn(1, 3, 64, 128)
+    with torch.no_grad():
+        logits, depth, _ = full(x)
+        want_logits, want_depth, _ = light.predict(x)
+        assert light(x)[0].shape == logits.shape and not torch.allclose(light(x)[0], logits)
+    torch.testing.assert_close(logits, want_logits, atol=0, rtol=0)
+    torch.testing.assert_close(depth, want_depth, atol=0, rtol=0)
+    with pytest.raises(ValueError, match="got a 'shared-light' run"):
+        carried_over("lite-full", "shared-light")
 
 
 def test_a_segmentation_teacher_builds_on_it_and_names_are_checked():
