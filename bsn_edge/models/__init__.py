@@ -4,6 +4,7 @@ from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, ORACLE_DEPTH_NOTE, Bli
 from bsn_edge.models.registry import (
     MODELS,
     TEACHER_ENCODERS,
+    Carried,
     ModelSpec,
     build,
     carried_over,
@@ -23,6 +24,7 @@ __all__ = [
     "ORACLE_DEPTH_NOTE",
     "TEACHER_ENCODERS",
     "BlindSpotNet",
+    "Carried",
     "DepthNet",
     "ModelSpec",
     "build",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import io
 from dataclasses import asdict, dataclass, replace
+from enum import StrEnum
 
 import torch
 from torch import nn
@@ -91,7 +92,7 @@ MODELS: dict[str, ModelSpec] = {
     "shared-light-oracle": ModelSpec(shared_encoder=True, oracle_depth=True, **_LIGHT),
     # D and B on one EfficientNet-Lite0 that starts from ImageNet: features learnt on real photographs
     "lite-light": ModelSpec(shared_encoder=True, encoder="efficientnet-lite0", pretrained="imagenet", **_LIGHT),
-    # the same network on the model frame at its full size: far and thin road users keep twice the pixels
+    # lite-light's network on the model frame at its full size, not halved
     "lite-full": ModelSpec(shared_encoder=True, encoder="efficientnet-lite0", pretrained="imagenet",
                            **{**_LIGHT, "input_scale": 1.0}),
 }
@@ -128,29 +129,36 @@ def create_model(name: str, pretrained: bool = False) -> BlindSpotNet:
     return build(get_spec(name), pretrained)
 
 
-def carried_over(name: str, source_name: str) -> str:
-    """What a ``name`` model takes from a ``source_name`` run to train on from: ``"all"`` its
-    weights when the two are one network (the same variant, or variants that differ only in
-    ``input_scale``: the same modules, run on another size of the frame), ``"D"`` alone for a
+class Carried(StrEnum):
+    """What a model takes from the run it starts from (``train.init``)."""
+
+    ALL = "all"     # every weight: the same network
+    D = "D"         # D alone: B's decoder starts fresh
+
+
+def carried_over(name: str, source_name: str) -> Carried:
+    """What a ``name`` model takes from a ``source_name`` run to train on from: all its weights
+    when the two are one network (the same variant, or variants that differ only in
+    ``input_scale``: the same modules, run on another size of the frame), D alone for a
     shared-encoder model from a two-network run with the same D (its encoder, decoder and head carry
     over whole; B's decoder, which read another encoder's features, starts fresh). ValueError for
     any other pair."""
     spec, src = get_spec(name), get_spec(source_name)
     if replace(src, input_scale=spec.input_scale) == spec:
-        return "all"
+        return Carried.ALL
     same_d = (spec.depth_width, spec.output_stride, spec.input_scale) == (src.depth_width, src.output_stride,
                                                                           src.input_scale)
     if spec.shared_encoder and not src.shared_encoder and src.arch == "deeplab" and same_d:
-        return "D"
+        return Carried.D
     raise ValueError(f"a {name!r} model starts from a run of its own network (at any input scale), or from a "
                      f"two-network run with the same D when it shares its encoder; got a {source_name!r} run")
 
 
-def start_from(model: BlindSpotNet, name: str, source: BlindSpotNet, source_name: str) -> str:
+def start_from(model: BlindSpotNet, name: str, source: BlindSpotNet, source_name: str) -> Carried:
     """Load into ``model`` (a ``name`` network) what :func:`carried_over` says it takes from
-    ``source`` (a ``source_name`` network); returns ``"all"`` or ``"D"``."""
+    ``source`` (a ``source_name`` network), and say which."""
     what = carried_over(name, source_name)
-    if what == "all":
+    if what is Carried.ALL:
         model.load_state_dict(source.state_dict())
     else:
         model.depth_net.load_state_dict(source.depth_net.net.state_dict())

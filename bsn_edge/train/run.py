@@ -32,7 +32,7 @@ import torch
 
 from bsn_edge.card import UNRECORDED, ModelCard, TrainingRecord
 from bsn_edge.fields import read_json_object
-from bsn_edge.models import BlindSpotNet, ModelSpec, build, carried_over, create_teacher, weights_bytes
+from bsn_edge.models import BlindSpotNet, Carried, ModelSpec, build, carried_over, create_teacher, weights_bytes
 from bsn_edge.sequence.images import atomic_write, atomic_write_bytes, torn_writes
 from bsn_edge.train.config import TeacherConfig
 
@@ -212,7 +212,7 @@ class Run:
             before = TrainingRecord.from_dict(frozen["training"])
             steps, samples, hours = steps + before.steps, samples + before.samples, hours + before.hours
             kinds |= set(before.precision) or {UNRECORDED}
-            d_only = carried_over(cfg.get("model", {}).get("name", frozen["variant"]), frozen["variant"]) == "D"
+            d_only = carried_over(cfg.get("model", {}).get("name", frozen["variant"]), frozen["variant"]) is Carried.D
             start += f" ({'its D, ' if d_only else ''}after {before.steps} steps)"
         return TrainingRecord(steps=steps, samples=round(samples), hours=round(hours, 2),
                               train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),

@@ -9,7 +9,7 @@ import torch
 
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
-from bsn_edge.models import carried_over, create_model, create_teacher, get_spec, start_from, teacher_encoder
+from bsn_edge.models import Carried, carried_over, create_model, create_teacher, get_spec, start_from, teacher_encoder
 from bsn_edge.models.efficientnet_lite import EfficientNetLite0, load_imagenet
 from bsn_edge.semantics import NUM_CLASSES
 
@@ -104,12 +104,12 @@ def test_the_full_size_variant_is_the_same_network_on_the_frame_as_it_comes():
     """``lite-full`` runs lite-light's modules on the model frame at its full size: it takes all of a
     lite-light run's weights, and then its outputs are lite-light's networks on that frame unshrunk."""
     assert get_spec("lite-full").input_scale == 1.0 and get_spec("lite-light").input_scale == 0.5
-    assert carried_over("lite-full", "lite-light") == carried_over("lite-light", "lite-full") == "all"
+    assert carried_over("lite-full", "lite-light") is carried_over("lite-light", "lite-full") is Carried.ALL
     torch.manual_seed(0)
     light = create_model("lite-light").eval()
     torch.manual_seed(1)
     full = create_model("lite-full").eval()
-    assert start_from(full, "lite-full", light, "lite-light") == "all"
+    assert start_from(full, "lite-full", light, "lite-light") is Carried.ALL
     x = torch.randn(1, 3, 64, 128)
     with torch.no_grad():
         logits, depth, _ = full(x)
