@@ -18,7 +18,7 @@ for d in calib bystyle/highway bystyle/suburb bystyle/town bystyle/urban; do
   [ -d "$d" ] || { echo "judge_real.sh: no $d in $HERE: run it from the campaign folder" >&2; exit 2; }
 done
 [ -f "$RUN/checkpoint.json" ] || { echo "judge_real.sh: $RUN has no checkpoint.json: not a bsn-train run" >&2; exit 2; }
-if ! "$B/python" -c "import json, sys; sys.exit(json.load(open(sys.argv[1]))['card'].get('threshold') is None)" "$RUN/checkpoint.json"; then
+if ! "$B/python" -c "import sys; from bsn_edge.train.run import Run; sys.exit(not Run(sys.argv[1]).finished())" "$RUN"; then
   echo "judge_real.sh: $RUN has not chosen its threshold yet (its training or final sweep is still running)" >&2; exit 2
 fi
 if [ -e "$OUT" ] && [ -z "${FORCE:-}" ]; then

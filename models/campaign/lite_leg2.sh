@@ -19,7 +19,7 @@ STEPS=${STEPS:-9000}            # train.steps: the whole schedule
 SHIP=${SHIP:-}                  # where the finished run is shipped (fp16), if anywhere
 BIN=$REPO/.venv/bin
 [ -f "$FROM/checkpoint.json" ] || { echo "lite_leg2.sh: no run $FROM/ here: run lite_leg1.sh first" >&2; exit 2; }
-if ! "$BIN/python" -c "import json, sys; sys.exit(json.load(open(sys.argv[1]))['card'].get('threshold') is None)" "$FROM/checkpoint.json"; then
+if ! "$BIN/python" -c "import sys; from bsn_edge.train.run import Run; sys.exit(not Run(sys.argv[1]).finished())" "$FROM"; then
   echo "lite_leg2.sh: $FROM has not ended yet (no threshold chosen): let its leg finish first" >&2; exit 2
 fi
 resume=()                       # go on from the last state; a run that never reached one starts again
