@@ -9,6 +9,8 @@
 # Leg L1T, L1 with domain randomisation: half the samples' vehicles and people repainted and shown
 # see-through (as leg S5) and half the samples through a camera of their own (data.camera_look):
 #   RUN=lite1t OBJECTS=0.5 LOOK=0.5 SHIP=/path/to/bsn-edge/models/campaign/lite1t REPO=... .../lite_leg1.sh
+# Leg L1S, L1T with the encoder at a hundredth of the learning rate (how much of ImageNet it keeps):
+#   RUN=lite1s ENCODER_LR=0.01 OBJECTS=0.5 LOOK=0.5 SHIP=/path/to/bsn-edge/models/campaign/lite1s REPO=... .../lite_leg1.sh
 # TEACHER=$PWD/teacher_lite0 distils from the teacher on Lite0 (teacher_lite0.sh) instead of the default's.
 set -euo pipefail
 REPO=${REPO:?set REPO to the checkout}
@@ -18,6 +20,7 @@ TEACHER=${TEACHER:-$REPO/models/default}   # teacher.checkpoint: the run whose t
 OBJECTS=${OBJECTS:-0}           # data.object_repaint and data.object_see_through: shares of samples
 LOOK=${LOOK:-0}                 # data.camera_look: share of samples
 SEED=${SEED:-5}                 # train.seed
+ENCODER_LR=${ENCODER_LR:-0.1}   # train.encoder_lr: the encoder's share of the learning rate
 SHIP=${SHIP:-}                  # where the finished run is shipped (fp16), if anywhere
 BIN=$REPO/.venv/bin
 if [ ! -f data/.made ]; then
@@ -29,7 +32,7 @@ resume=()                       # go on from the last state; a run that never re
 if [ -f "$RUN/state.pt" ]; then resume=(--resume); elif [ -d "$RUN" ]; then resume=(--force); fi
 "$BIN/bsn-train" --config "$REPO/configs/campaign.toml" --data data --out "$RUN" "${resume[@]}" \
   --set 'model.name="lite-light"' --set "teacher.checkpoint=\"$TEACHER\"" \
-  --set train.encoder_lr=0.1 --set "train.encoder_bn=\"$BN\"" --set "train.seed=$SEED" \
+  --set "train.encoder_lr=$ENCODER_LR" --set "train.encoder_bn=\"$BN\"" --set "train.seed=$SEED" \
   --set "data.object_repaint=$OBJECTS" --set "data.object_see_through=$OBJECTS" --set "data.camera_look=$LOOK"
 if [ -n "$SHIP" ] && [ ! -e "$SHIP" ]; then
   "$BIN/python" -c "import sys; from bsn_edge.train.run import Run; Run(sys.argv[1]).ship(sys.argv[2])" "$RUN" "$SHIP"
