@@ -9,6 +9,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import ClassVar
 
 import can
 import numpy as np
@@ -185,13 +186,22 @@ def test_a_video_cut_short_is_a_failed_source_with_a_non_zero_exit(setup, tmp_pa
 # -- a stalled live stream: back-off reconnects, UNAVAILABLE while it is gone --------------------------
 
 class FlakyCamera:
-    """Frames for a while, then nothing (a stall ends in a failed read)."""
+    """Frames for a while, then nothing (a stall ends in a failed read).
+
+    With ``after`` the first camera's frames go on until that event is set and only then count down,
+    so its stall comes while the loop runs, however long the model takes to load on a loaded machine.
+    ``delivered`` holds how many frames each opened camera gave."""
 
     opened = 0
+    delivered: ClassVar[list[int]] = []
+    GATE_TIMEOUT_S = 30.0
 
-    def __init__(self, _target, frames: int = 12, stall_s: float = 0.0) -> None:
+    def __init__(self, _target, frames: int = 12, stall_s: float = 0.0,
+                 after: threading.Event | None = None) -> None:
         FlakyCamera.opened += 1
         self.left, self.stall_s, self.n = frames, stall_s, FlakyCamera.opened
+        self.after, self.since = after, time.monotonic()
+        FlakyCamera.delivered.append(0)
 
     def set(self, *_):
         return True
@@ -202,10 +212,14 @@ class FlakyCamera:
         return self.n in (1, 3)
 
     def read(self):
+        waiting = self.after is not None and not self.after.is_set() \
+            and time.monotonic() - self.since < self.GATE_TIMEOUT_S
         if self.left <= 0:
             time.sleep(self.stall_s)
             return False, None
-        self.left -= 1
+        if not waiting:
+            self.left -= 1
+        FlakyCamera.delivered[self.n - 1] += 1
         time.sleep(0.02)
         return True, np.full((96, 192, 3), 90, np.uint8)
 
@@ -213,24 +227,53 @@ class FlakyCamera:
         pass
 
 
+class BusWatch:
+    """The statuses heard on a bus, gathered by a thread while the run goes on; ``running`` is set at
+    the first one that is not UNAVAILABLE (the loop has made a valid inference)."""
+
+    def __init__(self, rx) -> None:
+        self.rx, self.got = rx, []
+        self.running, self._stop = threading.Event(), threading.Event()
+        self._thread = threading.Thread(target=self._listen, daemon=True)
+        self._thread.start()
+
+    def _listen(self) -> None:
+        while not self._stop.is_set():
+            m = self.rx.recv(timeout=0.05)
+            d = None if m is None else decode(m.arbitration_id, m.data)
+            if d is not None and d.name == "BSN_Status":
+                assert d.crc_ok
+                self.got.append(int(d.signals["System_State"]))
+                if self.got[-1] != SystemState.UNAVAILABLE:
+                    self.running.set()
+
+    def close(self) -> list[int]:
+        """Stop listening; every status heard, the ones still queued on the bus included."""
+        self._stop.set()
+        self._thread.join(timeout=2)
+        return self.got + statuses(self.rx)
+
+
 def test_a_stalled_stream_reconnects_and_the_bus_shows_it(setup):
     model, clip = setup
-    FlakyCamera.opened = 0
+    FlakyCamera.opened, FlakyCamera.delivered = 0, []
     policy = Reconnect(stall_s=0.5, first_s=0.4, max_s=0.8, give_up_s=5.0, max_tries=3)
-    src = LiveSource("rtsp://camera", policy, opener=lambda t: FlakyCamera(t, frames=12, stall_s=0.3))
     cfg = RuntimeConfig(cycle_s=0.05)
     with can.Bus(interface="virtual", channel="bsn-fs-live") as rx, CanSender("virtual", "bsn-fs-live") as tx:
+        watch = BusWatch(rx)
+        src = LiveSource("rtsp://camera", policy,
+                         opener=lambda t: FlakyCamera(t, frames=12, stall_s=0.3, after=watch.running))
         engine = Engine(model)
         summary = run(engine, src, [tx], cfg, camera=mounted(engine, clip))
-        got = statuses(rx)
+        got = watch.close()
     src.close()
     assert FlakyCamera.opened >= 3 and summary["faults"]["source_reconnects"] >= 2
-    assert summary["frames"] + summary["dropped"] + summary["before_start"] == 24, \
+    assert FlakyCamera.delivered[1] == 0 and FlakyCamera.delivered[2] == 12
+    assert summary["frames"] + summary["dropped"] + summary["before_start"] == sum(FlakyCamera.delivered), \
         "frames came again after the reconnect"
     # OK / DEGRADED while frames come, UNAVAILABLE during the outage (> 0.5 s), again after, and at the end
     changes = [s for i, s in enumerate(got) if i == 0 or s != got[i - 1]]
-    assert SystemState.UNAVAILABLE in changes[1:-1] and changes[-1] == SystemState.UNAVAILABLE
-    assert summary["source_failure"] and "reconnects failed" in summary["source_failure"]
+    assert SystemState.UNAVAILABLE in changes[1:-1] and changes[-1] == SystemState.UNAVAILABLE, changes
 
 
 # -- two threads on one Health, and a heartbeat that survives ------------------------------------------
