@@ -30,13 +30,20 @@ from bsn_edge.runtime.sources import LiveSource
 from tests.fakes import SHIPPED, long_video, mounted
 
 
+def status_of(m) -> int | None:
+    """The system state a CAN message carries, if it is a status message (its CRC checked)."""
+    d = decode(m.arbitration_id, m.data)
+    if d is None or d.name != "BSN_Status":
+        return None
+    assert d.crc_ok
+    return int(d.signals["System_State"])
+
+
 def statuses(rx) -> list[int]:
     out = []
     while (m := rx.recv(timeout=0.2)) is not None:
-        d = decode(m.arbitration_id, m.data)
-        if d is not None and d.name == "BSN_Status":
-            assert d.crc_ok
-            out.append(int(d.signals["System_State"]))
+        if (state := status_of(m)) is not None:
+            out.append(state)
     return out
 
 
@@ -240,11 +247,9 @@ class BusWatch:
     def _listen(self) -> None:
         while not self._stop.is_set():
             m = self.rx.recv(timeout=0.05)
-            d = None if m is None else decode(m.arbitration_id, m.data)
-            if d is not None and d.name == "BSN_Status":
-                assert d.crc_ok
-                self.got.append(int(d.signals["System_State"]))
-                if self.got[-1] != SystemState.UNAVAILABLE:
+            if m is not None and (state := status_of(m)) is not None:
+                self.got.append(state)
+                if state != SystemState.UNAVAILABLE:
                     self.running.set()
 
     def close(self) -> list[int]:
@@ -274,6 +279,7 @@ def test_a_stalled_stream_reconnects_and_the_bus_shows_it(setup):
     # OK / DEGRADED while frames come, UNAVAILABLE during the outage (> 0.5 s), again after, and at the end
     changes = [s for i, s in enumerate(got) if i == 0 or s != got[i - 1]]
     assert SystemState.UNAVAILABLE in changes[1:-1] and changes[-1] == SystemState.UNAVAILABLE, changes
+    assert summary["source_failure"] and "reconnects failed" in summary["source_failure"]
 
 
 # -- two threads on one Health, and a heartbeat that survives ------------------------------------------
