@@ -25,20 +25,34 @@ def _images(folder: Path) -> list[Path]:
     return rgb or files
 
 
-def _video_frames(path: Path, count: int) -> Iterator[np.ndarray]:
+def _open_video(path: Path) -> cv2.VideoCapture:
     cap = cv2.VideoCapture(str(path))
     if not cap.isOpened():
         raise ValueError(f"{path}: OpenCV cannot open this video")
-    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) or 0
-    picks = set(np.linspace(0, max(n - 1, 0), count).round().astype(int).tolist()) if n else None
-    i = 0
+    return cap
+
+
+def _video_frames(path: Path, count: int) -> Iterator[np.ndarray]:
+    """Up to ``count`` frames spread evenly over the whole video. A container that does not say how many
+    frames it holds is counted first (grabbed, not decoded), so the picks still span all of it."""
+    cap = _open_video(path)
+    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
     try:
-        while True:
-            ok, frame = cap.read()
+        if n <= 0:
+            while cap.grab():
+                n += 1
+            cap.release()
+            cap = _open_video(path)
+        picks = set(np.linspace(0, max(n - 1, 0), min(count, n)).round().astype(int).tolist())
+        i = 0
+        while i <= max(picks, default=-1):
+            ok = cap.grab()
             if not ok:
                 break
-            if picks is None or i in picks:
-                yield frame
+            if i in picks:
+                ok, frame = cap.retrieve()
+                if ok:
+                    yield frame
             i += 1
     finally:
         cap.release()

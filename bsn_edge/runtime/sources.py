@@ -283,7 +283,10 @@ class LiveSource(Source):
         i = 0
         while not self._stop.is_set():
             t0 = time.perf_counter()
-            ok, frame = self.cap.read()
+            try:
+                ok, frame = self.cap.read()
+            except Exception:   # a backend that raises has lost the camera as one that returns nothing
+                ok, frame = False, None
             dt = time.perf_counter() - t0
             if not ok or frame is None or dt > self.policy.stall_s:
                 if not self._reopen():

@@ -243,3 +243,16 @@ def test_a_huge_bad_line_is_echoed_short_and_a_file_of_another_kind_exits_1(tmp_
     assert listen_cli.main(["--can-log", str(blf)]) == 1          # as documented: something was wrong
     err = capsys.readouterr().err
     assert "unreadable" in err and "0 frames" in err
+
+
+def test_every_decode_fault_reaches_the_bus_frames_of_another_size_included():
+    """Decode_Errors carries every frame that gave the model nothing to read: 2 that would not decode
+    and 3 of another size make 5 in byte 2, packed by hand; the other counters are their own."""
+    none = SectorAlert(0.0, Level.NONE, None)
+    f = AlertFrame(0.0, none, none, none, SystemState.OK, 10.0,
+                   {"decode_errors": 2, "size_changes": 3, "dropped_frames": 7})
+    _, (_, st) = CanEncoder().encode(f)
+    want = pack([(0, 0, 2), (0, 2, 6), (20, 8, 8), (5, 16, 8), (7, 24, 8), (0, 32, 8), (0, 40, 8), (0, 52, 4)])
+    assert st[:7] == want and st[7] == crc8_sae_j1850(bytes([0x01, 0x05]) + want)
+    many = AlertFrame(0.0, none, none, none, SystemState.OK, 10.0, {"decode_errors": 200, "size_changes": 100})
+    assert CanEncoder().encode(many)[1][1][2] == 255, "the sum saturates at 255"

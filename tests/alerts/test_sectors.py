@@ -73,3 +73,19 @@ def test_blind_spot_pixels_without_depth_give_no_distance():
     depth[80:90, 150:160] = 6.0        # one patch with depth: only it counts
     left, centre, right = g.read(mask, depth)
     assert right.distance_m == pytest.approx(6.0) and left.distance_m is None and centre.distance_m is None
+
+
+def test_a_score_never_passes_one_however_much_of_a_sector_is_blind():
+    """The whole left sector blind at 1 m: by the formula 1 - 1/30 of every pixel's nearness over 2 % of
+    the sector's pixels, 48.3; the bus and the state machine take scores in [0, 1], so 1.0 exactly.
+    Just under the cap, the formula's value passes unchanged."""
+    g = SectorGeometry(K, SectorConfig(range_m=30.0, full_area=0.02))
+    mask = np.zeros((100, 200), bool)
+    mask[:, g.column_sector == 0] = True
+    left = g.read(mask, np.full((100, 200), 1.0, np.float32))[0]
+    assert pytest.approx(48.33, abs=0.01) == (1 - 1 / 30) / 0.02
+    assert left.score == 1.0 and left.distance_m == pytest.approx(1.0)
+    few = np.zeros((100, 200), bool)
+    few[0, np.nonzero(g.column_sector == 0)[0][:3]] = True     # 3 pixels at 15 m: 3 * 0.5 / (0.02 * N)
+    part = g.read(few, np.full((100, 200), 15.0, np.float32))[0]
+    assert part.score == pytest.approx(1.5 / (0.02 * g.sector_pixels[0])) and part.score < 1

@@ -1,5 +1,7 @@
 """The alert state machine over scripted timestamps."""
 
+import math
+
 import pytest
 
 from bsn_edge.alerts import AlertConfig, Level, LevelRule, SectorState
@@ -126,3 +128,70 @@ def test_a_fault_outranks_calibrating():
     h2.fault("sink_errors")
     assert h2.state(1.45) == SystemState.DEGRADED
     assert h2.state(3.0) == SystemState.UNAVAILABLE
+
+
+# A step of the raw score and the times the levels must change, worked out from the exponential
+# s(t) = 1 - exp(-(t - t0) / tau) (rising) and s(t) = s0 exp(-(t - t0) / tau) (falling), not from the
+# machine. The machine holds each sample's score over the interval before it (zero-order hold), so a
+# step first seen at sample t acts from the sample before: t0 = t - dt.
+SMOOTH = AlertConfig(tau_s=0.5, caution=LevelRule(0.25, 0.15, delay_s=0.2, hold_s=1.0),
+                     warning=LevelRule(0.6, 0.45, delay_s=0.1, hold_s=1.5))
+DT = 0.01
+
+
+def _first_sample_at_or_after(t: float) -> float:
+    return math.ceil(t / DT - 1e-9) * DT
+
+
+def test_levels_follow_the_smoothed_score_at_the_times_the_exponential_gives():
+    tau, rise0, fall0 = SMOOTH.tau_s, 1.0 - DT, 3.0 - DT
+    trace = run(lambda t: 1.0 if 1.0 - 1e-9 <= t < 3.0 - 1e-9 else 0.0, 6.0, dt=DT, cfg=SMOOTH)
+    crosses = {lv: _first_sample_at_or_after(rise0 + tau * math.log(1 / (1 - rule.on)))
+               for lv, rule in ((Level.CAUTION, SMOOTH.caution), (Level.WARNING, SMOOTH.warning))}
+    caution_at = _first_sample_at_or_after(crosses[Level.CAUTION] + SMOOTH.caution.delay_s)
+    warning_at = _first_sample_at_or_after(crosses[Level.WARNING] + SMOOTH.warning.delay_s)
+    # on the raw score CAUTION would come at 1.2 s and WARNING at 1.1 s
+    assert caution_at == pytest.approx(1.34) and warning_at == pytest.approx(1.55)
+    assert level_at(trace, caution_at - DT) == Level.NONE
+    assert level_at(trace, caution_at) == Level.CAUTION
+    assert level_at(trace, warning_at - DT) == Level.CAUTION
+    assert level_at(trace, warning_at) == Level.WARNING
+    # the fall: from s0 the smoothed score passes WARNING's off (its hold long over), the machine steps
+    # to CAUTION there and holds it a second from then, though the score passes CAUTION's off before
+    s0 = 1 - math.exp(-(fall0 - rise0) / tau)
+    warning_off = _first_sample_at_or_after(fall0 + tau * math.log(s0 / SMOOTH.warning.off))
+    caution_off = _first_sample_at_or_after(fall0 + tau * math.log(s0 / SMOOTH.caution.off))
+    assert warning_off - warning_at > SMOOTH.warning.hold_s and caution_off < warning_off + SMOOTH.caution.hold_s
+    none_at = _first_sample_at_or_after(warning_off + SMOOTH.caution.hold_s)
+    assert level_at(trace, warning_off - DT) == Level.WARNING
+    assert level_at(trace, warning_off) == Level.CAUTION
+    assert level_at(trace, none_at - DT) == Level.CAUTION
+    assert level_at(trace, none_at) == Level.NONE
+    for t, s, _ in trace:   # and the score the bus carries is that exponential
+        want = 0.0 if t < 1.0 else (1 - math.exp(-(min(t, fall0) - rise0) / tau)) * math.exp(-max(t - fall0, 0) / tau)
+        assert s == pytest.approx(want, abs=1e-9), t
+
+
+def test_a_one_frame_spike_is_smoothed_away_even_with_no_creation_delay():
+    """30 frames a second, one frame at score 1: smoothed it is 1 - exp(-1/30 / 0.3) = 0.105, under
+    CAUTION's 0.25, so no level, however short the delay."""
+    cfg = AlertConfig(tau_s=0.3, caution=LevelRule(0.25, 0.15, delay_s=0.0, hold_s=1.0),
+                      warning=LevelRule(0.6, 0.45, delay_s=0.0, hold_s=1.5))
+    m = SectorState(cfg)
+    levels, peak = [], 0.0
+    for k in range(60):
+        s, lv = m.update(k / 30, 1.0 if k == 30 else 0.0)
+        levels.append(lv)
+        peak = max(peak, s)
+    assert peak == pytest.approx(1 - math.exp(-1 / 30 / 0.3), abs=1e-9)
+    assert set(levels) == {Level.NONE}
+
+
+def test_a_warning_whose_score_is_gone_ends_at_its_hold_straight_to_none():
+    """0.9 from 1 s to 2 s, then 0 (no smoothing): WARNING from 1.2 s (its 0.2 s delay), held 2 s to
+    3.2 s; the score is then under CAUTION's off too, so the level goes to NONE at once. A CAUTION in
+    between would linger its own hold (1 s) with nothing on the road."""
+    trace = run(lambda t: 0.9 if 1.0 - 1e-9 <= t < 2.0 - 1e-9 else 0.0, 6.0)
+    assert level_at(trace, 3.15) == Level.WARNING
+    assert level_at(trace, 3.2) == Level.NONE
+    assert Level.CAUTION not in {lv for t, _, lv in trace if t >= 1.2}

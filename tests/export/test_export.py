@@ -12,7 +12,7 @@ from onnx import numpy_helper
 
 from bsn_edge.card import ModelCard
 from bsn_edge.cli.export import main as export_main
-from bsn_edge.export import FusedModel, check_parity, head_nodes, quantize, read_card, to_onnx
+from bsn_edge.export import FusedModel, calib_frames, check_parity, head_nodes, quantize, read_card, to_onnx
 from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.export.quantize import QuantConfig
 from bsn_edge.modelfile.read import session
@@ -210,6 +210,39 @@ def test_calibration_sets_from_folders_and_videos(run, tmp_path):
     assert v.shape == (4, 32, 64, 3)
     with pytest.raises(ValueError, match="folder of images or a video"):
         load_frames(clip / "meta.json", (32, 64))
+
+
+def _painted_video(path, frames: int) -> None:
+    """Frame i a flat grey of 6 i: which frames a sampler took can be read off the pictures."""
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (64, 32))
+    for i in range(frames):
+        w.write(np.full((32, 64, 3), 6 * i, np.uint8))
+    w.release()
+
+
+class _Uncounted(cv2.VideoCapture):
+    """A container that does not say how many frames it holds (a stream dump, some AVIs)."""
+
+    def get(self, prop):
+        return 0.0 if prop == cv2.CAP_PROP_FRAME_COUNT else super().get(prop)
+
+
+@pytest.mark.parametrize("counted", [True, False])
+def test_calibration_frames_are_spread_over_the_whole_video(tmp_path, monkeypatch, counted):
+    """40 frames, 5 wanted: frames 0, 10, 20, 29, 39 (evenly from first to last, rounded), not the first
+    five, whether or not the container says its length; and a folder of the same pictures alike."""
+    video = tmp_path / "painted.avi"
+    _painted_video(video, 40)
+    if not counted:
+        monkeypatch.setattr(calib_frames.cv2, "VideoCapture", _Uncounted)
+    want = 6 * np.array([0, 10, 20, 29, 39])
+    got = load_frames(video, (32, 64), count=5).mean(axis=(1, 2, 3))
+    np.testing.assert_allclose(got, want, atol=3)
+    folder = tmp_path / "pictures"
+    folder.mkdir()
+    for i in range(40):
+        cv2.imwrite(str(folder / f"{i:03d}.png"), np.full((32, 64, 3), 6 * i, np.uint8))
+    np.testing.assert_array_equal(load_frames(folder, (32, 64), count=5).mean(axis=(1, 2, 3)), want)
 
 
 def test_a_folder_of_clips_is_sampled_across_them_each_warped_by_its_own_camera(tmp_path):

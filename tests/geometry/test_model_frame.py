@@ -167,3 +167,20 @@ def test_where_the_raw_camera_sees_nothing_the_picture_is_mirrored_as_opencv_mir
     taps = mf.fixed_maps[0]
     assert taps[..., 0].min() >= 0 and taps[..., 0].max() <= src.shape[1] - 1
     assert taps[..., 1].min() >= 0 and taps[..., 1].max() <= src.shape[0] - 1
+
+
+@pytest.mark.parametrize(("width", "height", "hfov"), [(640, 150, 70.0), (180, 400, 40.0), (300, 90, 100.0)])
+def test_the_model_sees_only_rays_that_land_inside_the_raw_picture_on_both_axes(width, height, hfov):
+    """A pinhole camera mounted as the model camera, shorter (or narrower) than it: model pixel (u, v)
+    looks along x = (u - cx) / fx, y = (v - cy) / fy, which the raw camera images at cx' + fx' x,
+    cy' + fy' y; the model sees it when that lies within the raw picture (pixel centres 0 .. n - 1, so
+    -0.5 .. n - 0.5). Rows above and below, columns left and right: worked from the tangents here."""
+    raw = Intrinsics.from_fov(width, height, hfov)
+    model = Intrinsics.from_fov(512, 256, 80.0)
+    mf = ModelFrame(raw, (), REF, model, REF)
+    x = (np.arange(model.width) - model.cx) / model.fx
+    y = (np.arange(model.height) - model.cy) / model.fy
+    cols = np.abs(raw.cx + raw.fx * x - (raw.width - 1) / 2) <= raw.width / 2
+    rows = np.abs(raw.cy + raw.fy * y - (raw.height - 1) / 2) <= raw.height / 2
+    assert not rows.all() or not cols.all(), "the raw camera must miss part of the model's view"
+    np.testing.assert_array_equal(mf.seen, rows[:, None] & cols[None, :])

@@ -178,3 +178,17 @@ def test_pixels_without_depth_are_not_visible(straight_road):
     outside = np.ones(holed.shape, bool)
     outside[100:120, 100:150] = False
     assert (lab.visibility[outside] == full.visibility[outside]).all()
+
+
+def test_blind_spot_regions_joined_only_at_corners_are_one_region():
+    """A staircase of ten 2x2 blocks, each touching the next only at a corner (40 pixels, 8-connected),
+    stays whole above a minimum of 30; a staircase of five (20 pixels) goes, and so does a lone block."""
+    mask = np.zeros((40, 60), bool)
+    for k in range(10):
+        mask[2 + 2 * k: 4 + 2 * k, 2 + 2 * k: 4 + 2 * k] = True
+    for k in range(5):
+        mask[2 + 2 * k: 4 + 2 * k, 40 + 2 * k: 42 + 2 * k] = True
+    mask[35:37, 55:57] = True
+    kept = remove_small_components(mask, 30)
+    assert kept[:, :30].sum() == 40 and (kept[:, :30] == mask[:, :30]).all()
+    assert not kept[:, 30:].any()

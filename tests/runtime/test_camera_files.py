@@ -50,6 +50,16 @@ def test_a_camera_that_cannot_exist_is_refused_with_the_field_named(setup, tmp_p
     assert states == [SystemState.UNAVAILABLE]
 
 
+@pytest.mark.parametrize(("cx", "cy"), [(-1.0, 360.0), (1281.0, 360.0), (640.0, -1.0), (640.0, 900.0),
+                                      (0.0, 360.0), (640.0, 720.0)])
+def test_a_principal_point_off_the_picture_on_any_side_is_refused(cx, cy):
+    """Left, right, above, below the 1280x720 picture, and on its edge: no lens's axis meets the sensor there."""
+    from bsn_edge.camera import Intrinsics
+    with pytest.raises(ValueError, match="principal point"):
+        Calibration.of(Intrinsics(1000.0, 1000.0, cx, cy, 1280, 720))
+    Calibration.of(Intrinsics(1000.0, 1000.0, 1.0, 719.0, 1280, 720))
+
+
 def test_real_lenses_pass():
     """The checks refuse no camera that exists: a 1280x720 dashcam's barrel (the Udacity camera's own
     coefficients from the chessboard), a stronger barrel and a mild pincushion all pass."""

@@ -12,12 +12,13 @@ from pathlib import Path
 from typing import ClassVar
 
 import can
+import cantools
 import numpy as np
 import onnx
 import pytest
 
-from bsn_edge.alerts import SystemState
-from bsn_edge.alerts.can_codec import decode
+from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+from bsn_edge.alerts.can_codec import DBC_PATH, decode
 from bsn_edge.alerts.health import Health, HealthConfig
 from bsn_edge.alerts.senders import CanSender
 from bsn_edge.card import CARD_SHA_KEY, ModelCard, card_digest
@@ -420,3 +421,33 @@ def test_a_serial_port_gone_for_good_is_degraded_on_the_other_bus_and_a_non_zero
     rc = run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
                        str(clip / "calibration.json")])
     assert rc == 1 and "serial could not send at the end of the run" in capsys.readouterr().err
+
+
+def test_beside_every_unavailable_status_the_hazard_says_nothing_is_known():
+    """A WARNING on the left at 4.5 m, then no valid inference past the deadline: from then every hazard
+    frame (decoded with cantools from the DBC) carries levels NONE, scores 0 and the far distance 63.5,
+    never the last WARNING; the final cycle too."""
+    db = cantools.database.load_file(str(DBC_PATH))
+    h = Health(HealthConfig(deadline_s=0.5, fps_floor=0.0))    # one inference: the rate is no fault here
+    warn = SectorAlert(1.0, Level.WARNING, 4.5)
+    with can.Bus(interface="virtual", channel="bsn-fs-unav") as rx, CanSender("virtual", "bsn-fs-unav") as tx:
+        emitter = CycleEmitter([tx], h, cycle_s=0.1)
+        h.valid(0.0)
+        emitter.publish(AlertFrame(0.0, warn, warn, warn, SystemState.OK, 20.0, {}))
+        emitter.emit(0.0)
+        emitter.emit(1.5)                    # deadline 0.5 s: cycles 0.0 .. 0.5 OK, 0.6 .. 1.5 UNAVAILABLE
+        h.unavailable()
+        emitter.final(1.55)
+        msgs = [db.decode_message(m.arbitration_id, bytes(m.data)) | {"id": m.arbitration_id}
+                for m in iter(lambda: rx.recv(0.2), None)]
+    pairs = list(zip(msgs[0::2], msgs[1::2], strict=True))
+    assert all(hz["id"] == 0x500 and st["id"] == 0x501 for hz, st in pairs) and len(pairs) == 17
+    states = [str(st["System_State"]) for _, st in pairs]
+    assert states == ["OK"] * 6 + ["UNAVAILABLE"] * 11
+    for hz, st in pairs:
+        for side in ("Left", "Centre", "Right"):
+            if str(st["System_State"]) == "UNAVAILABLE":
+                assert str(hz[f"{side}_Level"]) == "NONE" and hz[f"{side}_Score"] == 0
+                assert hz[f"{side}_Distance"] == 63.5
+            else:
+                assert str(hz[f"{side}_Level"]) == "WARNING" and hz[f"{side}_Distance"] == 4.5
