@@ -8,7 +8,9 @@ and benchmarks take model facts from a card, never from defaults of their own.
 Reading validates: a missing or bad key raises ``ValueError`` naming the key and the file.
 An exported card is *sealed*: it carries the sha256 of the graph and its weights
 (``graph_sha256``), a known-answer self-test, and ``card_sha256`` over every other entry, so a
-flipped byte anywhere in the file is caught at load.
+flipped byte anywhere in the file is caught at load. The digest reads each entry's key and value
+with their lengths before them (:func:`card_digest`), so no two cards share one, and a sealed card
+is read only when its entries are exactly the card's fields, each one strict JSON.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from enum import IntEnum
 from typing import Any
 
 from bsn_edge.camera import Intrinsics
@@ -37,6 +40,25 @@ _HEX64 = re.compile(r"[0-9a-f]{64}")
 # A card without a mounting was trained in the fixed-camera world (bsn-synth --camera fixed): cameras at
 # the reference height, pitched 0-3 degrees down (1.5 on average), no yaw or roll.
 EARLY_MOUNTING = Mounting(height_m=REFERENCE_HEIGHT_M, pitch_deg=1.5)
+
+
+class DigestVersion(IntEnum):
+    """How ``card_sha256`` encodes the entries. V1 joined keys and values with NUL, which two different
+    cards could share (one entry's key and value made to carry another's); V2 is canonical."""
+
+    V1 = 1
+    V2 = 2
+
+
+_DIGEST_DOMAIN = b"bsn-edge model card v2\0"
+
+
+# the entries of a card (``ModelCard.to_dict``; ``training`` only when recorded), and those a card read
+# from a run's checkpoint.json or a model sealed before they existed may lack
+CARD_FIELDS = ("card_version", "model", "variant", "spec", "input_size", "threshold", "camera", "depth_range",
+               "quantization", "config_digest", "weights_sha256", "train_camera", "graph_sha256", "self_test",
+               "mounting", "training")
+OPTIONAL_FIELDS = ("train_camera", "self_test", "config_digest", "graph_sha256", "mounting", "training")
 
 
 # the arithmetic a training piece ran in; UNRECORDED: its records do not name it (written before they did)
@@ -219,8 +241,7 @@ class ModelCard:
             return d[key]
 
         def build(key: str, fn):
-            v = get(key, required=key not in ("train_camera", "self_test", "config_digest", "graph_sha256",
-                                              "mounting", "training"))
+            v = get(key, required=key not in OPTIONAL_FIELDS)
             try:
                 return fn(v)
             except (TypeError, ValueError, KeyError) as e:
@@ -257,8 +278,11 @@ class ModelCard:
         return props
 
     @classmethod
-    def from_metadata(cls, props: Mapping[str, str], where: str = "model") -> ModelCard:
-        """Read a card from ONNX metadata; checks ``bsn.card_sha256`` when the card carries one."""
+    def from_metadata(cls, props: Mapping[str, str], where: str = "model",
+                      digests: tuple[DigestVersion, ...] = (DigestVersion.V2,)) -> ModelCard:
+        """Read a card from ONNX metadata: ``bsn.card_sha256`` must match (in one of ``digests``: a
+        model sealed before the canonical digest is read only to be resealed), and the entries must be
+        exactly the card's fields (``training`` may be absent), each strict JSON."""
         ours = {k: v for k, v in props.items() if k.startswith(PREFIX)}
         if not ours:
             raise ValueError(f"{where}: not a bsn-export model (no {PREFIX}* metadata)")
@@ -267,16 +291,28 @@ class ModelCard:
         stored = ours.get(CARD_SHA_KEY)
         if stored is None:
             raise ValueError(f"{where}: model card key {CARD_SHA_KEY!r} is missing")
-        if stored != card_digest(ours):
+        matched = [v for v in digests if stored == card_digest(ours, v)]
+        if not matched:
+            if DigestVersion.V1 not in digests and stored == card_digest(ours, DigestVersion.V1):
+                raise ValueError(f"{where}: sealed by an earlier bsn-edge, whose card digest was not canonical; "
+                                 "export it again, or reseal it if you trust the file (bsn-export --reseal "
+                                 "MODEL.onnx --out NEW.onnx --sign KEY.pem)")
             raise ValueError(f"{where}: the model card's metadata is damaged ({CARD_SHA_KEY} does not match)")
+        fields_ = {k[len(PREFIX):]: v for k, v in ours.items() if k != CARD_SHA_KEY}
+        unknown = sorted(set(fields_) - set(CARD_FIELDS))
+        # a card sealed canonically carries every field; one sealed before may lack those added since
+        optional = {"training"} if DigestVersion.V2 in matched else {"training", *OPTIONAL_FIELDS}
+        missing = sorted(set(CARD_FIELDS) - set(fields_) - optional)
+        if unknown or missing:
+            what = [f"unknown {', '.join(repr(PREFIX + k) for k in unknown)}"] if unknown else []
+            what += [f"missing {', '.join(repr(PREFIX + k) for k in missing)}"] if missing else []
+            raise ValueError(f"{where}: the model card's entries are not a card's ({'; '.join(what)})")
         d: dict[str, Any] = {}
-        for k, v in ours.items():
-            if k == CARD_SHA_KEY:
-                continue
+        for k, v in fields_.items():
             try:
-                d[k[len(PREFIX):]] = json.loads(v)
-            except json.JSONDecodeError as e:
-                raise ValueError(f"{where}: metadata {k!r} is not JSON ({e}): {v!r:.80}") from None
+                d[k] = _strict_json(v)
+            except ValueError as e:
+                raise ValueError(f"{where}: metadata {PREFIX + k!r} is not a card's JSON ({e}): {v!r:.80}") from None
         return cls.from_dict(d, where)
 
     @classmethod
@@ -309,13 +345,28 @@ class ModelCard:
         }, f"{where} (written before model cards)")
 
 
-def card_digest(props: Mapping[str, str]) -> str:
-    """sha256 over the sorted ``bsn.*`` entries other than the digest itself."""
+def card_digest(props: Mapping[str, str], version: DigestVersion = DigestVersion.V2) -> str:
+    """sha256 over the sorted ``bsn.*`` entries other than the digest itself: each key and each value
+    as UTF-8 with its length in 8 bytes before it (V2), so the byte stream names one card only."""
     h = hashlib.sha256()
+    if version == DigestVersion.V2:
+        h.update(_DIGEST_DOMAIN)
     for k in sorted(props):
         if k.startswith(PREFIX) and k != CARD_SHA_KEY:
-            h.update(k.encode() + b"\0" + props[k].encode() + b"\0")
+            key, value = k.encode(), props[k].encode()
+            if version == DigestVersion.V2:
+                h.update(len(key).to_bytes(8, "big") + key + len(value).to_bytes(8, "big") + value)
+            else:
+                h.update(key + b"\0" + value + b"\0")
     return h.hexdigest()
+
+
+def _strict_json(text: str) -> Any:
+    """JSON as a card writes it: no NaN or infinity, no control characters inside strings."""
+    def refuse(name: str) -> Any:
+        raise ValueError(f"{name} is not a number a card holds")
+
+    return json.loads(text, parse_constant=refuse)
 
 
 def _pair(v: Any, kind: type) -> tuple:

@@ -25,7 +25,7 @@ class Fault(StrEnum):
     carries (``can_codec``) and the summary reports (by these names)."""
 
     DECODE_ERRORS = "decode_errors"          # a frame that would not decode
-    SIZE_CHANGES = "size_changes"            # a frame of another size than the one before
+    SIZE_CHANGES = "size_changes"            # a frame of another size than the source's (not run)
     NAN_OUTPUTS = "nan_outputs"              # the model answered NaN or infinity
     DROPPED_FRAMES = "dropped_frames"        # a live source's frames the loop was too busy to take
     TX_ERRORS = "tx_errors"                  # a CAN send that failed

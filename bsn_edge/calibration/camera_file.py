@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
 from bsn_edge.calibration.hood import Hood
@@ -136,9 +137,14 @@ class Calibration:
 
 
 FOV_RANGE_DEG = (10.0, 170.0)     # horizontal field of view a pinhole model with distortion describes
+SIDE_RANGE_PX = (16, 8192)        # width and height: from the smallest test clip to 8K, what cameras make
 ASPECT_RANGE = (0.5, 2.0)         # fy / fx: pixels at most twice as tall as wide, or as wide as tall
 DIST_LIMIT = 1e3                  # |coefficient|: beyond it no lens, a typo
 ASPECT_TOLERANCE = 0.01           # frames whose width / height is the file's within this are the same camera resized
+# taking the lens out moves a pixel along its ray from the principal point: to at least half and at most
+# twice its distance. The Udacity dashcam's corners go to 1.1 times theirs, a strong barrel on a 70-degree
+# pinhole to 1.5; dist [0, 999, 0, 0, 0] on a 70-degree pinhole squeezes its picture's edge to 0.28
+LENS_ZOOM_RANGE = (0.5, 2.0)
 
 
 def check_physical(k: Intrinsics, dist: tuple[float, ...]) -> None:
@@ -148,6 +154,10 @@ def check_physical(k: Intrinsics, dist: tuple[float, ...]) -> None:
     the principal point inside the image, every distortion coefficient finite and within
     :data:`DIST_LIMIT`, and the radial distortion monotonic out to the image's corners (a lens model
     that folds back maps two directions onto one pixel: no warp can undo it)."""
+    lo_px, hi_px = SIDE_RANGE_PX
+    if not (lo_px <= k.width <= hi_px and lo_px <= k.height <= hi_px):
+        raise ValueError(f"width x height {k.width}x{k.height}: a camera file describes {lo_px} to {hi_px} pixels "
+                         "a side")
     hfov = math.degrees(2 * math.atan(k.width / (2 * k.fx)))
     lo, hi = FOV_RANGE_DEG
     if not lo <= hfov <= hi:
@@ -166,6 +176,48 @@ def check_physical(k: Intrinsics, dist: tuple[float, ...]) -> None:
         if folded is not None:
             raise ValueError(f"dist: the radial distortion folds back {folded} (not monotonic out to the image's "
                              f"corners): no camera images that way")
+        moved = _undistortion_fault(k, dist)
+        if moved is not None:
+            raise ValueError(f"dist: taking the lens out {moved}: no camera images that way")
+
+
+def _border(k: Intrinsics, per_side: int = 64) -> dict[str, np.ndarray]:
+    """Points along each side of the picture, in order: side -> [N, 2] pixel coordinates."""
+    w, h, t = k.width, k.height, np.linspace(0.0, 1.0, per_side)
+    return {"top": np.stack([t * w, 0 * t], -1), "right": np.stack([w + 0 * t, t * h], -1),
+            "bottom": np.stack([t * w, h + 0 * t], -1), "left": np.stack([0 * t, t * h], -1)}
+
+
+def _undistortion_fault(k: Intrinsics, dist: tuple[float, ...]) -> str | None:
+    """What is wrong with taking the lens out over the picture's border, or None. Radially (exactly, on
+    the radial polynomial, which :func:`_radial_fold` has found monotonic): every border pixel moves
+    along its ray to within :data:`LENS_ZOOM_RANGE` of its distance from the principal point. Then with
+    the tangential terms (OpenCV's undistortion, as the warps use it): every border pixel lands at a
+    finite place, in the order it has along its side."""
+    d = list(dist) + [0.0] * (8 - len(dist))
+    k1, k2, _, _, k3, k4, k5, k6 = d[:8]
+    border = _border(k)
+    pts = np.concatenate(list(border.values()))
+    r_d = np.hypot((pts[:, 0] - k.cx) / k.fx, (pts[:, 1] - k.cy) / k.fy)
+    r = np.linspace(0.0, 10.0 * float(r_d.max()), 20001)
+    r2 = r * r
+    curve = r * (1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3) / (1 + k4 * r2 + k5 * r2 ** 2 + k6 * r2 ** 3)
+    reach = int(np.argmax(curve >= r_d.max()))
+    away = r_d > 1e-6
+    zoom = np.interp(r_d[away], curve[:reach + 1], r[:reach + 1]) / r_d[away]
+    lo, hi = LENS_ZOOM_RANGE
+    if zoom.min() < lo or zoom.max() > hi:
+        worst = float(zoom.min() if zoom.min() < lo else zoom.max())
+        return (f"moves the picture's edge to {worst:.2f} times its distance from the principal point (a lens "
+                f"that exists: {lo:g} to {hi:g} times)")
+    for name, side in border.items():
+        out = cv2.undistortPoints(side[:, None], k.K, np.asarray(dist, np.float64), P=k.K).reshape(-1, 2)
+        if not np.isfinite(out).all():
+            return f"sends the {name} edge to infinity"
+        along = out[:, 0] if name in ("top", "bottom") else out[:, 1]
+        if np.any(np.diff(along) <= 0):
+            return f"folds the {name} edge back on itself"
+    return None
 
 
 def _radial_fold(k: Intrinsics, dist: tuple[float, ...]) -> str | None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from bsn_edge.card import DigestVersion
 from bsn_edge.cli.common import fail, glue_values, parse_size
 from bsn_edge.export.pipeline import export_run
 from bsn_edge.export.quantize import METHODS, TYPES, QuantConfig
@@ -46,7 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quantize-heads", action="store_true",
                    help="quantize the output heads too (by default they stay float)")
     p.add_argument("--reseal", metavar="MODEL.onnx",
-                   help="instead of exporting: seal a model exported before models were sealed (writes its card "
+                   help="instead of exporting: seal a model exported before models were sealed, or before their card "
+                        "digest was canonical (writes its card "
                         "with the graph's sha256 and a self-test answer to --out), signed with --sign KEY.pem, "
                         "which it needs: a resealed model is vouched for by whoever resealed it. Only for a file "
                         "you trust: sealing cannot tell whether it was damaged before")
@@ -88,7 +90,7 @@ def signed(model: Path, key: str | None) -> int:
 
 def reseal(src: Path, out: Path) -> int:
     try:
-        card = read_card(src)
+        card = read_card(src, (DigestVersion.V2, DigestVersion.V1))
         sealed = seal(src, card.replace(graph_sha256="", self_test=None), out)
     except (FileNotFoundError, ValueError, SelfTestError) as e:
         return fail(PROG, f"{src}: {e}" if isinstance(e, SelfTestError) else str(e))

@@ -1,8 +1,8 @@
 """``bsn-run``: dashcam video in, left / centre / right hazard levels out.
 
-This module imports only the standard library at its top: ``main`` watches SIGINT and SIGTERM before
-anything else (the runtime's modules take a while to import), so a signal at any moment of start-up
-ends the run cleanly.
+This module imports only the standard library at its top: ``main`` watches the terminating signals
+(TERM, INT, HUP, QUIT) before anything else (the runtime's modules take a while to import), so a signal
+at any moment of start-up ends the run cleanly.
 """
 
 from __future__ import annotations
@@ -37,8 +37,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "summary (frames, dropped, frames/s, p50/p95/p99 latency, per-stage shares). Before the "
                     "first frame the model's digest, signature and self-test are checked: a model that fails "
                     "them is refused (UNAVAILABLE is sent first); only models signed by a trusted key run, "
-                    "unless --allow-unsigned. Exit codes: 0 done (or stopped by SIGTERM), 1 the "
-                    "source failed, 2 could not start, 130 interrupted (SIGINT).")
+                    "unless --allow-unsigned. Exit codes: 0 done (or stopped by SIGTERM, as a service "
+                    "manager stops it), 1 the source failed, 2 could not start, 128 + N stopped by signal N "
+                    "(130 SIGINT, 129 SIGHUP, 131 SIGQUIT). A signal at any moment, start-up included, and any "
+                    "later ones end the run the same way: UNAVAILABLE last on every bus, the summary written.")
     _model_and_source(p)
     _camera(p)
     _outputs(p)
@@ -203,15 +205,36 @@ def refuse(senders: list[Sender], message: str) -> int:
     return fail(PROG, message + (" (UNAVAILABLE sent)" if senders else ""))
 
 
-class StopOnSignal:
-    """SIGINT and SIGTERM (how a service manager stops a process) both end the run cleanly: the
-    loop finishes its frame, logs are closed, the summary is written, UNAVAILABLE is sent."""
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGINT", "SIGHUP", "SIGQUIT")
+                     if hasattr(signal, name))
 
-    def __init__(self, source=None) -> None:
+
+def exit_code(signame: str | None) -> int:
+    """The exit code of a run a signal ended: 0 for SIGTERM (a service manager's stop), 128 + N for the
+    others (130 SIGINT, 129 SIGHUP, 131 SIGQUIT)."""
+    if signame is None or signame == "SIGTERM":
+        return 0
+    return 128 + int(signal.Signals[signame])
+
+
+class StopOnSignal:
+    """The terminating signals (TERM, as a service manager stops a process; INT, HUP when the terminal
+    or SSH session closes; QUIT) all end the run cleanly: the loop finishes its frame, logs are closed,
+    the summary is written, UNAVAILABLE is sent. The first signal names the stop; any after it change
+    nothing (they are counted). ``keep``: once a signal came, its handler stays in place after the run,
+    so a late signal cannot kill the process while it writes its last words (the command line); in a
+    program that calls :func:`main` itself the handlers it had come back."""
+
+    def __init__(self, source=None, keep: bool = False) -> None:
         self.source, self.event, self.signal = source, threading.Event(), None
+        self.later = 0
+        self.keep = keep
         self._old: dict[int, Any] = {}
 
     def _handle(self, signum, _frame) -> None:
+        if self.event.is_set():
+            self.later += 1
+            return
         self.signal = signal.Signals(signum).name
         self.event.set()
         if self.source is not None:
@@ -225,11 +248,13 @@ class StopOnSignal:
 
     def __enter__(self) -> StopOnSignal:
         if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
+            for sig in STOP_SIGNALS:
                 self._old[sig] = signal.signal(sig, self._handle)
         return self
 
     def __exit__(self, *exc) -> None:
+        if self.keep and self.event.is_set():
+            return
         for sig, old in self._old.items():
             signal.signal(sig, old)
 
@@ -268,7 +293,7 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
 def main(argv: list[str] | None = None) -> int:
     # signals first: from here on SIGINT and SIGTERM end the run cleanly, during start-up included; once
     # the outputs are open, every way out ends with UNAVAILABLE on the bus
-    with StopOnSignal() as stopper:
+    with StopOnSignal(keep=argv is None) as stopper:
         args = build_parser().parse_args(argv)
         if args.max_frames is not None and args.max_frames < 1:
             return fail(PROG, "--max-frames must be >= 1")
@@ -277,19 +302,38 @@ def main(argv: list[str] | None = None) -> int:
         return _run(args, stopper)
 
 
-def _stopped_early(stopper: StopOnSignal) -> int:
-    print(f"{PROG}: stopped by {stopper.signal} during start-up", file=sys.stderr)
-    return 130 if stopper.signal == "SIGINT" else 0
+def _stopped_early(args: argparse.Namespace, stopper: StopOnSignal, senders: list[Sender] | None = None) -> int:
+    """A signal before the first frame: UNAVAILABLE on every bus asked for (opened now if need be), the
+    summary written, the signal's exit code."""
+    if senders is None:
+        try:
+            senders = make_senders(args)
+        except ValueError:
+            senders = []
+    for s in senders:
+        from bsn_edge.alerts.frame import AlertFrame
+        s.send(AlertFrame.unavailable(0.0))
+        s.close()
+    if args.summary:
+        from bsn_edge.sequence.images import atomic_write_bytes
+        early = {"frames": 0, "valid_frames": 0, "stopped": True, "signal": stopper.signal, "phase": "start-up"}
+        try:
+            atomic_write_bytes(args.summary, (json.dumps(early, indent=1) + "\n").encode())
+        except OSError as e:
+            print(f"{PROG}: error: cannot write the summary {args.summary}: {e}", file=sys.stderr)
+    print(f"{PROG}: stopped by {stopper.signal} during start-up" + (" (UNAVAILABLE sent)" if senders else ""),
+          file=sys.stderr)
+    return exit_code(stopper.signal)
 
 
 def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
-    if stopper.event.is_set():          # nothing is open yet: there is no bus to tell
-        return _stopped_early(stopper)
+    if stopper.event.is_set():
+        return _stopped_early(args, stopper)
     from tqdm import tqdm
 
     from bsn_edge.runtime import run
-    if stopper.event.is_set():          # a signal while the runtime loaded: still nothing to tell
-        return _stopped_early(stopper)
+    if stopper.event.is_set():          # a signal while the runtime loaded
+        return _stopped_early(args, stopper)
     try:
         senders = make_senders(args)
     except ValueError as e:
@@ -300,8 +344,7 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
         return refuse(senders, str(e))
     if stopper.event.is_set():
         source.close()
-        refuse(senders, f"stopped by {stopper.signal} during start-up")
-        return 130 if stopper.signal == "SIGINT" else 0
+        return _stopped_early(args, stopper, senders)
     stopper.watch(source)
     try:
         total = args.max_frames or getattr(source, "total", None)
@@ -411,9 +454,9 @@ def _report(summary: dict[str, Any], args: argparse.Namespace, camera: CameraSta
         print(f"{PROG}: error: none of the {summary['frames']} frames gave a valid inference (see the faults)",
               file=sys.stderr)
         return 1
-    if stopper.signal == "SIGINT":
-        print(f"{PROG}: interrupted", file=sys.stderr)
-        return 130
+    if stopper.signal not in (None, "SIGTERM"):
+        print(f"{PROG}: stopped by {stopper.signal}", file=sys.stderr)
+        return exit_code(stopper.signal)
     return 1 if summary_error else 0
 
 

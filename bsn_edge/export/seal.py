@@ -11,7 +11,7 @@ from pathlib import Path
 
 import onnx
 
-from bsn_edge.card import ModelCard
+from bsn_edge.card import DigestVersion, ModelCard
 from bsn_edge.modelfile import selftest
 from bsn_edge.modelfile.read import ModelFile, graph_digest, session
 from bsn_edge.sequence.images import atomic_write_bytes
@@ -49,6 +49,7 @@ def seal(path: str | Path, card: ModelCard, out: str | Path | None = None) -> Mo
     return sealed
 
 
-def read_card(path: str | Path) -> ModelCard:
-    """The card of an exported model (validated), read as the runtime reads it."""
-    return ModelCard.from_metadata(ModelFile.read(path).metadata, str(path))
+def read_card(path: str | Path, digests: tuple[DigestVersion, ...] = (DigestVersion.V2,)) -> ModelCard:
+    """The card of an exported model (validated), read as the runtime reads it; ``digests``: the card
+    digests accepted (a model sealed before the canonical one is read only to be resealed)."""
+    return ModelCard.from_metadata(ModelFile.read(path).metadata, str(path), digests)

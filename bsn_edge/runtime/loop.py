@@ -147,7 +147,8 @@ class FramePipeline:
         self.feeder: Feeder | None = None
         self.pool: ThreadPoolExecutor | None = None     # the inference threads, with frames in flight
         self.frames = self.valid = 0
-        self.last_shape: tuple[int, ...] | None = None
+        self.shape: tuple[int, ...] | None = None      # the source's frames' shape: its first frame's
+        self.reconnects_seen = 0
         self.last_t = 0.0
 
     # -- the stages ------------------------------------------------------------------------------
@@ -164,10 +165,16 @@ class FramePipeline:
             h.fault(Fault.DECODE_ERRORS)
             rec.fault = Fault.DECODE_ERRORS
             return False
-        if self.last_shape is not None and cap.frame.shape != self.last_shape:
+        if self.source.reconnects != self.reconnects_seen:    # a camera reopened may come back at another size
+            self.reconnects_seen, self.shape = self.source.reconnects, None
+        if self.shape is None:
+            self.shape = cap.frame.shape
+        elif cap.frame.shape != self.shape:
+            # a frame of another size (or aspect) than the source's is a damaged frame: warped as the
+            # source's camera it would be stretched, so it is counted and not run
             h.fault(Fault.SIZE_CHANGES)
             rec.fault = Fault.SIZE_CHANGES
-        self.last_shape = cap.frame.shape
+            return False
         return True
 
     @property

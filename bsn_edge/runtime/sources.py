@@ -19,7 +19,7 @@ import numpy as np
 
 from bsn_edge.runtime.slot import LatestSlot
 from bsn_edge.sequence.folder import SequenceFolder
-from bsn_edge.sequence.media import IMAGE_EXTS, is_image
+from bsn_edge.sequence.media import IMAGE_EXTS, is_image, picture_damage
 
 
 @dataclass(frozen=True)
@@ -183,8 +183,18 @@ class ImageFolderSource(Source):
     def _frames(self) -> Iterator[Captured]:
         for i, p in enumerate(self.files):
             t0 = time.perf_counter()
-            frame = cv2.imread(str(p), cv2.IMREAD_COLOR)
+            frame = self._read(p)
             yield Captured(i / self.fps, frame, i, time.perf_counter() - t0, p.stem)
+
+    @staticmethod
+    def _read(path: Path) -> np.ndarray | None:
+        """The picture, or None when it cannot be read whole (a cut file decodes with its missing part
+        filled in: not a frame to run)."""
+        try:
+            damage = picture_damage(path.read_bytes(), path.suffix)
+        except OSError:
+            return None
+        return None if damage is not None else cv2.imread(str(path), cv2.IMREAD_COLOR)
 
 
 @dataclass(frozen=True)

@@ -220,11 +220,19 @@ def _painted_video(path, frames: int) -> None:
     w.release()
 
 
-class _Uncounted(cv2.VideoCapture):
+class _Uncounted:
     """A container that does not say how many frames it holds (a stream dump, some AVIs)."""
 
+    opener = cv2.VideoCapture
+
+    def __init__(self, *args) -> None:
+        self.cap = _Uncounted.opener(*args)
+
     def get(self, prop):
-        return 0.0 if prop == cv2.CAP_PROP_FRAME_COUNT else super().get(prop)
+        return 0.0 if prop == cv2.CAP_PROP_FRAME_COUNT else self.cap.get(prop)
+
+    def __getattr__(self, name):
+        return getattr(self.cap, name)
 
 
 @pytest.mark.parametrize("counted", [True, False])

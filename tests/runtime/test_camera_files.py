@@ -33,6 +33,8 @@ def _edited(clip, tmp_path, **change) -> str:
     ({"fx": 1e-6, "fy": 1e-6}, "field of view"),
     ({"fx": 1e9, "fy": 1e9}, "field of view"),
     ({"fy": 5.0}, "fy / fx"),
+    ({"dist": [0.0, 999.0, 0.0, 0.0, 0.0]}, "taking the lens out"),
+    ({"width": 10 ** 12, "height": 5 * 10 ** 11, "fx": 1e12, "fy": 1e12, "cx": 5e11, "cy": 2.5e11}, "pixels a side"),
 ])
 def test_a_camera_that_cannot_exist_is_refused_with_the_field_named(setup, tmp_path, capsys, change, says):
     model, clip = setup
@@ -62,11 +64,36 @@ def test_a_principal_point_off_the_picture_on_any_side_is_refused(cx, cy):
 
 def test_real_lenses_pass():
     """The checks refuse no camera that exists: a 1280x720 dashcam's barrel (the Udacity camera's own
-    coefficients from the chessboard), a stronger barrel and a mild pincushion all pass."""
+    coefficients from the chessboard), a stronger barrel and a mild pincushion all pass, and a strong
+    barrel on a 960x540 camera of 69 degrees across (its corners move by 0.38 of the diagonal)."""
     from bsn_edge.camera import Intrinsics
     k = Intrinsics(1150.0, 1150.0, 650.0, 370.0, 1280, 720)
     for dist in ((-0.24, 0.05, 0.001, -0.0005, 0.0), (-0.35, 0.12, 0.0, 0.0, -0.02), (0.15, 0.0, 0.001, -0.001, 0.0)):
         Calibration.of(k, dist)
+    Calibration.of(Intrinsics(700.0, 700.0, 480.0, 270.0, 960, 540), (-0.5, 0.2, 0.0, 0.0, -0.03))
+
+
+def test_the_lens_shift_is_measured_against_radii_undistorted_by_hand():
+    """A pure pincushion k1 on a 960x540 camera: the corner at normalised radius r_d comes from the radius
+    r with r (1 + k1 r^2) = r_d (solved here by bisection). At k1 = 3 the corner comes from 0.58 of its
+    distance and the lens passes; at k1 = 10, from 0.45: no lens squeezes its picture that much."""
+    from bsn_edge.calibration.camera_file import LENS_ZOOM_RANGE
+    from bsn_edge.camera import Intrinsics
+
+    k = Intrinsics(700.0, 700.0, 480.0, 270.0, 960, 540)
+    r_d = math.hypot(480, 270) / 700
+
+    def zoom(k1):
+        lo, hi = 0.0, r_d
+        for _ in range(60):
+            mid = (lo + hi) / 2
+            lo, hi = (mid, hi) if mid * (1 + k1 * mid * mid) < r_d else (lo, mid)
+        return lo / r_d
+
+    assert zoom(10.0) < LENS_ZOOM_RANGE[0] < zoom(3.0)
+    Calibration.of(k, (3.0, 0.0, 0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match=f"to {zoom(10.0):.2f} times its distance"):
+        Calibration.of(k, (10.0, 0.0, 0.0, 0.0, 0.0))
 
 
 @pytest.mark.parametrize("source", ["rgb", "video.mp4"])

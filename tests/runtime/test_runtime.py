@@ -60,8 +60,43 @@ def test_corrupt_and_resized_frames_are_counted(setup, tmp_path):
         cv2.imwrite(str(folder / f"{i:06d}.png"), img)
     (folder / "000003.png").write_bytes(b"\x89PNG\r\n\x1a\n this is not an image")
     summary = run(Engine(model), ImageFolderSource(folder), [])
-    assert summary["frames"] == 8 and summary["valid_frames"] == 7
-    assert summary["faults"]["decode_errors"] == 1 and summary["faults"]["size_changes"] == 2
+    # the resized frame is not run: warped as the source's camera it would be stretched
+    assert summary["frames"] == 8 and summary["valid_frames"] == 6
+    assert summary["faults"]["decode_errors"] == 1 and summary["faults"]["size_changes"] == 1
+
+
+def test_a_cut_jpeg_and_a_frame_of_another_aspect_are_decode_faults_on_the_bus(setup, tmp_path):
+    """Ten JPEG frames: the 4th cut short with garbage after it (it decodes, libjpeg only warns), the 7th
+    4:3 among 2:1 ones. Neither is run; both reach the bus's Decode_Errors (decoded with cantools) and
+    the frame log names each."""
+    import cantools
+
+    from bsn_edge.alerts.can_codec import DBC_PATH
+    model, clip = setup
+    folder = tmp_path / "jpegs"
+    folder.mkdir()
+    for i in range(10):
+        img = cv2.imread(str(clip / "rgb" / f"{i:06d}.png"))
+        if i == 6:
+            img = cv2.resize(img, (192, 144))
+        _, jpg = cv2.imencode(".jpg", img)
+        data = jpg.tobytes()
+        if i == 3:
+            data = data[: len(data) // 2] + bytes(np.random.default_rng(0).integers(0, 255, 300, dtype=np.uint8))
+        (folder / f"{i:06d}.jpg").write_bytes(data)
+    assert cv2.imread(str(folder / "000003.jpg")) is not None, "OpenCV decodes the cut file: it must be caught"
+    db = cantools.database.load_file(str(DBC_PATH))
+    log = tmp_path / "frames.jsonl"
+    with can.Bus(interface="virtual", channel="bsn-rt-cut") as rx, CanSender("virtual", "bsn-rt-cut") as tx:
+        summary = run(Engine(model), ImageFolderSource(folder), [tx], log=log)
+        st = [db.decode_message(m.arbitration_id, bytes(m.data)) for m in iter(lambda: rx.recv(0.2), None)
+              if m.arbitration_id == 0x501]
+    assert summary["frames"] == 10 and summary["valid_frames"] == 8
+    assert summary["faults"]["decode_errors"] == 1 and summary["faults"]["size_changes"] == 1
+    assert st[-1]["Decode_Errors"] == 2
+    faults = {json.loads(x)["frame"]: json.loads(x).get("fault") for x in log.read_text().splitlines()}
+    assert faults[3] == "decode_errors" and faults[6] == "size_changes"
+    assert all(f is None for k, f in faults.items() if k not in (3, 6))
 
 
 class NanEngine(Engine):

@@ -173,16 +173,17 @@ def test_a_folder_where_no_frame_decodes_is_an_error(setup, tmp_path, capsys):
     assert code == 1 and "none of the 4 frames" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 0), (signal.SIGINT, 130)])
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 0), (signal.SIGINT, 130), (signal.SIGHUP, 129),
+                                           (signal.SIGQUIT, 131)])
 def test_a_signal_at_any_moment_of_start_up_ends_with_unavailable_and_no_traceback(setup, tmp_path, sig, code):
     model, clip = setup
     env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
     # signals before main() runs are Python's, not the runtime's: each is sent a given time after the
     # CAN log appears (main() watches signals before it opens any output), however loaded the machine
     for delay in (0.0, 0.4, 1.5):                 # opening the outputs, loading the model, running
-        log = tmp_path / f"{sig.name}_{delay}.log"
+        log, summ = tmp_path / f"{sig.name}_{delay}.log", tmp_path / f"{sig.name}_{delay}.json"
         proc = subprocess.Popen([sys.executable, "-m", "bsn_edge.cli.run", "--model", str(model), "--source",
-                                 str(clip / "video.mp4"), "--pace", "--can-log", str(log)],
+                                 str(clip / "video.mp4"), "--pace", "--can-log", str(log), "--summary", str(summ)],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
         deadline = time.monotonic() + 60
         while not log.exists() and proc.poll() is None and time.monotonic() < deadline:
@@ -196,6 +197,35 @@ def test_a_signal_at_any_moment_of_start_up_ends_with_unavailable_and_no_traceba
         msgs = [decode(m.arbitration_id, bytes(m.data)) for m in can.LogReader(str(log))]
         states = [d.signals["System_State"] for d in msgs if d is not None and d.name == "BSN_Status"]
         assert states and states[-1] == SystemState.UNAVAILABLE, (delay, states)
+        summary = json.loads(summ.read_text())      # the summary is written, in the first second too
+        assert summary["stopped"] and summary["signal"] == sig.name, (delay, summary)
+
+
+def test_later_signals_change_nothing_the_first_one_started(setup, tmp_path):
+    """INT, INT, TERM in quick succession while it runs: the run ends as the first asked (exit 130, the
+    summary names SIGINT), UNAVAILABLE last on the bus, the later signals absorbed, not fatal."""
+    model, clip = setup
+    env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
+    log, canlog, summ = tmp_path / "a.jsonl", tmp_path / "a.log", tmp_path / "s.json"
+    proc = subprocess.Popen([sys.executable, "-m", "bsn_edge.cli.run", "--model", str(model), "--source",
+                             str(clip / "video.mp4"), "--pace", "--log", str(log), "--can-log", str(canlog),
+                             "--summary", str(summ)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                            text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (not log.exists() or len(log.read_text().splitlines()) < 3):
+        time.sleep(0.02)
+    t0 = time.monotonic()
+    for sig in (signal.SIGINT, signal.SIGINT, signal.SIGTERM):
+        proc.send_signal(sig)
+        time.sleep(0.02)
+    _, err = proc.communicate(timeout=30)
+    ended = time.monotonic() - t0
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    assert json.loads(summ.read_text())["signal"] == "SIGINT"
+    msgs = [decode(m.arbitration_id, bytes(m.data)) for m in can.LogReader(str(canlog))]
+    states = [d.signals["System_State"] for d in msgs if d is not None and d.name == "BSN_Status"]
+    assert states[-1] == SystemState.UNAVAILABLE
+    assert ended < 1.0, f"the run took {ended:.2f} s to end"
 
 
 def test_the_json_lines_of_a_killed_run_are_whole(setup, tmp_path):

@@ -232,3 +232,58 @@ def test_a_file_swapped_after_the_check_is_not_what_runs(setup, tmp_path, keys, 
     want = real_session(original, 2, False, exact_x64=not engine.card.seven_bit_weights).run(None, {"frame": frame})
     got = engine.infer(frame)
     assert all(np.allclose(a, b, atol=1e-6) for a, b in zip(want, got, strict=True))
+
+
+def _nul_joined(props) -> bytes:
+    """The byte stream the first card digest hashed: sorted ``bsn.*`` keys and values joined by NUL."""
+    return b"".join(k.encode() + b"\0" + props[k].encode() + b"\0" for k in sorted(props)
+                    if k.startswith("bsn.") and k != CARD_SHA_KEY)
+
+
+@pytest.mark.parametrize("into", ["key", "value"])
+def test_a_card_whose_entries_are_merged_or_re_split_is_refused_though_its_bytes_are_the_same(
+        setup, tmp_path, keys, into):
+    """``bsn.model`` and ``bsn.mounting`` made one entry, the mounting carried inside the merged key (or
+    the merged value): NUL-joined, the same bytes as the signed card, so a digest over them would still
+    match and the signature verify, while the card read would fall back to the default mounting."""
+    model, _ = setup
+    ours, _ = keys
+    signed = signed_copy(model, tmp_path, ours)
+    props = {p.key: p.value for p in onnx.load(str(signed)).metadata_props}
+    merged = {k: v for k, v in props.items() if k not in ("bsn.model", "bsn.mounting")}
+    if into == "key":
+        merged["bsn.model\0" + props["bsn.model"] + "\0bsn.mounting"] = props["bsn.mounting"]
+    else:
+        merged["bsn.model"] = props["bsn.model"] + "\0bsn.mounting\0" + props["bsn.mounting"]
+    assert _nul_joined(merged) == _nul_joined(props)
+    bad = with_metadata(model, tmp_path, "merged.onnx", merged)
+    with pytest.raises(ModelError, match=r"damaged|not a card"):
+        Engine(bad, trust=load_public_keys(f"{ours}.pub"))
+    code, st = bus_run(f"bsn-merged-{into}", ["--model", str(bad), "--source", str(setup[1] / "rgb"),
+                                              "--trust", f"{ours}.pub"])
+    assert code == 2 and [s["System_State"] for s in st] == [SystemState.UNAVAILABLE]
+
+
+def test_a_card_with_an_entry_of_its_own_is_refused_even_re_digested(setup, tmp_path):
+    """Entries beyond the card's fields (or one of them missing) are not a card, whatever the digest says."""
+    model, _ = setup
+    props = {p.key: p.value for p in onnx.load(str(model)).metadata_props if p.key != SIGNATURE_KEY}
+    extra = {**props, "bsn.mounting_override": json.dumps({"height_m": 2.5})}
+    extra[CARD_SHA_KEY] = card_digest(extra)
+    with pytest.raises(ModelError, match=r"unknown 'bsn\.mounting_override'"):
+        Engine(with_metadata(model, tmp_path, "extra.onnx", extra))
+    fewer = {k: v for k, v in props.items() if k != "bsn.mounting"}
+    fewer[CARD_SHA_KEY] = card_digest(fewer)
+    with pytest.raises(ModelError, match=r"missing 'bsn\.mounting'"):
+        Engine(with_metadata(model, tmp_path, "fewer.onnx", fewer))
+
+
+def test_the_card_digest_is_its_length_prefixed_entries():
+    """The digest by hand: sha256 over the domain tag, then each sorted ``bsn.*`` key and value with its
+    length in 8 big-endian bytes before it, the digest's own entry left out and other keys ignored."""
+    import hashlib
+    props = {"bsn.b": "[1]", "bsn.a": '"x"', CARD_SHA_KEY: "ignored", "other": "ignored"}
+    want = hashlib.sha256(b"bsn-edge model card v2\0"
+                          + (5).to_bytes(8, "big") + b"bsn.a" + (3).to_bytes(8, "big") + b'"x"'
+                          + (5).to_bytes(8, "big") + b"bsn.b" + (3).to_bytes(8, "big") + b"[1]").hexdigest()
+    assert card_digest(props) == want
