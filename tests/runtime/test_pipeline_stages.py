@@ -51,10 +51,13 @@ def test_read_counts_a_frame_that_did_not_decode_and_a_change_of_size(pipeline):
     rec = FrameRecord(1, 0.1)
     assert p.read(Captured(0.1, np.zeros((96, 192, 3), np.uint8), 1), rec) and rec.fault is None
     rec = FrameRecord(2, 0.2)
-    assert p.read(Captured(0.2, np.zeros((90, 192, 3), np.uint8), 2), rec), "another size is still a picture"
+    assert not p.read(Captured(0.2, np.zeros((90, 192, 3), np.uint8), 2), rec), \
+        "a frame of another size than the source's is not run (it would be stretched)"
     assert rec.fault is Fault.SIZE_CHANGES
+    rec = FrameRecord(3, 0.3)
+    assert p.read(Captured(0.3, np.zeros((96, 192, 3), np.uint8), 3), rec) and rec.fault is None
     assert p.health.faults[Fault.DECODE_ERRORS] == 1 and p.health.faults[Fault.SIZE_CHANGES] == 1
-    assert p.frames == 3
+    assert p.frames == 4
 
 
 def test_warp_puts_the_frame_into_the_model_camera_as_the_camera_file_says(pipeline):
