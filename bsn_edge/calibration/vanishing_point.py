@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from bsn_edge.camera import Intrinsics
-from bsn_edge.mounting import ANGLE_LIMIT_DEG, Mounting
+from bsn_edge.mounting import Mounting
 
 
 @dataclass(frozen=True)
@@ -84,10 +84,12 @@ class VanishingPoint:
         else:
             u, v = self.point
             ray = np.array([(u - intrinsics.cx) / intrinsics.fx, (v - intrinsics.cy) / intrinsics.fy, 1.0])
-        m = Mounting.from_forward(ray, height_m, roll_deg) if np.isfinite(ray).all() else None
-        if m is None or max(abs(m.pitch_deg), abs(m.yaw_deg)) > ANGLE_LIMIT_DEG:
+        if not np.isfinite(ray).all():
             return None
-        return m
+        try:
+            return Mounting.from_forward(ray, height_m, roll_deg)
+        except ValueError:          # beyond every mounting (ANGLE_LIMIT_DEG): lines that are not the road's
+            return None
 
 
 class VanishingGuess:

@@ -56,3 +56,28 @@ def test_every_benchmark_module_imports():
     assert "bench_train_step" in names
     for name in names:
         importlib.import_module(f"benchmarks.{name}")
+
+
+def test_camvid_counts_road_users_and_open_road_by_the_stated_rule():
+    """A hand-made 360x480 label: a car of 50x40 px reaching row 300 (near), a car of 50x40 px ending at
+    row 150 (not near: above the lower 40 %), a pedestrian of 15x20 px (all, not near), a speck of 10 px
+    (neither), pavement along the left; open road is the road of rows 216-359 at least 25 px from the
+    cars and from everything but road or pavement (the kerb of pavement does not count)."""
+    import numpy as np
+
+    from benchmarks.bench_camvid import open_road, road_users
+    lab = np.full((360, 480), 3, np.uint8)        # road
+    lab[:100] = 0                                  # sky
+    lab[:, :60] = 4                                # pavement
+    lab[261:301, 200:250] = 8                      # near car: 2,000 px, bottom row 300
+    lab[111:151, 300:350] = 8                      # far car: 2,000 px, bottom row 150
+    lab[250:270, 400:415] = 9                      # pedestrian: 300 px
+    lab[330:332, 100:105] = 10                     # a speck of a cyclist: 10 px
+    users = sorted(road_users(lab), key=lambda u: (u["group"], -u["near"]))
+    assert [(u["group"], u["area"], u["near"]) for u in users] == [
+        ("people", 300, False), ("vehicles", 2000, True), ("vehicles", 2000, False)]
+    clear = open_road(lab)
+    assert not clear[:216].any() and clear[216:, 60:].any()
+    assert not clear[237:325, 200:250].any() and not clear[261:301, 176:274].any(), "within 25 px of the near car"
+    assert clear[350, 65], "the pavement is not an obstacle"
+    assert not clear[330:332, 100:105].any()

@@ -130,3 +130,15 @@ def test_bsn_run_calibrates_with_the_vanishing_point_meanwhile():
     assert camera.frame_for(frames[-1]).mounting == camera.mounting
     with_file = CameraState(card, Calibration.of(card.camera, (), card.mounting), background=False)
     assert with_file.summary()["first_guess"] is None
+
+
+def test_a_point_beyond_every_mounting_is_no_guess_not_an_error():
+    """Lines meeting 35 degrees to the left (a side street's kerbs, not the road ahead): tan(35) fx left of
+    the centre is off every mounting (30 degrees at most), so there is no guess; 20 degrees is one."""
+    from bsn_edge.calibration.vanishing_point import VanishingPoint
+
+    k = Intrinsics(400.0, 400.0, 240.0, 180.0, 480, 360)
+    far = VanishingPoint((240.0 - 400.0 * math.tan(math.radians(35)), 180.0), (3, 3), 1.0)
+    assert far.mounting(k, 1.5) is None
+    near = VanishingPoint((240.0 - 400.0 * math.tan(math.radians(20)), 180.0), (3, 3), 1.0)
+    assert abs(near.mounting(k, 1.5).yaw_deg) == pytest.approx(20.0, abs=1e-6)

@@ -1,0 +1,137 @@
+"""Real road users marked on CamVid's held-out drive, by pixel labels: every model side by side.
+
+    python -m benchmarks.bench_camvid --out benchmarks/results [--model A.onnx --model NAME=B.onnx]
+
+The drive ``0006R0`` (101 labelled frames, 1 s apart) is kept out of everything trained. Each model sees
+its frames as ``bsn-run`` sees a folder of them with no camera file (``CameraState``: the model camera's
+field of view, the first guess and online calibration over the frames in order), and its blind spots
+are taken at the card's threshold on the raw frame. A **road user** is an 8-connected region of the
+label's car (vehicles) or pedestrian and bicyclist (people) pixels; it counts as **marked** when at least
+:data:`MARKED_SHARE` of its pixels are blind spot (the rule of ``bench_realboxes``). **Near**: at least
+:data:`NEAR_PIXELS` pixels with its lowest row in the lower :data:`LOWER_SHARE` of the frame (at 480x360);
+**all**: at least :data:`ALL_PIXELS` pixels. **Open road flagged**: the share of road pixels in the lower
+part, at least :data:`CLEAR_PX` pixels from anything but road or pavement, that are blind spot.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from benchmarks.bench_realboxes import frac
+from benchmarks.bench_realcam import REAL, licence
+from benchmarks.common import named, write_result
+from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.runtime.camera_state import CameraState
+from bsn_edge.runtime.engine import Engine
+from bsn_edge.sequence import camvid
+
+MARKED_SHARE = 0.15
+NEAR_PIXELS = 1500
+ALL_PIXELS = 200
+LOWER_SHARE = 0.4
+CLEAR_PX = 25
+GROUPS = {"vehicles": (8,), "people": (9, 10)}       # CamVid ids: car; pedestrian, bicyclist
+GROUND = (3, 4)                                      # road, pavement
+ROAD = 3
+
+
+def road_users(label: np.ndarray) -> list[dict[str, Any]]:
+    """The label's road users: group, pixel mask, area, and whether near (480x360 thresholds scaled)."""
+    h, w = label.shape
+    scale = (h * w) / (480 * 360)
+    out = []
+    for group, ids in GROUPS.items():
+        n, lab, stats, _ = cv2.connectedComponentsWithStats(np.isin(label, ids).astype(np.uint8), connectivity=8)
+        for k in range(1, n):
+            area = int(stats[k, cv2.CC_STAT_AREA])
+            if area < ALL_PIXELS * scale:
+                continue
+            bottom = int(stats[k, cv2.CC_STAT_TOP] + stats[k, cv2.CC_STAT_HEIGHT] - 1)
+            out.append({"group": group, "mask": lab == k, "area": area,
+                        "near": area >= NEAR_PIXELS * scale and bottom >= (1 - LOWER_SHARE) * h})
+    return out
+
+
+def open_road(label: np.ndarray) -> np.ndarray:
+    """Road pixels in the lower part of the frame, at least ``CLEAR_PX`` from anything but road or pavement."""
+    h = label.shape[0]
+    other = (~np.isin(label, GROUND)).astype(np.uint8)
+    far = cv2.distanceTransform(1 - other, cv2.DIST_L2, 5) >= CLEAR_PX
+    lower = np.zeros_like(far)
+    lower[round((1 - LOWER_SHARE) * h):] = True
+    return (label == ROAD) & far & lower
+
+
+def score_drive(engine: Engine, frames: list[camvid.CamVidFrame]) -> dict[str, Any]:
+    """Every frame of the drive through ``engine`` as ``bsn-run`` would run the folder: counts by group."""
+    state = CameraState(engine.card, None, background=False)
+    counts: dict[str, list[int]] = {f"{g}_{r}": [0, 0] for g in GROUPS for r in ("near", "all")}
+    flagged, road_px = 0, 0
+    for fr in frames:
+        image, label = fr.rgb(), fr.camvid_label()
+        state.observe(image)
+        mf = state.frame_for(image)
+        prob, _ = engine.infer(mf.to_model(image)[None])
+        mask = mf.to_raw(prob) >= engine.card.threshold
+        for u in road_users(label):
+            marked = int(mask[u["mask"]].mean() >= MARKED_SHARE)
+            for r in ("near", "all") if u["near"] else ("all",):
+                counts[f"{u['group']}_{r}"][0] += marked
+                counts[f"{u['group']}_{r}"][1] += 1
+        clear = open_road(label)
+        flagged += int(mask[clear].sum())
+        road_px += int(clear.sum())
+    state.close()
+    counts["road_users_all"] = [sum(counts[f"{g}_all"][i] for g in GROUPS) for i in (0, 1)]
+    return {"counts": counts, "open_road_flagged": round(flagged / max(road_px, 1), 4),
+            "camera": state.summary().get("first_guess")}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
+                   help="exported models, scored side by side (default: the shipped one)")
+    p.add_argument("--drive", default=camvid.HELD_OUT, help=f"the drive scored (default {camvid.HELD_OUT})")
+    p.add_argument("--name", default="camvid", help="the report's name in --out")
+    args = p.parse_args(argv)
+    root = REAL / "camvid"
+    if not root.is_dir():
+        print(f"no CamVid frames at {root}: nothing to score")
+        return 0
+    try:
+        models = {name: Engine(path) for name, path in named(args.model or [str(DEFAULT_MODEL)]).items()}
+    except ValueError as e:
+        p.error(str(e))
+    frames = list(camvid.frames_of(root, args.drive, "train"))
+    result: dict[str, Any] = {"drive": args.drive, "frames": len(frames), "marked_share": MARKED_SHARE,
+                              "models": {}}
+    table = ["| model (threshold) | near cars | near people and cyclists | all road users | open road flagged |",
+             "|---|---|---|---|---|"]
+    for name, engine in models.items():
+        r = score_drive(engine, frames)
+        result["models"][name] = {"threshold": engine.card.threshold, **r}
+        c = r["counts"]
+        table.append(f"| {name} ({engine.card.threshold:.2f}) | {frac(c['vehicles_near'])} | "
+                     f"{frac(c['people_near'])} | {frac(c['road_users_all'])} | "
+                     f"{100 * r['open_road_flagged']:.1f} % |")
+    md = [f"# Real road users marked: CamVid drive {args.drive}, by pixel labels", "",
+          f"{len(frames)} labelled frames, 1 s apart, held out of every training run, each run as `bsn-run` runs a "
+          f"folder with no camera file. A road user (an 8-connected region of car, or of pedestrian and bicyclist "
+          f"pixels, at least {ALL_PIXELS} px) is marked when at least {100 * MARKED_SHARE:.0f} % of its pixels are "
+          f"blind spot at the model's threshold; near: at least {NEAR_PIXELS} px with its lowest row in the lower "
+          f"{100 * LOWER_SHARE:.0f} % of the 480x360 frame; open road: road pixels in that lower part at least "
+          f"{CLEAR_PX} px from anything but road or pavement.", "", *table, "",
+          f"Frames and labels: {licence('camvid')}."]
+    write_result(Path(args.out), args.name, result, "\n".join(md))
+    print("\n".join(table))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
