@@ -25,6 +25,7 @@ import numpy as np
 from benchmarks.bench_realboxes import frac
 from benchmarks.bench_realcam import REAL, licence
 from benchmarks.common import named, write_result
+from bsn_edge.calibration import Calibration
 from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
@@ -67,9 +68,19 @@ def open_road(label: np.ndarray) -> np.ndarray:
     return (label == ROAD) & far & lower
 
 
-def score_drive(engine: Engine, frames: list[camvid.CamVidFrame]) -> dict[str, Any]:
-    """Every frame of the drive through ``engine`` as ``bsn-run`` would run the folder: counts by group."""
-    state = CameraState(engine.card, None, background=False)
+def assumed_camera_file(engine: Engine, frame: camvid.CamVidFrame) -> Calibration:
+    """A camera file that says only what ``bsn-run`` assumes of a camera it knows nothing of: the model
+    camera's field of view at the frame's size, sitting as the model camera does (its height and pitch,
+    no yaw or roll)."""
+    h, w = frame.rgb().shape[:2]
+    return Calibration.of(engine.card.camera.scaled(w, h), (), engine.card.mounting, method="assumed")
+
+
+def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool = False) -> dict[str, Any]:
+    """Every frame of the drive through ``engine`` as ``bsn-run`` would run the folder (``assumed``: with
+    :func:`assumed_camera_file` instead of none, so no first guess and no online calibration): counts."""
+    cal = assumed_camera_file(engine, frames[0]) if assumed else None
+    state = CameraState(engine.card, cal, background=False)
     counts: dict[str, list[int]] = {f"{g}_{r}": [0, 0] for g in GROUPS for r in ("near", "all")}
     flagged, road_px = 0, 0
     for fr in frames:
@@ -99,6 +110,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="exported models, scored side by side (default: the shipped one)")
     p.add_argument("--drive", default=camvid.HELD_OUT, help=f"the drive scored (default {camvid.HELD_OUT})")
     p.add_argument("--name", default="camvid", help="the report's name in --out")
+    p.add_argument("--assumed-camera", action="store_true",
+                   help="also score each model with a camera file that says only what bsn-run assumes (the model "
+                        "camera's field of view and mounting): what the first guess and online calibration win "
+                        "or cost")
     args = p.parse_args(argv)
     root = REAL / "camvid"
     if not root.is_dir():
@@ -113,8 +128,12 @@ def main(argv: list[str] | None = None) -> int:
                               "models": {}}
     table = ["| model (threshold) | near cars | near people and cyclists | all road users | open road flagged |",
              "|---|---|---|---|---|"]
-    for name, engine in models.items():
-        r = score_drive(engine, frames)
+    runs = [(name, engine, False) for name, engine in models.items()]
+    if args.assumed_camera:
+        runs = [(f"{name}{', assumed camera file' if a else ''}", engine, a) for name, engine in models.items()
+                for a in (False, True)]
+    for name, engine, assumed in runs:
+        r = score_drive(engine, frames, assumed)
         result["models"][name] = {"threshold": engine.card.threshold, **r}
         c = r["counts"]
         table.append(f"| {name} ({engine.card.threshold:.2f}) | {frac(c['vehicles_near'])} | "

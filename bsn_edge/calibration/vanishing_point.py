@@ -95,12 +95,21 @@ class VanishingPoint:
 class VanishingGuess:
     """The first guess of pitch and yaw while online calibration has none: the median over the
     first ``frames`` frames whose vanishing point was found (:func:`find_vanishing_point`), looked
-    for in at most ``looks`` frames. Not thread-safe: its owner serialises :meth:`record`."""
+    for in at most ``looks`` frames, used only once it knows: at least ``agree`` frames found and their
+    pitches and yaws each within ``max_spread_deg`` (1.4826 x their median absolute deviation) of
+    one another. Frames of one camera on a straight road agree within a degree (rendered cameras
+    0.1-0.6, the real highway, Udacity and mountain clips 0.2-1.3); city streets seen a second apart,
+    or photos from different cars, scatter by 4-12 degrees of yaw, and a guess from them is worse
+    than none (``benchmarks/results/camvid.md``). Not thread-safe: its owner serialises :meth:`record`."""
 
-    def __init__(self, frames: int = 9, looks: int = 60, cfg: VanishingConfig | None = None) -> None:
-        if not 1 <= frames <= looks:
-            raise ValueError(f"frames must be in [1, looks], got {frames} and {looks}")
+    def __init__(self, frames: int = 9, looks: int = 60, cfg: VanishingConfig | None = None, agree: int = 5,
+                 max_spread_deg: float = 1.5) -> None:
+        if not 1 <= agree <= frames <= looks:
+            raise ValueError(f"need 1 <= agree <= frames <= looks, got {agree}, {frames} and {looks}")
+        if not max_spread_deg > 0:
+            raise ValueError(f"max_spread_deg must be positive, got {max_spread_deg}")
         self.frames, self.looks, self.cfg = frames, looks, cfg or VanishingConfig()
+        self.agree, self.max_spread_deg = agree, max_spread_deg
         self.found: list[tuple[float, float]] = []       # (pitch, yaw) in degrees
         self.looked = 0
 
@@ -121,17 +130,49 @@ class VanishingGuess:
         if pitch_yaw is not None and len(self.found) < self.frames:
             self.found.append(pitch_yaw)
 
+    @property
+    def spread_deg(self) -> tuple[float, float] | None:
+        """How far the frames found disagree: 1.4826 x the median absolute deviation of their pitches
+        and of their yaws (None before two are found)."""
+        if len(self.found) < 2:
+            return None
+        a = np.array(self.found)
+        mad = np.median(np.abs(a - np.median(a, axis=0)), axis=0)
+        return float(1.4826 * mad[0]), float(1.4826 * mad[1])
+
+    @property
+    def agreed(self) -> bool:
+        """Whether enough frames were found and agree to be used."""
+        spread = self.spread_deg
+        return len(self.found) >= self.agree and spread is not None and max(spread) <= self.max_spread_deg
+
     def mounting(self, height_m: float, roll_deg: float = 0.0) -> Mounting | None:
-        """The median pitch and yaw of the frames found so far (None before the first)."""
-        if not self.found:
+        """The median pitch and yaw of the frames found, once they agree (:attr:`agreed`); else None."""
+        if not self.agreed:
             return None
         pitch, yaw = np.median(np.array(self.found), axis=0)
         return Mounting(height_m, float(pitch), float(yaw), roll_deg)
 
+    def state(self) -> str:
+        """What the guess is, in words: used, waiting for frames, or refused for disagreeing."""
+        spread = self.spread_deg
+        if self.agreed:
+            return "used"
+        if spread is not None and max(spread) > self.max_spread_deg and (self.done or len(self.found) >= self.frames):
+            return f"not used: the frames disagree by {max(spread):.1f} deg (at most {self.max_spread_deg:g})"
+        if self.done:
+            return f"not used: {len(self.found)} frames found, {self.agree} needed"
+        if spread is not None and max(spread) > self.max_spread_deg:
+            return f"not used yet: the frames disagree by {max(spread):.1f} deg"
+        return f"not used yet: {len(self.found)} of the {self.agree} frames it needs"
+
     def to_dict(self) -> dict[str, object]:
         m = self.mounting(1.0)
+        spread = self.spread_deg
         return {"method": "vanishing point of the road's lines", "frames_found": len(self.found),
-                "frames_looked": self.looked, "pitch_deg": None if m is None else round(m.pitch_deg, 3),
+                "frames_looked": self.looked, "used": m is not None, "state": self.state(),
+                "spread_deg": None if spread is None else [round(spread[0], 2), round(spread[1], 2)],
+                "pitch_deg": None if m is None else round(m.pitch_deg, 3),
                 "yaw_deg": None if m is None else round(m.yaw_deg, 3)}
 
 

@@ -221,11 +221,14 @@ class CameraState:
 
     def _meanwhile(self) -> str:
         g = self._vanishing
-        if g is None or not g.found:
+        if g is None or not g.looked:
             return ""
         m = g.mounting(1.0)
+        if m is None:
+            return (f"; meanwhile the camera is taken to sit as the model camera does (the road's vanishing point "
+                    f"is {g.state()})")
         return (f"; meanwhile pitch {m.pitch_deg:+.2f} yaw {m.yaw_deg:+.2f} deg from the road's vanishing point "
-                f"({len(g.found)} of {g.looked} frames)")
+                f"({len(g.found)} of {g.looked} frames agree within {max(g.spread_deg or (0.0,)):.1f} deg)")
 
     def summary(self) -> dict[str, Any]:
         with self._lock:

@@ -142,3 +142,41 @@ def test_a_point_beyond_every_mounting_is_no_guess_not_an_error():
     assert far.mounting(k, 1.5) is None
     near = VanishingPoint((240.0 - 400.0 * math.tan(math.radians(20)), 180.0), (3, 3), 1.0)
     assert abs(near.mounting(k, 1.5).yaw_deg) == pytest.approx(20.0, abs=1e-6)
+
+
+def test_the_first_guess_is_used_only_when_enough_frames_agree():
+    """Pitch and yaw found frame by frame: five within a fraction of a degree are used (their median);
+    four are not yet; nine whose yaws scatter over 20 degrees (city corners a second apart) never are,
+    and the camera is then taken to sit as the model camera does."""
+    agreeing = [(1.0, 2.0), (1.2, 2.3), (0.9, 1.8), (1.1, 2.1), (1.0, 2.2)]
+    g = VanishingGuess()
+    for py in agreeing[:4]:
+        g.record(py)
+    assert g.mounting(1.5) is None and "not used yet" in g.state()
+    g.record(agreeing[4])
+    m = g.mounting(1.5)
+    assert (m.pitch_deg, m.yaw_deg) == (1.0, 2.1) and g.state() == "used"
+    scattered = VanishingGuess()
+    for py in [(-3.0, 6.8), (-2.6, 14.0), (-3.4, -4.0), (1.2, 2.6), (0.3, 5.7), (-1.9, 20.2), (-0.5, 6.6),
+               (-1.8, -12.9), (-0.1, -13.1)]:
+        scattered.record(py)
+    assert scattered.mounting(1.5) is None and scattered.spread_deg[1] > 5
+    assert scattered.state().startswith("not used: the frames disagree")
+    assert not scattered.to_dict()["used"] and scattered.to_dict()["pitch_deg"] is None
+
+
+def test_a_city_drive_a_second_apart_gets_no_first_guess():
+    """CamVid's held-out drive, as bsn-run sees a folder of its frames with no camera file: the road's
+    lines in its first frames disagree, so the camera is warped as the model camera sits."""
+    from bsn_edge.sequence import camvid
+
+    root = _real("camvid")
+    card = card_for((128, 256))
+    camera = CameraState(card, background=False)
+    frames = [f.rgb() for f in camvid.frames_of(root, camvid.HELD_OUT, "train")][:60]
+    for f in frames:
+        camera.observe(f)
+    guess = camera.summary()["first_guess"]
+    assert guess["frames_found"] >= 5 and not guess["used"], guess
+    assert camera.frame_for(frames[-1]).mounting == card.mounting
+    assert "taken to sit as the model camera does" in camera.progress()
