@@ -27,9 +27,9 @@ from benchmarks.bench_realcam import REAL, licence
 from benchmarks.common import named, write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.labels import camvid
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
-from bsn_edge.sequence import camvid
 
 MARKED_SHARE = 0.15
 NEAR_PIXELS = 1500

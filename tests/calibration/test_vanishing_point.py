@@ -168,7 +168,7 @@ def test_the_first_guess_is_used_only_when_enough_frames_agree():
 def test_a_city_drive_a_second_apart_gets_no_first_guess():
     """CamVid's held-out drive, as bsn-run sees a folder of its frames with no camera file: the road's
     lines in its first frames disagree, so the camera is warped as the model camera sits."""
-    from bsn_edge.sequence import camvid
+    from bsn_edge.labels import camvid
 
     root = _real("camvid")
     card = card_for((128, 256))
