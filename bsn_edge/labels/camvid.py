@@ -9,6 +9,7 @@ reads that layout.
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -107,3 +108,40 @@ def frames_of(root: str | Path, drive: str, split: str | None = None) -> Iterato
         raise ValueError(f"{root}: no drive {drive!r}" + (f" in {split}/" if split else ""))
     for d in found:
         yield from d.frames
+
+
+def write_sequence(drive: Drive, out: str | Path, label_name: str = "T5s", hfov_deg: float = 80.0,
+                   force: bool = False) -> Path:
+    """``drive`` as a sequence folder the training data loader reads: its pictures (``rgb/``), its labels as
+    trainIds (``semantic/``) and ``meta.json`` (the frame rate its spacing gives; no camera file: the camera
+    is taken as ``bsn-run`` takes one it knows nothing of, ``hfov_deg`` across). Its T-frame label set
+    ``label_name`` marks no blind spot and an empty V: until labels are made for it, the frames teach the
+    segmentation teacher and, through distillation, B's features, never B's blind spots. ``FileExistsError``
+    when ``out`` exists, unless ``force``."""
+    from bsn_edge.camera import Intrinsics
+    from bsn_edge.sequence.folder import LabelSet, SequenceFolder
+    from bsn_edge.sequence.images import atomic_write_bytes, write_image, write_mask
+    from bsn_edge.sequence.meta import SequenceMeta
+
+    out = Path(out)
+    if out.exists() and not force:
+        raise FileExistsError(f"{out} exists; pass force=True to replace it")
+    seq = SequenceFolder(out)
+    h, w = drive.frames[0].rgb().shape[:2]
+    labels = LabelSet(out / SequenceFolder.LABELS / label_name)
+    labels.make_dirs()
+    for sub in (SequenceFolder.RGB, SequenceFolder.SEMANTIC):
+        seq.dir(sub).mkdir(parents=True, exist_ok=True)
+    none = np.zeros((h, w), bool)
+    for i, fr in enumerate(drive.frames):
+        write_image(seq.dir(SequenceFolder.RGB) / f"{i:06d}.png", fr.rgb())
+        write_image(seq.dir(SequenceFolder.SEMANTIC) / f"{i:06d}.png", fr.semantic())
+        write_mask(labels.blindspot(i), none)
+        write_mask(labels.visibility(i), none)
+    intrinsics = Intrinsics.from_fov(w, h, hfov_deg)
+    SequenceMeta(fps=1.0 / drive.step_s, intrinsics=intrinsics, source="camvid", frames=len(drive.frames),
+                 extra={"style": "camvid", "drive": drive.name, "split": drive.split,
+                        "video_frames": [f.video_frame for f in drive.frames]}).write(out)
+    params = {"source": "camvid", "blind_spots": "none yet: V is empty", "camera": intrinsics.to_dict()}
+    atomic_write_bytes(labels.params_path, (json.dumps(params, indent=2) + "\n").encode())
+    return out
