@@ -26,6 +26,7 @@ CAMVID_CLASSES = ("sky", "building", "pole", "road", "pavement", "tree", "sign",
 # CamVid id -> Cityscapes trainId (a bicyclist is the rider with the bicycle: rider, a road user either way)
 TO_TRAIN_ID = np.array([sm.SKY, sm.BUILDING, sm.POLE, sm.ROAD, sm.SIDEWALK, sm.VEGETATION, sm.TRAFFIC_SIGN,
                         sm.FENCE, sm.CAR, sm.PERSON, sm.RIDER] + [sm.IGNORE] * (256 - 11), np.uint8)
+STYLE = "camvid"         # the style its sequence folders are written with (real pictures with pixel labels)
 HELD_OUT = "0006R0"      # the drive kept out of everything trained: the benchmark's
 _NAME = re.compile(r"^(?P<drive>[0-9A-Za-z]+)_f?(?P<frame>\d+)$")
 
@@ -140,7 +141,7 @@ def write_sequence(drive: Drive, out: str | Path, label_name: str = "T5s", hfov_
         write_mask(labels.visibility(i), none)
     intrinsics = Intrinsics.from_fov(w, h, hfov_deg)
     SequenceMeta(fps=1.0 / drive.step_s, intrinsics=intrinsics, source="camvid", frames=len(drive.frames),
-                 extra={"style": "camvid", "drive": drive.name, "split": drive.split,
+                 extra={"style": STYLE, "drive": drive.name, "split": drive.split,
                         "video_frames": [f.video_frame for f in drive.frames]}).write(out)
     params = {"source": "camvid", "blind_spots": "none yet: V is empty", "camera": intrinsics.to_dict()}
     atomic_write_bytes(labels.params_path, (json.dumps(params, indent=2) + "\n").encode())

@@ -58,11 +58,16 @@ class DataConfig:
     # what the guessed-camera samples teach D (bsn_edge.data.guessed_camera.GuessedDepth): "metric",
     # "scale-free" (up to a factor of their own) or "none"
     guessed_depth: str = GuessedDepth.METRIC.value
+    # share of each training batch drawn from real pictures (clips of style "camvid": bsn_edge.labels.camvid),
+    # however few they are beside the synthetic clips; 0: every sample alike
+    real_share: float = 0.0
 
     def __post_init__(self) -> None:
         if self.guessed_depth not in {g.value for g in GuessedDepth}:
             raise ValueError(f"data.guessed_depth must be one of {', '.join(g.value for g in GuessedDepth)}, "
                              f"got {self.guessed_depth!r}")
+        if not 0.0 <= self.real_share < 1.0:
+            raise ValueError(f"data.real_share is a share of each batch in [0, 1), got {self.real_share}")
         for name in ("object_repaint", "object_see_through", "camera_look", "guessed_camera"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"data.{name} is a share of samples in [0, 1], got {getattr(self, name)}")

@@ -31,6 +31,7 @@ from bsn_edge.data import BlindSpotDataset, Clip, find_clips, split_clips
 from bsn_edge.data.cache import SampleCache, default_cache_root
 from bsn_edge.data.camera_mix import CameraMix
 from bsn_edge.data.guessed_camera import ClipCamera, GuessedDepth
+from bsn_edge.labels.camvid import STYLE as CAMVID_STYLE
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.metrics import ThresholdSweep
 from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, create_model, create_teacher, get_spec, start_from
@@ -51,6 +52,10 @@ def _dist() -> tuple[int, int]:
     return (dist.get_rank(), world) if world > 1 else (0, 1)
 
 
+REAL_STYLES = (CAMVID_STYLE,)   # clips of real pictures (data.real_share draws from them)
+GROUP_SEED_STRIDE = 7919   # a group's permutations are drawn from seeds of their own, far from the others'
+
+
 class BatchStream:
     """An endless, resumable stream of batches: ``[(sample index, augmentation seed), ...]``.
 
@@ -58,16 +63,51 @@ class BatchStream:
     ``batch x world`` samples is split between the ranks. Batch ``k`` of the stream depends only on
     ``k``, so a run resumed at step ``s`` sees exactly what an uninterrupted run sees from ``s`` on,
     augmentation included (each sample's seed is its position in the stream).
+
+    With ``real`` (sample indices) and ``real_per_batch`` > 0, every global batch holds that many samples of
+    ``real`` and the rest of the others, each group visited in permutations of its own (drawn from the
+    seed and the group's pass over it), so a small group of real pictures is seen at a set share however
+    many synthetic samples there are; batch ``k`` still depends only on ``k``.
     """
 
-    def __init__(self, n: int, batch: int, seed: int, start: int = 0, world: int = 1, rank: int = 0) -> None:
+    def __init__(self, n: int, batch: int, seed: int, start: int = 0, world: int = 1, rank: int = 0,
+                 real: tuple[int, ...] = (), real_per_batch: int = 0) -> None:
         self.n, self.batch, self.seed, self.start, self.world, self.rank = n, batch, seed, start, world, rank
         glob = batch * world
         self.per_epoch = max(n // glob, 1)
         self.glob = min(glob, n)
+        if real_per_batch and not 0 < real_per_batch < self.glob:
+            raise ValueError(f"real samples per batch must be within 1..{self.glob - 1}, got {real_per_batch}")
+        if real_per_batch and not real:
+            raise ValueError("real samples per batch were asked for, but there is no real sample")
+        real_set = set(real)
+        self.groups = ((tuple(sorted(real_set)), real_per_batch),
+                       (tuple(i for i in range(n) if i not in real_set), self.glob - real_per_batch)) \
+            if real_per_batch else ()
+
+    @staticmethod
+    def _take(members: tuple[int, ...], seed: int, start: int, count: int) -> list[int]:
+        """``count`` members from position ``start`` of an endless run of permutations of ``members``
+        (pass ``p`` drawn from ``seed + p``)."""
+        out: list[int] = []
+        pos = start
+        while len(out) < count:
+            p, j = divmod(pos, len(members))
+            order = torch.randperm(len(members), generator=torch.Generator().manual_seed(seed + p)).tolist()
+            got = [members[i] for i in order[j:j + count - len(out)]]
+            out += got
+            pos += len(got)
+        return out
 
     def __iter__(self) -> Iterator[list[tuple[int, int]]]:
         k = self.start
+        if self.groups:
+            while True:
+                glob = [i for g, (members, m) in enumerate(self.groups)
+                        for i in self._take(members, self.seed + GROUP_SEED_STRIDE * g, k * m, m)]
+                picked = glob[self.rank::self.world]
+                yield [(i, (k * self.glob + r) * self.world + self.rank) for r, i in enumerate(picked)]
+                k += 1
         while True:
             epoch, j = divmod(k, self.per_epoch)
             order = torch.randperm(self.n, generator=torch.Generator().manual_seed(self.seed + epoch)).tolist()
@@ -78,10 +118,25 @@ class BatchStream:
                 k += 1
 
 
+def real_samples(ds) -> tuple[int, ...]:
+    """The indices of ``ds``'s samples from real pictures (clips of a style in :data:`REAL_STYLES`)."""
+    return tuple(i for i, (clip, _) in enumerate(ds.items) if clip.style in REAL_STYLES)
+
+
+def stream_for(ds, n: int, batch: int, seed: int, start: int, world: int, rank: int,
+               real_share: float) -> BatchStream:
+    """The :class:`BatchStream` of ``n`` samples of ``ds``, with ``real_share`` of each global batch from
+    its real pictures when it has any (0: every sample alike)."""
+    real = real_samples(ds) if real_share > 0 else ()
+    per = min(max(round(real_share * min(batch * world, n)), 1), min(batch * world, n) - 1) if real else 0
+    return BatchStream(n, batch, seed, start, world, rank, real, per)
+
+
 def batch_stream(ds, batch: int, world: int, rank: int, seed: int, workers: int, start: int = 0,
-            device: torch.device | None = None) -> Iterator[dict]:
+                 device: torch.device | None = None, real_share: float = 0.0) -> Iterator[dict]:
     """Batches of ``ds`` from stream position ``start`` on (see :class:`BatchStream`), on ``device``."""
-    dl = DataLoader(ds, batch_sampler=BatchStream(len(ds), batch, seed, start, world, rank), num_workers=workers,
+    dl = DataLoader(ds, batch_sampler=stream_for(ds, len(ds), batch, seed, start, world, rank, real_share),
+                    num_workers=workers,
                     pin_memory=device is not None and device.type == "cuda",
                     persistent_workers=workers > 0)
     # the iterator is made now, not at the first batch: it takes a draw from torch's generator, and a
@@ -104,12 +159,13 @@ def sample_cache(cfg: Config, ds, progress: bool = False, desc: str = "caching s
 
 
 def training_batches(ds, cache: SampleCache | None, batch: int, world: int, rank: int, seed: int, workers: int,
-                     start: int = 0, device: torch.device | None = None) -> Iterator[dict]:
+                     start: int = 0, device: torch.device | None = None, real_share: float = 0.0) -> Iterator[dict]:
     """The stream of :class:`BatchStream` as batches: gathered from ``cache`` (augmented as a batch),
-    or loaded sample by sample from ``ds`` when there is no cache. Both give the same samples."""
+    or loaded sample by sample from ``ds`` when there is no cache. Both give the same samples.
+    ``real_share``: of each batch, from real pictures (``data.real_share``)."""
     if cache is None:
-        return batch_stream(ds, batch, world, rank, seed, workers, start, device)
-    stream = BatchStream(len(cache), batch, seed, start, world, rank)
+        return batch_stream(ds, batch, world, rank, seed, workers, start, device, real_share)
+    stream = stream_for(ds, len(cache), batch, seed, start, world, rank, real_share)
     dev = device or torch.device("cpu")
     return (_to(cache.batch(picks, ds.augment, ds.seed, ds.object_repaint, ds.object_see_through, ds.camera_look),
                 dev)
@@ -344,7 +400,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         optim.load_state_dict(saved)
         start, seconds_before = int(saved["step"]), float(saved.get("seconds", 0.0))
     batches = training_batches(ds, cache, t.batch_size, world, rank, cfg.train.seed + 1, cfg.data.workers, start,
-                               device=dev)
+                               device=dev, real_share=cfg.data.real_share)
     if saved is not None and "torch_rng" in saved:
         torch.set_rng_state(saved["torch_rng"])
     bar = tqdm(range(start, t.steps), initial=start, total=t.steps, desc="teacher",
@@ -661,7 +717,7 @@ def _batches(cfg: Config, data, cache, state: dict[str, Any] | None, start: int,
              dev: torch.device):
     """The training batches from step ``start`` on, and the random draws where the saved state left them."""
     batches = training_batches(data.train_ds, cache, cfg.train.batch_size, world, rank, cfg.train.seed,
-                               cfg.data.workers, start, device=dev)
+                               cfg.data.workers, start, device=dev, real_share=cfg.data.real_share)
     if state is not None and "torch_rng" in state:
         # dropout draws go on where they stopped (after the loader, which takes a draw of its own)
         torch.set_rng_state(state["torch_rng"])

@@ -249,6 +249,30 @@ def test_the_ranks_share_out_one_process_s_global_batch():
         assert len({seed for h in halves for _, seed in h}) == 8
 
 
+def test_a_set_share_of_each_batch_comes_from_the_real_pictures_and_resumes_alike():
+    """200 samples of which 6 are real, 2 real per batch of 8: every batch holds exactly 2 of the real ones
+    and 6 of the others; each group is visited whole before any sample repeats (the real ones every 3
+    steps, the others every 32); batch k is the same whether the stream starts at 0 or resumes at k;
+    augmentation seeds are distinct; the plain stream is unchanged when no share is asked."""
+    from bsn_edge.train.trainer import BatchStream
+    real = (5, 17, 60, 61, 120, 199)
+    stream = iter(BatchStream(200, 8, seed=3, real=real, real_per_batch=2))
+    batches = [next(stream) for _ in range(40)]
+    for b in batches:
+        picks = [i for i, _ in b]
+        assert len(picks) == 8 and sum(i in real for i in picks) == 2
+    reals = [i for b in batches[:3] for i, _ in b if i in real]
+    assert sorted(reals) == list(real), "the six real samples, each once, in the first three batches"
+    others = [i for b in batches[:32] for i, _ in b if i not in real]
+    assert len(others) == 192 and len(set(others)) == 192
+    resumed = iter(BatchStream(200, 8, seed=3, start=25, real=real, real_per_batch=2))
+    assert next(resumed) == batches[25]
+    assert len({s for b in batches for _, s in b}) == 8 * 40
+    assert next(iter(BatchStream(200, 8, seed=3))) == next(iter(BatchStream(200, 8, seed=3, real=real)))
+    with pytest.raises(ValueError, match=r"within 1\.\.7"):
+        BatchStream(200, 8, seed=3, real=real, real_per_batch=8)
+
+
 def _two_ranks_in_one_process(cfg, data_dir, init: Path) -> dict:
     """What DistributedDataParallel on two ranks computes, step by step in one process: each rank's
     half of the global batch through the model (BatchNorm on the rank's own samples), the gradients
