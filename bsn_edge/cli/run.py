@@ -221,9 +221,9 @@ class StopOnSignal:
     """The terminating signals (TERM, as a service manager stops a process; INT, HUP when the terminal
     or SSH session closes; QUIT) all end the run cleanly: the loop finishes its frame, logs are closed,
     the summary is written, UNAVAILABLE is sent. The first signal names the stop; any after it change
-    nothing (they are counted). ``keep``: once a signal came, its handler stays in place after the run,
-    so a late signal cannot kill the process while it writes its last words (the command line); in a
-    program that calls :func:`main` itself the handlers it had come back."""
+    nothing (they are counted). ``keep``: once a signal came, the signals are ignored after the run, so
+    a late one cannot kill the process while it writes its last words or shuts down (the command line);
+    in a program that calls :func:`main` itself the handlers it had come back."""
 
     def __init__(self, source=None, keep: bool = False) -> None:
         self.source, self.event, self.signal = source, threading.Event(), None
@@ -254,6 +254,10 @@ class StopOnSignal:
 
     def __exit__(self, *exc) -> None:
         if self.keep and self.event.is_set():
+            # ignored, not handled: Python puts back the default action of the signals it handles while it
+            # shuts down, and a late signal would then kill the process after its clean stop
+            for sig in self._old:
+                signal.signal(sig, signal.SIG_IGN)
             return
         for sig, old in self._old.items():
             signal.signal(sig, old)

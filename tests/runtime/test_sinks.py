@@ -202,8 +202,9 @@ def test_a_signal_at_any_moment_of_start_up_ends_with_unavailable_and_no_traceba
 
 
 def test_later_signals_change_nothing_the_first_one_started(setup, tmp_path):
-    """INT, INT, TERM in quick succession while it runs: the run ends as the first asked (exit 130, the
-    summary names SIGINT), UNAVAILABLE last on the bus, the later signals absorbed, not fatal."""
+    """INT while it runs, then INT, TERM and HUP every 5 ms until the process is gone: the run ends as the
+    first asked (exit 130, the summary names SIGINT), UNAVAILABLE last on the bus, the later signals
+    absorbed, not fatal, while it stops and while Python shuts down."""
     model, clip = setup
     env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
     log, canlog, summ = tmp_path / "a.jsonl", tmp_path / "a.log", tmp_path / "s.json"
@@ -215,9 +216,16 @@ def test_later_signals_change_nothing_the_first_one_started(setup, tmp_path):
     while time.monotonic() < deadline and (not log.exists() or len(log.read_text().splitlines()) < 3):
         time.sleep(0.02)
     t0 = time.monotonic()
-    for sig in (signal.SIGINT, signal.SIGINT, signal.SIGTERM):
-        proc.send_signal(sig)
-        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    later = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    k = 0
+    while proc.poll() is None and time.monotonic() - t0 < 5:   # later signals until it has exited, shutdown included
+        try:
+            proc.send_signal(later[k % len(later)])
+        except ProcessLookupError:
+            break
+        k += 1
+        time.sleep(0.005)
     _, err = proc.communicate(timeout=30)
     ended = time.monotonic() - t0
     assert proc.returncode == 130 and "Traceback" not in err, err
