@@ -15,7 +15,6 @@ part, at least :data:`CLEAR_PX` pixels from anything but road or pavement, that 
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 from typing import Any
 
@@ -24,9 +23,8 @@ import numpy as np
 
 from benchmarks.bench_realboxes import frac
 from benchmarks.bench_realcam import REAL, licence
-from benchmarks.common import named, write_result
+from benchmarks.common import engines, models_parser, write_result
 from bsn_edge.calibration import Calibration
-from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.labels import camvid
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
@@ -104,12 +102,8 @@ def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool 
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="benchmarks/results")
-    p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
-                   help="exported models, scored side by side (default: the shipped one)")
+    p = models_parser(__doc__, "camvid")
     p.add_argument("--drive", default=camvid.HELD_OUT, help=f"the drive scored (default {camvid.HELD_OUT})")
-    p.add_argument("--name", default="camvid", help="the report's name in --out")
     p.add_argument("--assumed-camera", action="store_true",
                    help="also score each model with a camera file that says only what bsn-run assumes (the model "
                         "camera's field of view and mounting): what the first guess and online calibration win "
@@ -119,10 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     if not root.is_dir():
         print(f"no CamVid frames at {root}: nothing to score")
         return 0
-    try:
-        models = {name: Engine(path) for name, path in named(args.model or [str(DEFAULT_MODEL)]).items()}
-    except ValueError as e:
-        p.error(str(e))
+    models = engines(p, args.model)
     frames = list(camvid.frames_of(root, args.drive, "train"))
     result: dict[str, Any] = {"drive": args.drive, "frames": len(frames), "marked_share": MARKED_SHARE,
                               "models": {}}

@@ -20,7 +20,6 @@ where it is at least as good as the assumed camera on every source.
 
 from __future__ import annotations
 
-import argparse
 import json
 import tempfile
 from pathlib import Path
@@ -32,9 +31,8 @@ import numpy as np
 from benchmarks import bench_camvid, bench_realboxes
 from benchmarks.bench_realboxes import frac
 from benchmarks.bench_realcam import REAL
-from benchmarks.common import named, write_result
+from benchmarks.common import engines, models_parser, write_result
 from bsn_edge.calibration import Calibration
-from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.labels import camvid
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
@@ -100,16 +98,9 @@ def rendered(engine: Engine, work: Path) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="benchmarks/results")
-    p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
-                   help="exported models, scored side by side (default: the shipped one)")
-    p.add_argument("--name", default="first_guess", help="the report's name in --out")
+    p = models_parser(__doc__, "first_guess")
     args = p.parse_args(argv)
-    try:
-        models = {name: Engine(path) for name, path in named(args.model or [str(DEFAULT_MODEL)]).items()}
-    except ValueError as e:
-        p.error(str(e))
+    models = engines(p, args.model)
     result: dict[str, Any] = {"models": {}}
     table = ["| model | source | guess (no camera file) | assumed camera file | true camera file |",
              "|---|---|---|---|---|"]

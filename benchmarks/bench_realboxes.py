@@ -21,7 +21,6 @@ file loses.
 
 from __future__ import annotations
 
-import argparse
 import json
 from collections import defaultdict
 from pathlib import Path
@@ -32,11 +31,10 @@ import numpy as np
 
 from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_camera
 from benchmarks.bench_realview import city_pair_camera
-from benchmarks.common import named, write_result
+from benchmarks.common import engines, models_parser, write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.exif import from_exif
 from bsn_edge.card import ModelCard
-from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
@@ -181,11 +179,7 @@ def frac(pair: list[int]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="benchmarks/results")
-    p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
-                   help="exported models, scored side by side (default: the shipped one)")
-    p.add_argument("--name", default="realboxes", help="the report's name in --out")
+    p = models_parser(__doc__, "realboxes")
     p.add_argument("--withhold-camera", action="store_true",
                    help="score only the frames that have a camera file, each model twice: with it, and as bsn-run "
                         "sees them without one")
@@ -193,10 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to score")
         return 0
-    try:
-        models = {name: Engine(path) for name, path in named(args.model or [str(DEFAULT_MODEL)]).items()}
-    except ValueError as e:
-        p.error(str(e))
+    models = engines(p, args.model)
     frames = load_frames(json.loads(BOXES.read_text()))
     runs = [(name, engine, False) for name, engine in models.items()]
     if args.withhold_camera:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -89,6 +90,29 @@ def portable(text: str) -> str:
     if cwd:
         text = text.replace(cwd + "/", "")
     return text.replace(home + "/", "~/") if home else text
+
+
+def models_parser(description: str, name: str) -> argparse.ArgumentParser:
+    """The arguments every benchmark of exported models takes: ``--out``, ``--model [NAME=]MODEL.onnx``
+    (repeatable, scored side by side) and ``--name`` (the report's, default ``name``)."""
+    p = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
+                   help="exported models, scored side by side (default: the shipped one)")
+    p.add_argument("--name", default=name, help="the report's name in --out")
+    return p
+
+
+def engines(p: argparse.ArgumentParser, specs: list[str] | None) -> dict[str, Any]:
+    """The models ``--model`` names (the shipped one when none), loaded as the runtime loads them; a
+    usage error through ``p`` for two of one name or a model that does not load."""
+    from bsn_edge.cli.demo import DEFAULT_MODEL
+    from bsn_edge.runtime.engine import Engine
+
+    try:
+        return {name: Engine(path) for name, path in named(specs or [str(DEFAULT_MODEL)]).items()}
+    except ValueError as e:
+        p.error(str(e))
 
 
 def write_result(out_dir: str | Path, name: str, result: dict[str, Any], markdown: str) -> Path:
