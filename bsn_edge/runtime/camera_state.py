@@ -70,6 +70,7 @@ class CameraState:
         self.report: dict[str, Any] = {"source": "camera file" if self.mounting else "online"}
         self._calibrator: OnlineCalibrator | None = None
         self._frames: dict[tuple[int, int], ModelFrame] = {}
+        self._camera_file: tuple[tuple[int, int, Hood | None], Calibration] | None = None
         self._lock = threading.RLock()
         # the hood: the camera file's when it has looked, else looked for in the first seconds
         self.hood: Hood | None = calibration.hood if calibration is not None else None
@@ -99,10 +100,16 @@ class CameraState:
             self._calibrator.close()
 
     def camera_file(self, width: int, height: int) -> Calibration:
-        """The camera as known now: the camera file (else the assumed camera), with the hood once found."""
-        cal = self.calibration or assumed_camera(self.card.camera, self.card.mounting, width, height, self.height_m)
+        """The camera as known now: the camera file (else the assumed camera), with the hood once found.
+        Built once per frame size and hood: building one checks its lens, and calibration asks every frame."""
         with self._lock:
-            return cal if self.hood is None or cal.hood is not None else cal.with_hood(self.hood)
+            key = (width, height, self.hood)
+            if self._camera_file is None or self._camera_file[0] != key:
+                cal = self.calibration or assumed_camera(self.card.camera, self.card.mounting, width, height,
+                                                         self.height_m)
+                cal = cal if self.hood is None or cal.hood is not None else cal.with_hood(self.hood)
+                self._camera_file = (key, cal)
+            return self._camera_file[1]
 
     def observe(self, frame: np.ndarray) -> None:
         """Let online calibration see this frame (nothing once the mounting is known): the estimator is

@@ -191,10 +191,12 @@ class ImageFolderSource(Source):
         """The picture, or None when it cannot be read whole (a cut file decodes with its missing part
         filled in: not a frame to run)."""
         try:
-            damage = picture_damage(path.read_bytes(), path.suffix)
+            data = path.read_bytes()
         except OSError:
             return None
-        return None if damage is not None else cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if picture_damage(data, path.suffix) is not None:
+            return None
+        return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)     # EXIF rotation applied, as imread
 
 
 @dataclass(frozen=True)
