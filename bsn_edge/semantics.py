@@ -58,6 +58,12 @@ def is_traversable(sem: np.ndarray) -> np.ndarray:
     return (sem == ROAD) | (sem == SIDEWALK)
 
 
+def is_static(sem: np.ndarray) -> np.ndarray:
+    """Boolean mask of pixels whose class stays put in the world (not sky, not a road user, not ignore):
+    what the camera's motion is read from."""
+    return (sem < NUM_CLASSES) & (sem != SKY) & ~np.isin(sem, ROAD_USERS)
+
+
 def colorize(sem: np.ndarray) -> np.ndarray:
     """BGR colour image of a trainId image (ignore and unknown ids are black)."""
     lut = np.zeros((256, 3), dtype=np.uint8)

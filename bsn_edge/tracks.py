@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections import OrderedDict
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 
@@ -59,3 +62,59 @@ def triangulate(K: np.ndarray, T_w0: np.ndarray, T_w1: np.ndarray, p0: np.ndarra
         parallax = np.degrees(np.arccos(np.clip((c0 * c1).sum(1), -1, 1)))
     ok &= (np.linalg.norm(r0, axis=1) < 1.5) & (np.linalg.norm(r1, axis=1) < 1.5) & (parallax > 1.0)
     return z0, ok
+
+
+Matches = Callable[[int, int], tuple[np.ndarray, np.ndarray]]   # frames (i, j) -> points in i, points in j
+
+SIFT_FEATURES = 8000
+SIFT_CONTRAST = 0.02  # half OpenCV's default: dim city streets under cloud give few keypoints otherwise
+RATIO = 0.8           # Lowe's ratio test; RANSAC removes what it lets through
+
+
+class FeatureMatches:
+    """Matches between frames too far apart in time for Lucas-Kanade (a clip at one frame a second
+    moves tens of pixels between frames, its near road hundreds): SIFT keypoints on the pixels
+    ``static(i)`` allows (classes that do not move: a car passing is not the camera moving),
+    matched with the ratio test, on contrast-equalised frames. Each frame's keypoints are found once (the last
+    :data:`KEEP` frames asked for are kept), so matches of frame ``i`` to two others start from the
+    same points of ``i``."""
+
+    KEEP = 8
+
+    def __init__(self, gray: Callable[[int], np.ndarray], static: Callable[[int], np.ndarray] | None = None) -> None:
+        self.gray, self.static = gray, static
+        self._sift = cv2.SIFT_create(SIFT_FEATURES, contrastThreshold=SIFT_CONTRAST)
+        self._clahe = cv2.createCLAHE(2.0, (8, 8))
+        self._matcher = cv2.BFMatcher(cv2.NORM_L2)
+        self._found: OrderedDict[int, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
+
+    def _features(self, i: int) -> tuple[np.ndarray, np.ndarray | None]:
+        if i in self._found:
+            self._found.move_to_end(i)
+            return self._found[i]
+        mask = None
+        if self.static is not None:
+            mask = cv2.erode(self.static(i).astype(np.uint8) * 255, np.ones((3, 3), np.uint8))
+        kp, des = self._sift.detectAndCompute(self._clahe.apply(self.gray(i)), mask)
+        self._found[i] = (np.float32([k.pt for k in kp]).reshape(-1, 2), des)
+        while len(self._found) > self.KEEP:
+            self._found.popitem(last=False)
+        return self._found[i]
+
+    def __call__(self, i: int, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """Matched positions ``[N, 2]`` in frame ``i`` and in frame ``j``."""
+        (pa, da), (pb, db) = self._features(i), self._features(j)
+        if da is None or db is None or len(da) < 2 or len(db) < 2:
+            return np.zeros((0, 2), np.float32), np.zeros((0, 2), np.float32)
+        pairs = self._ratio(da, db)
+        if not pairs:
+            return np.zeros((0, 2), np.float32), np.zeros((0, 2), np.float32)
+        ia, ib = np.array(pairs).T
+        return pa[ia], pb[ib]
+
+    def _ratio(self, da: np.ndarray, db: np.ndarray) -> list[tuple[int, int]]:
+        out = []
+        for m in self._matcher.knnMatch(da, db, k=2):
+            if len(m) == 2 and m[0].distance < RATIO * m[1].distance:
+                out.append((m[0].queryIdx, m[0].trainIdx))
+        return out

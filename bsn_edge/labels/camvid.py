@@ -28,6 +28,10 @@ TO_TRAIN_ID = np.array([sm.SKY, sm.BUILDING, sm.POLE, sm.ROAD, sm.SIDEWALK, sm.V
                         sm.FENCE, sm.CAR, sm.PERSON, sm.RIDER] + [sm.IGNORE] * (256 - 11), np.uint8)
 STYLE = "camvid"         # the style its sequence folders are written with (real pictures with pixel labels)
 HELD_OUT = "0006R0"      # the drive kept out of everything trained: the benchmark's
+# Nothing of the camera is published but its size: a camera behind a car's windscreen. Its vanishing points
+# scatter too much on these streets to give a pitch (none agreed on any drive); ``bsn-label --depth ground``
+# finds the road's plane from the direction the car travels instead.
+CAMERA_HEIGHT_M = 1.3
 _NAME = re.compile(r"^(?P<drive>[0-9A-Za-z]+)_f?(?P<frame>\d+)$")
 
 
@@ -114,11 +118,13 @@ def frames_of(root: str | Path, drive: str, split: str | None = None) -> Iterato
 def write_sequence(drive: Drive, out: str | Path, label_name: str = "T5s", hfov_deg: float = 80.0,
                    force: bool = False) -> Path:
     """``drive`` as a sequence folder the training data loader reads: its pictures (``rgb/``), its labels as
-    trainIds (``semantic/``) and ``meta.json`` (the frame rate its spacing gives; no camera file: the camera
-    is taken as ``bsn-run`` takes one it knows nothing of, ``hfov_deg`` across). Its T-frame label set
+    trainIds (``semantic/``), ``meta.json`` (the frame rate its spacing gives, the camera's height
+    :data:`CAMERA_HEIGHT_M`) and a camera file of what is assumed of the camera, as ``bsn-run`` takes one
+    it knows nothing of: ``hfov_deg`` across, no mounting. Its T-frame label set
     ``label_name`` marks no blind spot and an empty V: until labels are made for it, the frames teach the
     segmentation teacher and, through distillation, B's features, never B's blind spots. ``FileExistsError``
     when ``out`` exists, unless ``force``."""
+    from bsn_edge.calibration.camera_file import Calibration
     from bsn_edge.camera import Intrinsics
     from bsn_edge.sequence.folder import LabelSet, SequenceFolder
     from bsn_edge.sequence.images import atomic_write_bytes, write_image, write_mask
@@ -140,8 +146,10 @@ def write_sequence(drive: Drive, out: str | Path, label_name: str = "T5s", hfov_
         write_mask(labels.blindspot(i), none)
         write_mask(labels.visibility(i), none)
     intrinsics = Intrinsics.from_fov(w, h, hfov_deg)
+    Calibration(intrinsics, intrinsics_method=f"assumed: {hfov_deg:g} degrees across; CamVid publishes no camera"
+                ).write(seq.calibration_path)
     SequenceMeta(fps=1.0 / drive.step_s, intrinsics=intrinsics, source="camvid", frames=len(drive.frames),
-                 extra={"style": STYLE, "drive": drive.name, "split": drive.split,
+                 extra={"style": STYLE, "camera_height": CAMERA_HEIGHT_M, "drive": drive.name, "split": drive.split,
                         "video_frames": [f.video_frame for f in drive.frames]}).write(out)
     params = {"source": "camvid", "blind_spots": "none yet: V is empty", "camera": intrinsics.to_dict()}
     atomic_write_bytes(labels.params_path, (json.dumps(params, indent=2) + "\n").encode())

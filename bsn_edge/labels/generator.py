@@ -19,7 +19,7 @@ from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.camera import Intrinsics
 from bsn_edge.card import EARLY_MOUNTING
 from bsn_edge.labels.config import LabelConfig
-from bsn_edge.labels.monocular import metric_depth_and_poses, seed_poses
+from bsn_edge.labels.monocular import fill_poses, metric_depth_and_poses, seed_poses
 from bsn_edge.labels.sources import ClipData, FilesDepth, frame_count
 from bsn_edge.labels.sources.base import ClipRejectedError, DepthSource, SegSource
 from bsn_edge.labels.sources.registry import make_depth, make_poses, make_seg
@@ -33,6 +33,7 @@ from bsn_edge.sequence.images import atomic_write_bytes
 
 DEFAULT_CAMERA_HEIGHT = REFERENCE_HEIGHT_M
 SEED_WINDOW = 5  # label frames either side: the seed VO's scale drifts too much for one fit per clip
+FEATURES_BELOW_FPS = 4.0  # label frames further apart than this rate are matched by features, not tracked
 
 
 @dataclass(frozen=True)
@@ -196,17 +197,58 @@ def open_sources(clip: ClipData, cfg: LabelConfig, sources: Sources, idx: np.nda
     if sources.seg != "files" and sources.depth != "files":
         # the depth source holds every label frame's depth already; their classes cost a quarter of it
         seg = _Remembered(seg)
+    if sources.poses == "vo" and sources.depth == "ground":
+        return _ground_first(clip, cfg, seg, idx, _camera_height(cfg, cal, clip))
     if sources.poses == "vo" and sources.depth != "files":
         # no metric depth to anchor VO: seed poses, align, ground-scale, re-solve (monocular.py)
         seed, pose_info = seed_poses(clip)
         aligned = make_depth(sources.depth, clip, seed, cfg, frames, window=SEED_WINDOW, seg=seg)
-        height = (cfg.camera_height or (cal.mounting.height_m if cal is not None and cal.mounting else None)
-                  or clip.meta.extra.get("camera_height") or DEFAULT_CAMERA_HEIGHT)
-        depth, poses, more = metric_depth_and_poses(clip, aligned, seg, idx, float(height))
+        depth, poses, more = metric_depth_and_poses(clip, aligned, seg, idx, _camera_height(cfg, cal, clip))
         return depth, seg, poses, {"kind": "vo", "metric": True, **pose_info, **more}
     metric = FilesDepth(clip) if sources.depth == "files" else None
     poses, pose_info = make_poses(sources.poses, clip, metric)
     return make_depth(sources.depth, clip, poses, cfg, frames, seg=seg), seg, poses, pose_info
+
+
+def _camera_height(cfg: LabelConfig, cal: Calibration | None, clip: ClipData) -> float:
+    """Metres above the road: ``--camera-height``, the camera file's mounting, meta.json's, the default."""
+    return float(cfg.camera_height or (cal.mounting.height_m if cal is not None and cal.mounting else None)
+                 or clip.meta.extra.get("camera_height") or DEFAULT_CAMERA_HEIGHT)
+
+
+def _ground_first(clip: ClipData, cfg: LabelConfig, seg: SegSource, idx: np.ndarray, height: float
+                  ) -> tuple[DepthSource, SegSource, np.ndarray, dict[str, Any]]:
+    """``--depth ground --poses vo``: the road plane's depth is metric before any pose is known, so
+    each step's length comes from it at once (no seed trajectory to scale, and no scale to fit
+    afterwards: the steps are measured in the plane's metres). Label frames further
+    apart than :data:`FEATURES_BELOW_FPS` allows are matched by features on the classes that do
+    not move. A camera file without a mounting gets one from the drive itself: the road's normal
+    is square to the direction the car travels, which a first pass of the odometry gives."""
+    from bsn_edge.labels.sources.ground_depth import GroundDepth, PlaneDepth
+    from bsn_edge.labels.vo import travel_direction, visual_odometry
+    from bsn_edge.mounting import Mounting
+    from bsn_edge.tracks import FeatureMatches
+
+    frames = [int(i) for i in idx]
+    K = clip.meta.intrinsics.K
+    matches = None
+    if cfg.rate < FEATURES_BELOW_FPS:
+        matches = FeatureMatches(lambda i: read_gray(clip.seq, i), lambda i: sm.is_static(seg(i)))
+    by_k = None if matches is None else (lambda a, b: matches(frames[a], frames[b]))
+    grays = [read_gray(clip.seq, i) for i in frames]
+    cal = clip.info.get("calibration")
+    mounting, found = (cal.mounting if cal is not None else None), "camera file"
+    if mounting is None:
+        forward = travel_direction(visual_odometry(grays, K, matches=by_k)[0])
+        if forward is None:
+            raise ClipRejectedError("the camera never moved: no road plane from the drive, and no mounting given")
+        mounting, found = Mounting.from_forward(forward, height), "direction of travel"
+    plane, _ = GroundDepth.predictor(clip, seg, mounting)
+    poses_idx, info = visual_odometry(grays, K, matches=by_k,
+                                      depth=lambda k: np.nan_to_num(plane(frames[k]), nan=0.0))
+    poses = fill_poses(poses_idx, idx, clip.frames)
+    return PlaneDepth(plane, mounting, found), seg, poses, {
+        "kind": "vo", "metric": True, "matched_by": "features" if matches else "tracks", **info}
 
 
 class FrameCache:

@@ -62,12 +62,12 @@ def metric_depth_and_poses(clip: ClipData, depth: DepthSource, seg: SegSource, i
     metric = PerFrameScaled(depth, factors)
     frames = [read_gray(clip.seq, int(i)) for i in idx]
     poses_idx, info = visual_odometry(frames, K, depth=lambda k: metric(int(idx[k])))
-    poses = _fill(poses_idx, idx, clip.frames)
+    poses = fill_poses(poses_idx, idx, clip.frames)
     return metric, poses, {"final": info, "frames_without_ground": failed, "camera_height": camera_height,
                            "poses_between_label_frames": "interpolated"}
 
 
-def _fill(poses_idx: np.ndarray, idx: np.ndarray, n: int) -> np.ndarray:
+def fill_poses(poses_idx: np.ndarray, idx: np.ndarray, n: int) -> np.ndarray:
     """Poses of every frame from those of the label-rate frames (translation interpolated,
     rotation of the nearest); only label-rate frames are used for labels."""
     out = np.empty((n, 4, 4))

@@ -10,16 +10,18 @@ both pairs); the whole trajectory is then in the units of the first step, and
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from typing import Any
 
 import cv2
 import numpy as np
 
-from bsn_edge.tracks import detect, track, triangulate
+from bsn_edge.tracks import Matches, detect, track, triangulate
 
 MIN_INLIERS = 20
 MAX_STEP_CHANGE = 0.5  # a step more than 50 % longer or shorter than the last is suspect
+STILL_PX = 1.0         # matches that moved less than this (median) between frames: the camera stood still
 
 
 def _rel(R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -30,13 +32,36 @@ def _rel(R: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def _essential(K, p0, p1):
-    E, mask = cv2.findEssentialMat(p0, p1, K, cv2.RANSAC, 0.999, 1.0)
+    try:
+        E, mask = cv2.findEssentialMat(p0, p1, K, cv2.RANSAC, 0.999, 1.0)
+    except cv2.error:      # degenerate matches (all but still): OpenCV's polynomial solver gives up
+        return None
     if E is None or E.shape != (3, 3):
         return None
     n, R, t, mask = cv2.recoverPose(E, p0, p1, K, mask=mask)
     if n < MIN_INLIERS:
         return None
     return R, t.ravel() / (np.linalg.norm(t) + 1e-12)
+
+
+MIN_SCALED = 8        # matches with both a depth and a triangulation that an essential step's length needs
+
+
+def _essential_scaled(K, p0, p1, depth0):
+    """Motion from the essential matrix, its length the median ratio of ``depth0`` to the depths the
+    unit step triangulates: each point's depth may be rough (the road plane's, at a thing's ground
+    contact), their median is not, where PnP's reprojection test would refuse them all."""
+    ess = _essential(K, p0, p1)
+    if ess is None:
+        return None
+    R, t = ess
+    z, ok = triangulate(K, np.eye(4), np.linalg.inv(_rel(R, t)), p0, p1)
+    u, v = np.rint(p0[:, 0]).astype(int), np.rint(p0[:, 1]).astype(int)
+    d = depth0[v, u]
+    ok &= (d > 0.5) & (d < 80.0)
+    if ok.sum() < MIN_SCALED:
+        return None
+    return R, t * float(np.median(d[ok] / z[ok]))
 
 
 def _lift(K, pts, depth):
@@ -82,27 +107,42 @@ def _pnp(K, pts0, pts1, depth0, expected_step: float | None):
 
 def visual_odometry(frames: list[np.ndarray], K: np.ndarray,
                     depth: Callable[[int], np.ndarray] | None = None,
-                    progress: Callable[[int], None] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+                    progress: Callable[[int], None] | None = None,
+                    matches: Matches | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     """Camera-to-world poses ``[N, 4, 4]`` (first frame at the origin) of grayscale ``frames``.
 
     With ``depth`` (metric depth of frame i) the poses are metric; without, they are in units of
-    the first step's length.
+    the first step's length. ``matches(i, i + 1)`` replaces Lucas-Kanade tracking (frames far apart
+    in time, :class:`bsn_edge.tracks.FeatureMatches`); a step whose matches barely move is no motion,
+    and a step it cannot solve carries the last one's length; with depth, each step is the essential
+    matrix's scaled by it (matched points are too few and their depth too rough for PnP).
     """
     n = len(frames)
     poses = [np.eye(4)]
-    stats = {"pnp_steps": 0, "essential_steps": 0, "carried_steps": 0}
+    solved = "pnp_steps" if matches is None else "depth_scaled_steps"
+    stats = {solved: 0, "essential_steps": 0, "carried_steps": 0, "still_steps": 0}
     prev_T = _rel(np.eye(3), np.zeros(3))
     prev_pair: tuple[np.ndarray, np.ndarray] | None = None  # tracks of the last pair (in i-1, in i)
     for i in range(n - 1):
         g0, g1 = frames[i], frames[i + 1]
-        p0 = detect(g0)
-        p1, ok = track(g0, g1, p0)
-        p0, p1 = p0[ok], p1[ok]
+        if matches is None:
+            p0 = detect(g0)
+            p1, ok = track(g0, g1, p0)
+            p0, p1 = p0[ok], p1[ok]
+        else:
+            p0, p1 = matches(i, i + 1)
         expected = float(np.linalg.norm(prev_T[:3, 3])) if i else None
-        step = _pnp(K, p0, p1, depth(i), expected) if depth is not None and len(p0) >= MIN_INLIERS else None
-        if step is not None:
+        still = matches is not None and len(p0) >= MIN_INLIERS and np.median(np.linalg.norm(p1 - p0, axis=1)) < STILL_PX
+        step = None
+        if depth is not None and len(p0) >= MIN_INLIERS and not still:
+            d0 = depth(i)
+            step = _pnp(K, p0, p1, d0, expected) if matches is None else _essential_scaled(K, p0, p1, d0)
+        if still:
+            T_rel = _rel(np.eye(3), np.zeros(3))
+            stats["still_steps"] += 1
+        elif step is not None:
             T_rel = _rel(*step)
-            stats["pnp_steps"] += 1
+            stats[solved] += 1
         else:
             ess = _essential(K, p0, p1) if len(p0) >= MIN_INLIERS else None
             if ess is None:
@@ -110,14 +150,19 @@ def visual_odometry(frames: list[np.ndarray], K: np.ndarray,
                 stats["carried_steps"] += 1
             else:
                 R, t = ess
-                scale = _carry_scale(K, frames, i, prev_pair, prev_T, R, t, p0, p1) if i else 1.0
+                if matches is not None:
+                    scale = float(np.linalg.norm(prev_T[:3, 3])) if i else 1.0
+                else:
+                    scale = _carry_scale(K, frames, i, prev_pair, prev_T, R, t, p0, p1) if i else 1.0
                 T_rel = _rel(R, t * scale)
                 stats["essential_steps"] += 1
         poses.append(poses[-1] @ np.linalg.inv(T_rel))
-        prev_T, prev_pair = T_rel, (frames[i], g1)
+        if not still:      # a stop says nothing of the speed the car moves off at
+            prev_T = T_rel
+        prev_pair = (frames[i], g1)
         if progress:
             progress(1)
-    stats["metric"] = depth is not None and stats["pnp_steps"] > 0
+    stats["metric"] = depth is not None and stats[solved] > 0
     return np.stack(poses), stats
 
 
@@ -171,3 +216,18 @@ def metric_scale_from_ground(depths: list[np.ndarray], traversable: list[np.ndar
     if not heights:
         raise ValueError("no frame has enough traversable pixels to fit the ground plane")
     return camera_height / float(np.median(heights))
+
+
+def travel_direction(poses: np.ndarray) -> np.ndarray | None:
+    """The median direction of travel in the camera frame over the steps of ``poses`` (camera to
+    world) that moved: the car drives along the road, so this is the road's forward direction as
+    the camera sees it, whatever the steps' lengths. None when no step moved."""
+    dirs = []
+    for a, b in itertools.pairwise(poses):
+        c = (np.linalg.inv(a) @ b)[:3, 3]          # camera centre of the next frame, in this one
+        if np.linalg.norm(c) > 1e-9:
+            dirs.append(c / np.linalg.norm(c))
+    if not dirs:
+        return None
+    d = np.median(np.array(dirs), axis=0)
+    return d / np.linalg.norm(d)

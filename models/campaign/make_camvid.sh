@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # usage (in the campaign folder): make_camvid.sh [DATA]; REPO points at the checkout.
 # CamVid's labelled drives as sequence folders in DATA (labels.camvid.write_sequence), every drive but the
-# held-out one (0006R0, bsn-bench --only camvid's): pictures, labels as trainIds, an empty V until T-frame
-# labels are made for them. Finished drives are skipped.
+# held-out one (0006R0, bsn-bench --only camvid's): pictures, labels as trainIds, a camera file of what is
+# assumed; then their T-frame labels (T = 5 s at their 1 frame/s: 5 steps), from the road plane and
+# odometry on matched features (bsn-label --depth ground --poses vo). Finished drives and frames are skipped.
 set -euo pipefail
 REPO=${REPO:?set REPO to the checkout}
 D=${1:-data}
@@ -17,8 +18,9 @@ for d in camvid.drives(root):
     if d.name == camvid.HELD_OUT:
         continue
     out = data / f"camvid_{d.name}_{d.split}"
-    if (out / "meta.json").is_file():
+    if (out / "calibration.json").is_file():
         continue
-    camvid.write_sequence(d, out)
+    camvid.write_sequence(d, out, force=out.exists())
     print(f"{out}: {len(d.frames)} frames, {1 / d.step_s:g} frames/s")
 PY
+"$REPO/.venv/bin/bsn-label" "$D"/camvid_*_* --rate 1 --T 5 --depth ground --seg files --poses vo

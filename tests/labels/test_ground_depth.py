@@ -111,3 +111,35 @@ def test_ground_depth_needs_a_mounting(synth_clip, tmp_path):
     Calibration.of(cal.intrinsics, cal.dist, method="chessboard only").write(path)
     with pytest.raises(ClipRejectedError, match="mounting"):
         label_sequence(seq, LabelConfig(rate=5.0, horizon_s=1.0), Sources(depth="ground"))
+
+
+@pytest.fixture(scope="module")
+def sparse_clip(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ground") / "town_sparse"
+    write_clip(SynthConfig(frames=40, height=256, width=512, fps=10.0, camera="fixed", seed=2), out, video=False)
+    return out
+
+
+def test_far_apart_frames_without_a_mounting_give_the_exact_labels(sparse_clip, tmp_path):
+    """Labelled drives at 1-2 frames/s with no camera mounting (CamVid's): features on things that stay put,
+    the road plane found square to the direction of travel, each step scaled by the plane."""
+    cfg = LabelConfig(rate=2.0, horizon_s=1.0)
+    exact = tmp_path / "exact"
+    shutil.copytree(sparse_clip, exact)
+    label_sequence(exact, cfg)
+    ground = tmp_path / "ground"
+    shutil.copytree(sparse_clip, ground)
+    path = SequenceFolder(ground).calibration_path
+    truth = Calibration.read(path)
+    Calibration.of(truth.intrinsics, truth.dist).write(path)
+    rep = label_sequence(ground, cfg, Sources(depth="ground", poses="vo"))
+    depth, poses = rep["sources_detail"]["depth"], rep["sources_detail"]["poses"]
+    assert poses["matched_by"] == "features" and depth["mounting_from"] == "direction of travel"
+    assert depth["mounting"]["pitch_deg"] == pytest.approx(truth.mounting.pitch_deg, abs=0.5)
+    a, b = SequenceFolder(exact).labels(cfg.name), SequenceFolder(ground).labels(cfg.name)
+    tp = fp = fn = 0
+    for i in a.frames():
+        e, g = read_mask(a.blindspot(i)), read_mask(b.blindspot(i))
+        v = read_mask(a.visibility(i)) & read_mask(b.visibility(i))
+        tp, fp, fn = tp + (e & g & v).sum(), fp + (g & ~e & v).sum(), fn + (e & ~g & v).sum()
+    assert tp > 0 and tp / (tp + fp + fn) > 0.7

@@ -13,16 +13,18 @@ overhang), the landmarks say so: the source is aligned and checked like any dept
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from bsn_edge import semantics as sm
 from bsn_edge.camera import Intrinsics
-from bsn_edge.labels.sources.base import ClipData, ClipRejectedError, SegSource
+from bsn_edge.labels.sources.base import ClipData, ClipRejectedError, DepthSource, SegSource
 from bsn_edge.labels.sources.onnx_depth import AlignedDepth
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.mounting import Mounting
+from bsn_edge.tracks import Matches
 
 if TYPE_CHECKING:
     from bsn_edge.labels.config import LabelConfig
@@ -78,15 +80,19 @@ class GroundDepth(AlignedDepth):
 
     name = "ground"
 
-    @classmethod
-    def for_clip(cls, clip: ClipData, seg: SegSource, poses: np.ndarray, cfg: LabelConfig,
-                 frames: list[int], window: int | None = None) -> GroundDepth:
+    @staticmethod
+    def predictor(clip: ClipData, seg: SegSource, mounting: Mounting | None = None
+                  ) -> tuple[Callable[[int], np.ndarray], Mounting]:
+        """The plane's depth of frame ``i`` on the clip's raw pixels (NaN where unknown), before any
+        check against the landmarks, and the mounting it comes from (``mounting``, else the camera
+        file's)."""
         cal = clip.info.get("calibration")
-        if cal is None or cal.mounting is None:
+        mounting = mounting or (cal.mounting if cal is not None else None)
+        if mounting is None:
             raise ClipRejectedError("depth from the road plane needs the camera's mounting (height, pitch, roll): "
                                     "give a camera file with one (bsn-calibrate --mount)")
-        intr, mounting = clip.meta.intrinsics, cal.mounting
-        if cal.has_distortion:
+        intr = clip.meta.intrinsics
+        if cal is not None and cal.has_distortion:
             # the plane holds in the undistorted camera; the depth goes back onto the raw pixels,
             # where every source's depth lives (the generator undistorts them all alike)
             lens = ModelFrame(intr, cal.dist, mounting, intr, mounting)
@@ -97,8 +103,14 @@ class GroundDepth(AlignedDepth):
         else:
             def predict(i: int) -> np.ndarray:
                 return ground_depth(seg(i), intr, mounting)
+        return predict, mounting
 
-        obj = cls(predict, "metric_depth", clip, poses, frames, cfg.min_corr, window)
+    @classmethod
+    def for_clip(cls, clip: ClipData, seg: SegSource, poses: np.ndarray, cfg: LabelConfig,
+                 frames: list[int], window: int | None = None, matches: Matches | None = None,
+                 mounting: Mounting | None = None) -> GroundDepth:
+        predict, mounting = cls.predictor(clip, seg, mounting)
+        obj = cls(predict, "metric_depth", clip, poses, frames, cfg.min_corr, window, matches)
         obj.mounting = mounting
         return obj
 
@@ -107,4 +119,22 @@ class GroundDepth(AlignedDepth):
 
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "kind": "ground", "mounting": self.mounting.to_dict(),
+                "ground_classes": [sm.NAMES[c] for c in GROUND], "max_depth_m": MAX_GROUND_M}
+
+
+class PlaneDepth(DepthSource):
+    """The road plane's depth as it is, for poses whose steps were measured in it (``bsn-label --depth
+    ground --poses vo``): the plane defines the metres, so there is no scale to fit to landmarks."""
+
+    name = "ground"
+
+    def __init__(self, predict: Callable[[int], np.ndarray], mounting: Mounting, mounting_from: str) -> None:
+        self.predict, self.mounting, self.mounting_from = predict, mounting, mounting_from
+
+    def __call__(self, i: int) -> np.ndarray:
+        return np.nan_to_num(self.predict(i), nan=0.0)
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": "ground", "prediction": "metric_depth", "scale": "the plane's own (poses measured in it)",
+                "mounting": self.mounting.to_dict(), "mounting_from": self.mounting_from,
                 "ground_classes": [sm.NAMES[c] for c in GROUND], "max_depth_m": MAX_GROUND_M}

@@ -12,6 +12,7 @@ from bsn_edge.labels.landmarks import frame_landmarks
 from bsn_edge.labels.sources.base import ClipData, ClipRejectedError, DepthSource
 from bsn_edge.labels.sources.onnx_model import OnnxImageModel
 from bsn_edge.sequence.frames import read_gray, read_rgb
+from bsn_edge.tracks import Matches
 
 if TYPE_CHECKING:
     from bsn_edge.labels.config import LabelConfig
@@ -45,7 +46,7 @@ class AlignedDepth(DepthSource):
     name = "aligned"
 
     def __init__(self, predict, kind: str, clip: ClipData, poses: np.ndarray, frames: list[int],
-                 min_corr: float, window: int | None = None) -> None:
+                 min_corr: float, window: int | None = None, matches: Matches | None = None) -> None:
         self.kind, self.window = kind, window
         self._pred: dict[int, np.ndarray] = {}
         self._align: dict[int, Alignment] = {}
@@ -61,7 +62,7 @@ class AlignedDepth(DepthSource):
         for i in frames:
             pred = predict(i)
             self._pred[i] = pred
-            u, v, z = frame_landmarks(gray, i, clip.frames, clip.meta.fps, poses, K)
+            u, v, z = frame_landmarks(gray, i, clip.frames, clip.meta.fps, poses, K, matches)
             ui, vi = np.rint(u).astype(int), np.rint(v).astype(int)
             smooth = locally_smooth(pred)[vi, ui]
             samples.append((pred[vi[smooth], ui[smooth]], z[smooth]))
