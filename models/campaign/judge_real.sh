@@ -2,7 +2,8 @@
 # Judge a leg of the lite-light campaign beside the shipped default (and beside another leg, when
 # given), in one sitting and as the issue of the real-street default asks: exported as the default is
 # (int8, 7-bit weights, calibrated on calib/); the real boxes (near and all occluders marked, by class,
-# open road flagged), once more on the frames that have a camera file with it withheld; held-out IoU
+# open road flagged), once more on the frames that have a camera file with it withheld; CamVid's held-out
+# drive by its pixel labels (bench_camvid); held-out IoU
 # per style (bystyle/STYLE); the real cameras' depth; the real footage side by side for the eye. No
 # timing is taken. Run from the campaign folder (calib/, bystyle/).
 #   usage: judge_real.sh CHECKOUT RUN LABEL OUT [OTHER_LABEL=OTHER_MODEL.onnx]
@@ -33,9 +34,10 @@ models=(--model "default=$SHIPPED" --model "$LABEL=$MODEL")
 cd "$REPO"
 "$B/python" -m benchmarks.bench_realboxes --out "$OUT/realboxes" "${models[@]}"
 "$B/python" -m benchmarks.bench_realboxes --out "$OUT/withheld" --name withheld --withhold-camera "${models[@]}"
+"$B/python" -m benchmarks.bench_camvid --out "$OUT/camvid" "${models[@]}"
 sets=()
 for s in highway suburb town urban; do sets+=(--set "$s=$HERE/bystyle/$s"); done
 "$B/python" -m benchmarks.bench_cameras --out "$OUT/cameras" "${sets[@]}" "${models[@]}"
 "$B/python" -m benchmarks.bench_realcam --out "$OUT/realcam" "${models[@]}"
 "$B/python" -m benchmarks.bench_realview --out "$OUT/realview" "${models[@]}"
-echo "judged $RUN: $OUT (realboxes/, withheld/, cameras/, realcam/, realview/)"
+echo "judged $RUN: $OUT (realboxes/, withheld/, camvid/, cameras/, realcam/, realview/)"
