@@ -28,30 +28,54 @@ from bsn_edge.camera import Intrinsics
 FILM_DIAGONAL_MM = math.hypot(36.0, 24.0)
 EXIF_IFD_POINTER = 0x8769
 FOCAL_35MM = 0xA405
-_SHORT, _LONG = 3, 4
+MAKE, MODEL = 0x010F, 0x0110
+_ASCII, _SHORT, _LONG = 2, 3, 4
 _HEAD_BYTES = 1 << 16      # the APP1 segment is at most 64 KiB and comes first
 
 
 def focal_35mm(path: str | os.PathLike) -> float | None:
     """The 35 mm equivalent focal length in millimetres a JPEG's EXIF record gives, or None (not a
     JPEG, no EXIF, no such tag, or a record that does not parse)."""
+    found = _record(path)
+    if found is None:
+        return None
+    tiff, order, ifd0 = found
+    try:
+        exif = _tag(tiff, order, ifd0, EXIF_IFD_POINTER)
+        value = None if exif is None else _tag(tiff, order, exif, FOCAL_35MM)
+    except (struct.error, IndexError):
+        return None
+    return float(value) if value else None
+
+
+def camera_of(path: str | os.PathLike) -> tuple[str, str, float | None] | None:
+    """Which camera took the picture, as its EXIF record says: maker, model and 35 mm equivalent
+    focal length (a zoom's setting tells two lenses apart); None without a record."""
+    found = _record(path)
+    if found is None:
+        return None
+    tiff, order, ifd0 = found
+    try:
+        make, model = _text(tiff, order, ifd0, MAKE), _text(tiff, order, ifd0, MODEL)
+    except (struct.error, IndexError):
+        return None
+    return make, model, focal_35mm(path)
+
+
+def _record(path: str | os.PathLike) -> tuple[bytes, str, int] | None:
+    """A JPEG's EXIF TIFF block, its byte order and the offset of its first IFD; None without one."""
     try:
         with open(path, "rb") as f:
             head = f.read(_HEAD_BYTES + 4)
     except OSError:
         return None
     tiff = _exif_tiff(head)
-    if tiff is None:
+    if tiff is None or len(tiff) < 8 or tiff[:2] not in (b"II", b"MM"):
         return None
-    try:
-        order = {b"II": "<", b"MM": ">"}[tiff[:2]]
-        if struct.unpack(order + "H", tiff[2:4])[0] != 42:
-            return None
-        exif = _tag(tiff, order, struct.unpack(order + "I", tiff[4:8])[0], EXIF_IFD_POINTER)
-        value = None if exif is None else _tag(tiff, order, exif, FOCAL_35MM)
-    except (KeyError, struct.error, IndexError):
+    order = "<" if tiff[:2] == b"II" else ">"
+    if struct.unpack(order + "H", tiff[2:4])[0] != 42:
         return None
-    return float(value) if value else None
+    return tiff, order, struct.unpack(order + "I", tiff[4:8])[0]
 
 
 def from_exif(path: str | os.PathLike, width: int, height: int) -> Calibration | None:
@@ -83,6 +107,19 @@ def _exif_tiff(head: bytes) -> bytes | None:
             return None
         i += 2 + size
     return None
+
+
+def _text(tiff: bytes, order: str, ifd: int, tag: int) -> str:
+    """The ASCII ``tag`` in the IFD at offset ``ifd`` ("" when absent)."""
+    (count,) = struct.unpack(order + "H", tiff[ifd:ifd + 2])
+    for k in range(count):
+        entry = ifd + 2 + 12 * k
+        t, kind, n = struct.unpack(order + "HHI", tiff[entry:entry + 8])
+        if t != tag or kind != _ASCII:
+            continue
+        at = entry + 8 if n <= 4 else struct.unpack(order + "I", tiff[entry + 8:entry + 12])[0]
+        return tiff[at:at + n].split(b"\x00", 1)[0].decode("ascii", "replace").strip()
+    return ""
 
 
 def _tag(tiff: bytes, order: str, ifd: int, tag: int) -> int | None:

@@ -42,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "pixels off (bsn-adapt uses 8 there; default 0 = off)")
     p.add_argument("--vis-range", type=float, default=16.0,
                    help="L, metres: V is sky or a surface nearer than this (default 16)")
+    p.add_argument("--users-unknown", action="store_true",
+                   help="leave road users with no road seen behind them out of V (unknown, not taught as hiding "
+                        "nothing): for drives whose frames are far apart, such as CamVid's a second apart")
     p.add_argument("--min-area", type=int, default=None,
                    help="drop label components smaller than this (pixels); default scales the paper's "
                         "100 px at 375x1242 with the image area")
@@ -69,7 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = LabelConfig(rate=args.rate, horizon_s=args.horizon, depth_tol=args.depth_tol,
                           vis_range=args.vis_range, min_area=args.min_area, min_corr=args.min_corr,
-                          camera_height=args.camera_height, look_tol=args.look_tol)
+                          camera_height=args.camera_height, look_tol=args.look_tol,
+                          users_unknown=args.users_unknown)
     except ValueError as e:
         return fail(PROG, str(e))
     sources = Sources(depth=args.depth, seg=args.seg, poses=args.poses, calib=args.calib)

@@ -277,7 +277,9 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
     lines.append(f"  model: signed by key {model['signer']}" if model["authentic"]
                  else f"  model: UNSIGNED ({model['trust_note']}; run by --allow-unsigned)")
     m = summary["camera"]["mounting"]
-    if camera.calibrating:
+    if summary["camera"]["cameras"]["cameras"] != "one camera":
+        lines.append(f"  camera: {camera.progress()}")
+    elif camera.calibrating:
         lines.append(f"  camera: still {camera.progress()}; online calibration needs a few seconds of straight "
                      "forward driving, longer with turns, stops or little texture (or run bsn-calibrate --mount once "
                      "and pass --calib)")
@@ -399,6 +401,12 @@ def _start(args: argparse.Namespace):
         print(f"{PROG}: warning: {engine.verdict.note}; it runs because of --allow-unsigned, and the status says "
               "Model_Unsigned on every cycle", file=sys.stderr)
     source = open_source(args.source, pace=args.pace, stall_s=args.stall)
+    if calibration is None and not source.one_camera:
+        from bsn_edge.runtime.picture_cameras import PictureCameras
+        print(f"{PROG}: note: {source.cameras.cameras.value}: {source.cameras.why}; each is warped with its own lens "
+              "(EXIF, else assumed) and the model camera's mounting (pass --calib if they are one camera)",
+              file=sys.stderr)
+        return engine, PictureCameras(engine.card, source.cameras, args.height), source, cfg, maps
     intrinsics_from = "camera file"
     if calibration is None and source.picture is not None and source.size is not None:
         calibration = from_exif(source.picture, *source.size)

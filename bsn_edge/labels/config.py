@@ -30,6 +30,10 @@ class LabelConfig:
                  frame t's picture where it lands (window mean difference under this), for depth
                  and segmentation from models, whose own depth and classes cannot say it; 0: off
                  (exact depth and classes need no second opinion).
+    users_unknown: road users (vehicles, people) with no road seen behind them in the later frames
+                 are left out of V, unknown rather than taught as hiding nothing: for drives whose
+                 frames are far apart (CamVid's, a second), where the road behind a road user is often
+                 never in view of the few later frames; False: V as the paper.
     """
 
     rate: float = 5.0
@@ -41,6 +45,7 @@ class LabelConfig:
     shrink_margin: float = 0.5
     camera_height: float | None = None
     look_tol: float = 0.0
+    users_unknown: bool = False
 
     def __post_init__(self) -> None:
         if not self.rate > 0:

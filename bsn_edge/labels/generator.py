@@ -359,7 +359,8 @@ def _label_one(labels, cache: FrameCache, warper: Warper, idx: np.ndarray, k: in
                 "blindspot_in_v_px": int((omega & vis).sum()), "resumed": True}
     d_t, sem_t, grey_t = cache.take(k)
     lab = label_frame(warper, [cache.cloud(k + j) for j in range(1, cfg.horizon_frames + 1)], d_t,
-                      sm.is_traversable(sem_t), sem_t == sm.SKY, poses[i], cfg, grey_t)
+                      sm.is_traversable(sem_t), sem_t == sm.SKY, poses[i], cfg, grey_t,
+                      np.isin(sem_t, sm.ROAD_USERS))
     write_mask(labels.blindspot(i), lab.omega, durable=True)
     write_mask(labels.visibility(i), lab.visibility, durable=True)
     return {"frame": i, "blindspot_px": int(lab.omega.sum()), "visible_px": int(lab.visibility.sum()),

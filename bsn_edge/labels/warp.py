@@ -253,11 +253,13 @@ def look_agrees(grey: np.ndarray, warped_grey: np.ndarray, look_tol: float) -> n
 
 
 def label_frame(warper: Warper, clouds: list[Cloud], depth: np.ndarray, traversable: np.ndarray,
-                sky: np.ndarray, T_wc: np.ndarray, cfg: LabelConfig, grey: np.ndarray | None = None) -> FrameLabel:
+                sky: np.ndarray, T_wc: np.ndarray, cfg: LabelConfig, grey: np.ndarray | None = None,
+                users: np.ndarray | None = None) -> FrameLabel:
     """T-frame blind spots and the visibility mask of one frame from the clouds of later frames,
     with ``cfg``'s tolerances (``depth_tol``, ``vis_range``, ``min_area`` at this frame's size,
     ``shrink_margin``); with ``look_tol`` > 0 (clouds made with their pictures, this frame's
-    ``grey``), warped road that looks like this frame's picture is visible too (``look_agrees``)."""
+    ``grey``), warped road that looks like this frame's picture is visible too (``look_agrees``).
+    With ``users_unknown``, the pixels of road users (``users``) left without label are out of V."""
     by_look = cfg.look_tol > 0
     if by_look and grey is None:
         raise ValueError("comparing by look needs the label frame's grey picture")
@@ -269,4 +271,8 @@ def label_frame(warper: Warper, clouds: list[Cloud], depth: np.ndarray, traversa
     omega &= ~looks
     kept = remove_small_components(omega, cfg.min_area_px(*depth.shape))
     vis = sky | ((depth > 0) & (depth < cfg.vis_range))
+    if cfg.users_unknown:
+        if users is None:
+            raise ValueError("leaving road users out of V needs their pixels")
+        vis &= kept | ~users
     return FrameLabel(kept, vis, s, d_a, int(agree.sum()), int(omega.sum() - kept.sum()), int(looks.sum()))

@@ -123,6 +123,10 @@ class CameraState:
             self._look_for_vanishing_point(frame)
             self._calibrate(frame)
 
+    def picture(self, path: Path | None, frame: np.ndarray) -> None:
+        """The next frame to warp is the picture ``path`` (None: not a picture). One camera: nothing
+        changes (:class:`~bsn_edge.runtime.picture_cameras.PictureCameras` takes each picture's own)."""
+
     def frame_for(self, frame: np.ndarray) -> ModelFrame:
         """The model frame for this raw frame with the mounting known now (built once per size and
         mounting); it changes nothing (:meth:`observe` is what calibrates)."""
@@ -240,7 +244,8 @@ class CameraState:
     def summary(self) -> dict[str, Any]:
         with self._lock:
             m, report = self.mounting, dict(self.report)
-        return {"intrinsics": self.intrinsics_from, "size_note": self.size_note,
+        return {"cameras": {"cameras": "one camera", "why": "one source"}, "intrinsics": self.intrinsics_from,
+                "size_note": self.size_note,
                 "mounting": None if m is None else m.to_dict(),
                 "calibrating": m is None, "calibration": report, "hood": self._hood_summary(),
                 "first_guess": self._vanishing.to_dict() if self._vanishing is not None else None,

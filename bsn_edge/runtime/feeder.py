@@ -47,8 +47,8 @@ class Prepared:
     ready_at: float
 
 
-# (raw frame, input buffer) -> (model frame, calibrating); writes the warped frame into the buffer
-Warp = Callable[[np.ndarray, np.ndarray], tuple[ModelFrame, bool]]
+# (captured frame, input buffer) -> (model frame, calibrating); writes the warped frame into the buffer
+Warp = Callable[[Captured, np.ndarray], tuple[ModelFrame, bool]]
 
 
 class Feeder:
@@ -101,7 +101,7 @@ class Feeder:
         if cap.frame is None:
             return Prepared(cap, None, None, False, 0.0, time.perf_counter())
         t0 = time.perf_counter()
-        mf, calibrating = self.warp(cap.frame, buf)
+        mf, calibrating = self.warp(cap, buf)
         t1 = time.perf_counter()
         return Prepared(cap, mf, buf, calibrating, t1 - t0, t1)
 

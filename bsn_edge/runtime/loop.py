@@ -167,7 +167,7 @@ class FramePipeline:
             return False
         if self.source.reconnects != self.reconnects_seen:    # a camera reopened may come back at another size
             self.reconnects_seen, self.shape = self.source.reconnects, None
-        if self.shape is None:
+        if self.shape is None or not self.source.one_camera:     # each picture its own camera, its own size
             self.shape = cap.frame.shape
         elif cap.frame.shape != self.shape:
             # a frame of another size (or aspect) than the source's is a damaged frame: warped as the
@@ -182,9 +182,11 @@ class FramePipeline:
         """Frames the model had no time for: skipped by a live source, or replaced in the feeder's slot."""
         return self.source.dropped + (self.feeder.dropped if self.feeder is not None else 0)
 
-    def warp(self, frame: np.ndarray, buf: np.ndarray) -> tuple[ModelFrame, bool]:
+    def warp(self, cap: Captured, buf: np.ndarray) -> tuple[ModelFrame, bool]:
         """The frame shown to online calibration, then into the model camera, written into the input
         buffer ``buf``; whether the camera was still calibrating for it."""
+        frame = cap.frame
+        self.camera.picture(cap.picture, frame)
         self.camera.observe(frame)
         mf = self.camera.frame_for(frame)
         mf.to_model(frame, dst=buf[0])

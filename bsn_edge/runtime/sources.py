@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bsn_edge.calibration.folder_cameras import FolderCameras, FolderVerdict, judge_folder
 from bsn_edge.runtime.slot import LatestSlot
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import IMAGE_EXTS, is_image, picture_damage
@@ -29,6 +30,7 @@ class Captured:
     index: int
     decode_s: float = 0.0
     name: str = ""               # what saved maps are named after: an image's stem, else the frame number
+    picture: Path | None = None  # the file the frame was read from, when it is a picture
 
 
 def capture_size(cap) -> tuple[int, int] | None:
@@ -56,6 +58,12 @@ class Source:
     failure: str | None = None
     size: tuple[int, int] | None = None   # (width, height) of its frames when known before the first one
     picture: Path | None = None           # the first frame's file when the frames are pictures (EXIF: the lens)
+    cameras: FolderVerdict | None = None  # a folder's pictures: one camera or each its own (None: one camera)
+
+    @property
+    def one_camera(self) -> bool:
+        """Whether every frame comes from one camera (a folder of unrelated photos does not)."""
+        return self.cameras is None or self.cameras.cameras is FolderCameras.ONE
 
     def __init__(self) -> None:
         self._stop = threading.Event()
@@ -179,12 +187,13 @@ class ImageFolderSource(Source):
         first = cv2.imread(str(self.files[0]), cv2.IMREAD_COLOR)     # as the frames are read: EXIF rotation applied
         self.size = None if first is None else (first.shape[1], first.shape[0])
         self.picture = self.files[0]
+        self.cameras = judge_folder(self.files, read=self._read)
 
     def _frames(self) -> Iterator[Captured]:
         for i, p in enumerate(self.files):
             t0 = time.perf_counter()
             frame = self._read(p)
-            yield Captured(i / self.fps, frame, i, time.perf_counter() - t0, p.stem)
+            yield Captured(i / self.fps, frame, i, time.perf_counter() - t0, p.stem, p)
 
     @staticmethod
     def _read(path: Path) -> np.ndarray | None:

@@ -31,10 +31,10 @@ class ListSource(Source):
             yield Captured(t, np.full(self.shape, i % 256, np.uint8), i)
 
 
-def copy_warp(frame, buf):
+def copy_warp(cap, buf):
     """A warp that writes the frame's value into the whole buffer, slowly enough to race the model."""
     time.sleep(0.002)
-    buf[...] = frame[0, 0, 0]
+    buf[...] = cap.frame[0, 0, 0]
     return None, False
 
 
@@ -72,10 +72,10 @@ def test_at_most_limit_frames_and_errors_reach_the_caller():
     feeder = Feeder(ListSource(10), copy_warp, buffers(), background=True, limit=4)
     assert [i.cap.index for i in feeder] == [0, 1, 2, 3], "buffers come back when the next frame is asked for"
 
-    def failing(frame, buf):
-        if frame[0, 0, 0] == 3:
+    def failing(cap, buf):
+        if cap.frame[0, 0, 0] == 3:
             raise RuntimeError("the warp failed")
-        return copy_warp(frame, buf)
+        return copy_warp(cap, buf)
 
     feeder, seen = Feeder(ListSource(10), failing, buffers(), background=True), []
     with pytest.raises(RuntimeError, match="the warp failed"):
@@ -125,10 +125,10 @@ def test_a_nice_feeder_reads_below_the_callers_priority():
     caller's, whose own is untouched."""
     seen = {}
 
-    def warp(frame, buf):
+    def warp(cap, buf):
         tid = threading.get_native_id()
         seen[tid] = os.getpriority(os.PRIO_PROCESS, tid)
-        return copy_warp(frame, buf)
+        return copy_warp(cap, buf)
 
     me = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
     assert len(list(Feeder(ListSource(3), warp, buffers(), background=True, nice=5))) == 3

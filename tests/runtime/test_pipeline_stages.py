@@ -65,7 +65,7 @@ def test_warp_puts_the_frame_into_the_model_camera_as_the_camera_file_says(pipel
     p, _, clip = pipeline
     frame = cv2.imread(str(sorted((clip / "rgb").glob("*.png"))[0]))
     buf = np.empty_like(p.engine.buf)
-    _, calibrating = p.warp(frame, buf)
+    _, calibrating = p.warp(Captured(0.0, frame, 0), buf)
     assert not calibrating, "the camera file has a mounting"
     cal = Calibration.read(clip / "calibration.json")
     want = cal.model_frame(frame.shape[1], frame.shape[0], p.engine.card.camera, p.engine.card.mounting).to_model(frame)
