@@ -1,5 +1,6 @@
 """``label_sequence`` and ``bsn-label`` over sequence folders."""
 
+import dataclasses
 import json
 import shutil
 
@@ -7,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from bsn_edge import semantics as sm
 from bsn_edge.calibration import Calibration
 from bsn_edge.cli import label as label_cli
 from bsn_edge.labels import LabelConfig, Sources, label_sequence, labels_dir, resample
@@ -334,3 +336,22 @@ def test_a_distorted_clip_is_labelled_in_its_undistorted_camera(tmp_path):
     looked = precision()
     assert looked[0] > 0.85 and looked[1] > 0.7 * with_lens[1]
     assert sum(f["removed_by_look_px"] for f in rep["per_frame"]) > 0
+
+
+def test_road_users_with_no_road_seen_behind_them_are_left_out_of_v(clip_dir, tmp_path):
+    cfg = LabelConfig(rate=5.0, horizon_s=1.0)
+    paper, unknown = tmp_path / "paper", tmp_path / "unknown"
+    shutil.copytree(clip_dir, paper)
+    shutil.copytree(clip_dir, unknown)
+    label_sequence(paper, cfg)
+    label_sequence(unknown, dataclasses.replace(cfg, users_unknown=True))
+    a, b = SequenceFolder(paper).labels(cfg.name), SequenceFolder(unknown).labels(cfg.name)
+    left_out = 0
+    for i in a.frames():
+        sem = cv2.imread(str(SequenceFolder(paper).dir(SequenceFolder.SEMANTIC) / f"{i:06d}.png"), cv2.IMREAD_UNCHANGED)
+        users = np.isin(sem, sm.ROAD_USERS)
+        omega, v_paper, v_unknown = read_mask(a.blindspot(i)), read_mask(a.visibility(i)), read_mask(b.visibility(i))
+        assert np.array_equal(omega, read_mask(b.blindspot(i))), "the blind spots are the paper's"
+        assert np.array_equal(v_unknown, v_paper & (omega | ~users))
+        left_out += int((v_paper & ~v_unknown).sum())
+    assert left_out > 0, "the clip has road users in V without blind spot"
