@@ -32,7 +32,7 @@ import cv2
 from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.mount_fit import MountFitConfig
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime.calibrator import ONLINE_FIT
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine

@@ -40,7 +40,7 @@ from onnxruntime.quantization.shape_inference import quant_pre_process
 from benchmarks.bench_arch import count_gmacs
 from benchmarks.bench_quant import kernel_times, latency
 from benchmarks.common import class_name, machine, write_result
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
 from bsn_edge.export.seal import read_card
 from bsn_edge.modelfile.read import session

@@ -29,7 +29,7 @@ from pathlib import Path
 
 from benchmarks.common import write_result
 from bsn_edge.cli.common import CHECKOUT
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 
 BASE_MODULES = "numpy, cv2, onnxruntime, can, cantools, serial, tqdm"
 OLD_PATH = "torch, onnx, onnxruntime.quantization"

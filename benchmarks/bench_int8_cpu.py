@@ -25,7 +25,7 @@ import numpy as np
 
 from benchmarks.common import summary, time_calls, write_result
 from bsn_edge.card import ModelCard
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.export import quantize, to_onnx
 from bsn_edge.export.quantize import QuantConfig
 from bsn_edge.modelfile import selftest

@@ -46,7 +46,7 @@ from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.calibration.mounting_step import calibrate_mounting
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import REAL_DATA
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.metrics import bin_name, depth_by_bin
 from bsn_edge.mounting import Mounting
 from bsn_edge.runtime.engine import Engine

@@ -42,8 +42,8 @@ from benchmarks.common import named, write_result
 from bsn_edge import semantics as sm
 from bsn_edge.card import ModelCard
 from bsn_edge.cli.common import CHECKOUT
-from bsn_edge.cli.demo import DEFAULT_MODEL
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.export.seal import read_card
 from bsn_edge.train.run import Run
 

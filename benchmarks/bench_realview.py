@@ -27,7 +27,7 @@ from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_sample
 from benchmarks.common import named, write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import Intrinsics
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.media import read_video

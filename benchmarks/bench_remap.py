@@ -31,7 +31,7 @@ from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import REAL_DATA
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.mounting import Mounting
 from bsn_edge.sequence.media import read_video
 

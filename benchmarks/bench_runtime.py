@@ -57,7 +57,7 @@ from benchmarks.bench_realcam import REAL, udacity_camera
 from benchmarks.common import class_name, machine, summary, time_calls, write_result
 from bsn_edge.alerts.senders import CanSender
 from bsn_edge.calibration import Calibration
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.sources import LiveSource, Reconnect

@@ -33,7 +33,7 @@ from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.vanishing_point import find_vanishing_point
 from bsn_edge.cli.common import REAL_DATA
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.frames import read_rgb

@@ -106,7 +106,7 @@ def models_parser(description: str, name: str) -> argparse.ArgumentParser:
 def engines(p: argparse.ArgumentParser, specs: list[str] | None) -> dict[str, Any]:
     """The models ``--model`` names (the shipped one when none), loaded as the runtime loads them; a
     usage error through ``p`` for two of one name or a model that does not load."""
-    from bsn_edge.cli.demo import DEFAULT_MODEL
+    from bsn_edge.default_model import DEFAULT_MODEL
     from bsn_edge.runtime.engine import Engine
 
     try:

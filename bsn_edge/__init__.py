@@ -5,4 +5,9 @@ Subpackages follow the data flow: ``synth`` (a synthetic driving world),
 models, export, runtime and alerts.
 """
 
-__version__ = "0.1.0"
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("bsn-edge")      # pyproject.toml's, as installed
+except PackageNotFoundError:               # imported from a source tree that was never installed
+    __version__ = "0+unknown"

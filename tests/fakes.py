@@ -11,7 +11,7 @@ from bsn_edge import semantics as sm
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import look_pose
 from bsn_edge.cli.common import CHECKOUT
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.synth import Agents, Boxes, RoadLayout, World
 from bsn_edge.synth.boxes import KIND_VEHICLE
 

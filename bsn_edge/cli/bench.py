@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from bsn_edge.cli.common import CHECKOUT, REAL_DATA, fail
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 
 PROG = "bsn-bench"
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")

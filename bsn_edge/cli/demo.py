@@ -9,13 +9,13 @@ from pathlib import Path
 
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli import sheet, synth
-from bsn_edge.cli.common import CHECKOUT, fail
+from bsn_edge.cli.common import fail
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.modelfile.trust import TrustPolicy
 from bsn_edge.runtime import Engine
 from bsn_edge.synth.style import STYLES
 
 PROG = "bsn-demo"
-DEFAULT_MODEL = CHECKOUT / "models" / "bsn_shared_light_int8.onnx"
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from bsn_edge.cli.common import fail
+from bsn_edge.default_model import DEFAULT_MODEL
 
 if TYPE_CHECKING:
     from bsn_edge.alerts.senders import Sender
@@ -50,7 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _model_and_source(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("what runs on what")
-    g.add_argument("--model", required=True, help="fused ONNX model from bsn-export")
+    g.add_argument("--model", default=str(DEFAULT_MODEL),
+                   help="fused ONNX model from bsn-export (default: the shipped one, inside the package, signed "
+                        "with the project's key)")
     g.add_argument("--source", required=True, help="VIDEO file, image DIR, CAMERA_INDEX or stream URL")
     g.add_argument("--trust", metavar="KEYS", action="append", default=[],
                    help="also trust models signed by these Ed25519 public keys: a .pub file, a file of several or a "

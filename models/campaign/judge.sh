@@ -21,7 +21,7 @@ if [ -e "$OUT" ] && [ -z "${FORCE:-}" ]; then
 fi
 mkdir -p "$OUT"
 MODEL=$OUT/model_int8.onnx
-SHIPPED=$("$B/python" -c "from bsn_edge.cli.demo import DEFAULT_MODEL; print(DEFAULT_MODEL)")
+SHIPPED=$("$B/python" -c "from bsn_edge.default_model import DEFAULT_MODEL; print(DEFAULT_MODEL)")
 "$B/bsn-export" --checkpoint "$RUN" --out "$MODEL" --int8 --reduce-range --calib calib
 cp "$REPO/benchmarks/results/cameras.json" "$OUT/"
 cd "$REPO"

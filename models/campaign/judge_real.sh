@@ -27,7 +27,7 @@ if [ -e "$OUT" ] && [ -z "${FORCE:-}" ]; then
 fi
 mkdir -p "$OUT"
 MODEL=$OUT/model_int8.onnx
-SHIPPED=$("$B/python" -c "from bsn_edge.cli.demo import DEFAULT_MODEL; print(DEFAULT_MODEL)")
+SHIPPED=$("$B/python" -c "from bsn_edge.default_model import DEFAULT_MODEL; print(DEFAULT_MODEL)")
 [ -f "$MODEL" ] || "$B/bsn-export" --checkpoint "$RUN" --out "$MODEL" --int8 --reduce-range --calib calib
 models=(--model "default=$SHIPPED" --model "$LABEL=$MODEL")
 [ -n "$OTHER" ] && models+=(--model "$OTHER")

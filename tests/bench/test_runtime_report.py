@@ -66,7 +66,7 @@ def test_the_ceiling_is_what_two_cores_can_do_for_both_parts_and_never_above_the
 
 def test_the_cpu_budget_times_reading_and_the_model_of_the_shipped_model_on_a_short_clip(tmp_path):
     from benchmarks.bench_runtime import cpu_budget
-    from bsn_edge.cli.demo import DEFAULT_MODEL
+    from bsn_edge.default_model import DEFAULT_MODEL
     from tests.fakes import noise_video
     if not DEFAULT_MODEL.is_file():
         pytest.skip("the shipped model is not in this checkout")

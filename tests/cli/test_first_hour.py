@@ -10,7 +10,7 @@ import pytest
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli import run as run_cli
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.mounting import Mounting
 
 ROOT = Path(__file__).resolve().parents[2]

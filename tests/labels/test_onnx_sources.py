@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bsn_edge import semantics as sm
-from bsn_edge.cli.demo import DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.labels import ClipRejectedError, LabelConfig, Sources, label_sequence, labels_dir
 from bsn_edge.labels.generator import StaleLabelsError
 from bsn_edge.labels.sources.base import ClipData

@@ -181,7 +181,7 @@ def test_keys_are_never_overwritten_and_bad_keys_are_named(tmp_path, keys, capsy
 
 
 def test_the_shipped_default_is_signed_with_the_projects_key_and_runs_by_default():
-    from bsn_edge.cli.demo import DEFAULT_MODEL
+    from bsn_edge.default_model import DEFAULT_MODEL
     from bsn_edge.modelfile.trust import PROJECT_KEYS
     if not DEFAULT_MODEL.is_file():
         pytest.skip("the shipped model is not in this checkout")
