@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import torch
 from torch.utils.data import DataLoader
-from tqdm import tqdm
 
 from bsn_edge.adapt.config import AdaptConfig
 from bsn_edge.metrics import ThresholdSweep
 from bsn_edge.models import BlindSpotNet
+from bsn_edge.progress import progress_bar
 from bsn_edge.train.config import TrainConfig
 from bsn_edge.train.losses import distillation_loss, masked_bce
 from bsn_edge.train.optim import Optimizer
@@ -47,7 +47,7 @@ def finetune_b(model: BlindSpotNet, ds, cfg: AdaptConfig, teacher: torch.nn.Modu
     model.train()
     model.depth_net.eval()
     losses = []
-    for _ in tqdm(range(cfg.steps), desc="fine-tune B", unit="step", disable=None if progress else True):
+    for _ in progress_bar(range(cfg.steps), desc="fine-tune B", unit="step", enabled=progress):
         b = next(stream)
         logits, _, feats = model(b["image"])
         loss = masked_bce(logits, b["blindspot"], b["visibility"])

@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from bsn_edge.adapt.clips import Imported, UnusableClipError, clip_name, import_clip, moving_seconds
 from bsn_edge.adapt.config import AdaptConfig
@@ -27,6 +26,7 @@ from bsn_edge.labels.generator import made_with
 from bsn_edge.labels.sources.base import ClipData
 from bsn_edge.labels.sources.registry import make_seg
 from bsn_edge.models import ORACLE_DEPTH_NOTE
+from bsn_edge.progress import progress_bar
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.meta import SequenceMeta
 from bsn_edge.train.run import Run
@@ -123,7 +123,7 @@ def _import_all(videos: list[str | Path], folder: AdaptFolder, cfg: AdaptConfig,
     """The videos imported as clips long enough and moving enough to label; the others rejected."""
     names: set[str] = set()
     usable = []
-    with tqdm(desc="import", unit="frame", disable=None if progress else True) as bar:
+    with progress_bar(desc="import", unit="frame", enabled=progress) as bar:
         for v in videos:
             name = clip_name(Path(v), names)
             names.add(name)
@@ -165,7 +165,7 @@ def _label_all(road_ok: list[Imported], depth_of: dict[str, str], seg: str, cfg:
                report: dict[str, Any], progress: bool) -> dict[str, Any]:
     """Label every clip with its depth source (``depth_of``, updated where it falls back); the results."""
     results: dict[str, Any] = {}
-    with tqdm(total=0, desc="label", unit="frame", disable=None if progress else True) as bar:
+    with progress_bar(total=0, desc="label", unit="frame", enabled=progress) as bar:
         def on_total(n: int) -> None:
             bar.total = (bar.total or 0) + n
             bar.refresh()

@@ -8,13 +8,12 @@ import re
 import sys
 from pathlib import Path
 
-from tqdm import tqdm
-
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.calibration.field_of_view import WIDE_DEG, from_field_of_view
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.calibration.mounting_step import MountingRefusedError, calibrate_mounting, check_arguments
 from bsn_edge.cli.common import fail
+from bsn_edge.progress import progress_bar
 
 PROG = "bsn-calibrate"
 
@@ -71,7 +70,7 @@ def mount(args) -> int:
         return fail(PROG, str(e))
     try:
         camera = Calibration.read(args.calib)
-        with tqdm(desc="frames", unit="frame", disable=None) as bar:
+        with progress_bar(desc="frames", unit="frame") as bar:
             cal = calibrate_mounting(args.source, camera, args.height, args.lane_width,
                                      MountFitConfig(max_spread_deg=args.max_error), max_frames=args.max_frames,
                                      progress=bar.update)
@@ -128,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.square <= 0 or args.every < 1:
         return fail(PROG, "--square must be positive and --every >= 1")
     try:
-        with tqdm(desc="views", unit="view", disable=None) as bar:
+        with progress_bar(desc="views", unit="view") as bar:
             cal = calibrate(args.source, args.board, args.square, args.every, progress=bar.update)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))

@@ -5,11 +5,10 @@ from __future__ import annotations
 import argparse
 import os
 
-from tqdm import tqdm
-
 from bsn_edge.cli.common import fail
 from bsn_edge.labels import LabelConfig, Sources
 from bsn_edge.labels.batch import label_many, label_many_ray
+from bsn_edge.progress import progress_bar
 
 PROG = "bsn-label"
 
@@ -80,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     jobs = args.jobs or min(len(args.seqs), os.cpu_count() or 1)
     if jobs < 1:
         return fail(PROG, f"--jobs must be >= 1, got {jobs}")
-    with tqdm(total=0, desc="label", unit="frame", disable=None) as bar:
+    with progress_bar(total=0, desc="label", unit="frame") as bar:
         def on_total(n: int) -> None:
             bar.total = (bar.total or 0) + n
             bar.refresh()

@@ -338,8 +338,7 @@ def _stopped_early(args: argparse.Namespace, stopper: StopOnSignal, senders: lis
 def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     if stopper.event.is_set():
         return _stopped_early(args, stopper)
-    from tqdm import tqdm
-
+    from bsn_edge.progress import progress_bar
     from bsn_edge.runtime import run
     if stopper.event.is_set():          # a signal while the runtime loaded
         return _stopped_early(args, stopper)
@@ -357,7 +356,7 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     stopper.watch(source)
     try:
         total = args.max_frames or getattr(source, "total", None)
-        with tqdm(total=total, unit="frame", desc="bsn-run", disable=None, file=sys.stderr) as bar:
+        with progress_bar(total=total, unit="frame", desc="bsn-run", file=sys.stderr) as bar:
             def tick(n: int) -> None:
                 bar.update(n)
                 if camera.calibrating and bar.n % 25 == 0:

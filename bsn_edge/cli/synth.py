@@ -6,9 +6,8 @@ import argparse
 import os
 import time
 
-from tqdm import tqdm
-
 from bsn_edge.cli.common import fail, glue_values, parse_size
+from bsn_edge.progress import progress_bar
 from bsn_edge.synth import STYLES, SynthConfig, write_clip
 
 PROG = "bsn-synth"
@@ -68,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     t0 = time.perf_counter()
     try:
-        with tqdm(total=cfg.frames, desc=f"render {args.out}", unit="frame", disable=None) as bar:
+        with progress_bar(total=cfg.frames, desc=f"render {args.out}", unit="frame") as bar:
             out = write_clip(cfg, args.out, force=args.force, video=not args.no_video, progress=bar.update,
                              workers=max(1, args.workers))
     except (FileExistsError, OSError, ValueError) as e:

@@ -29,13 +29,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from bsn_edge import semantics as sm
 from bsn_edge.data.camera_look import CameraLook, camera_look, draw_camera_look
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD, BlindSpotDataset
 from bsn_edge.data.guessed_camera import ClipCamera
 from bsn_edge.data.repaint import Repaint, SeeThrough, draw_repaint, draw_see_through, repaint, see_through
+from bsn_edge.progress import progress_bar
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.images import DEPTH_SCALE, depth_to_png16
 
@@ -134,7 +134,7 @@ class SampleCache:
             tmp.mkdir(parents=True)
             arrays = {name: np.lib.format.open_memmap(tmp / f"{name}.npy", "w+", dt, shape)
                       for name, (shape, dt) in shapes.items()}
-        for k in tqdm(range(n), desc=desc, unit="frame", disable=not progress or n < 64):
+        for k in progress_bar(range(n), desc=desc, unit="frame", enabled=progress and n >= 64):
             a = ds.load(k)
             arrays["rgb"][k] = a["rgb"]
             arrays["depth"][k] = depth_to_png16(a["depth"])
@@ -175,8 +175,8 @@ class SampleCache:
         teacher.eval()
         out = None
         with torch.no_grad():
-            for lo in tqdm(range(0, len(self), batch), desc="teacher features", unit="batch",
-                           disable=not progress or len(self) < 64):
+            for lo in progress_bar(range(0, len(self), batch), desc="teacher features", unit="batch",
+                                   enabled=progress and len(self) >= 64):
                 idx = np.arange(lo, min(lo + batch, len(self)))
                 img = self.images(idx, np.zeros(len(idx), bool), np.ones(len(idx)), np.zeros(len(idx)))
                 both = torch.cat([img, img.flip(-1)])

@@ -23,7 +23,6 @@ import torch
 import torch.distributed as dist
 import torch.nn.functional as F
 from torch.utils.data import DataLoader
-from tqdm import tqdm
 
 from bsn_edge import semantics as sm
 from bsn_edge.card import BF16, FP32, UNCHOSEN_THRESHOLD, UNRECORDED, ModelCard
@@ -35,6 +34,7 @@ from bsn_edge.labels.camvid import STYLE as CAMVID_STYLE
 from bsn_edge.labels.generator import label_camera
 from bsn_edge.metrics import ThresholdSweep
 from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, create_model, create_teacher, get_spec, start_from
+from bsn_edge.progress import progress_bar
 from bsn_edge.sequence import SequenceMeta
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.train.config import Config
@@ -403,8 +403,8 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
                                device=dev, real_share=cfg.data.real_share)
     if saved is not None and "torch_rng" in saved:
         torch.set_rng_state(saved["torch_rng"])
-    bar = tqdm(range(start, t.steps), initial=start, total=t.steps, desc="teacher",
-               disable=True if (not progress or rank) else None, unit="step")
+    bar = progress_bar(range(start, t.steps), initial=start, total=t.steps, desc="teacher", unit="step",
+                       enabled=progress and not rank)
     if rank == 0:
         run.trim_history("teacher", start)
         if start == 0 and t.init and val_cache is not None and t.eval_every:
@@ -579,8 +579,8 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     batches = _batches(cfg, data, cache, state, start, rank, world, dev)
     if rank == 0:
         _start_history(run, model, cfg, start, dtype, val_caches)
-    bar = tqdm(range(start, cfg.train.steps), desc=f"train {cfg.model.name}", unit="step",
-               disable=True if (not progress or rank) else None)
+    bar = progress_bar(range(start, cfg.train.steps), initial=start, total=cfg.train.steps,
+                       desc=f"train {cfg.model.name}", unit="step", enabled=progress and not rank)
     last: list[float] | None = None                      # this piece's latest step
     since, first = _carried(state)
     t0, done = time.perf_counter(), start
