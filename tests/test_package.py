@@ -27,3 +27,16 @@ def test_the_commands_run_the_default_without_being_told():
 
 def test_the_version_is_the_projects():
     assert bsn_edge.__version__ == tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+
+
+def test_bsn_export_help_needs_none_of_the_training_stack():
+    """``bsn-export --help`` answers without importing torch, onnx or onnxruntime's quantization tools."""
+    import subprocess
+    import sys
+
+    code = ("import sys, contextlib, io\nfrom bsn_edge.cli import export\n"
+            "with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
+            "    export.main(['--help'])\n"
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'torch', 'onnx', 'onnxruntime'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"

@@ -3,18 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from bsn_edge.card import DigestVersion
 from bsn_edge.cli.common import fail, glue_values, parse_size
-from bsn_edge.export.pipeline import export_run
-from bsn_edge.export.quantize import METHODS, TYPES, QuantConfig
-from bsn_edge.export.seal import read_card, seal
+from bsn_edge.modelfile.quant_names import METHOD_NAMES, TYPE_NAMES
 from bsn_edge.modelfile.selftest import SelfTestError
 from bsn_edge.modelfile.trust import user_trust_dir
-from bsn_edge.train.run import Run
+
+# torch, onnx and onnxruntime's quantization tools are imported where they work, not for --help
 
 PROG = "bsn-export"
+INT8_COUNT = 64
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,13 +31,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output .onnx path")
     p.add_argument("--size", type=parse_size, default=None, metavar="HxW",
                    help="input size (default: the size the run was trained at)")
-    p.add_argument("--int8", action="store_true", help="quantize to int8 (needs --calib)")
-    p.add_argument("--calib", help="calibration frames: a folder of images, a sequence folder, a folder of sequence "
-                        "folders (shared evenly, each warped by its own camera) or a video")
-    p.add_argument("--calib-frames", type=int, default=64, help="calibration frames to use (default 64)")
-    p.add_argument("--method", choices=sorted(METHODS), default="minmax", help="calibration method (default minmax)")
-    p.add_argument("--activations", choices=sorted(TYPES), default="uint8", help="activation type (default uint8)")
-    p.add_argument("--weights", choices=sorted(TYPES), default="int8", help="weight type (default int8)")
+    p.add_argument("--int8", action="store_true", help="quantize to int8 (needs --int8-frames)")
+    p.add_argument("--int8-frames", metavar="DIR_OR_VIDEO",
+                   help="the frames int8's activation ranges are calibrated on: a folder of images, a sequence "
+                        "folder, a folder of sequence folders (shared evenly, each warped by its own camera) or a "
+                        "video (not a camera file: that is bsn-run's --calib)")
+    p.add_argument("--int8-count", type=int, default=None, metavar="N",
+                   help=f"how many of those frames, spread over them (default {INT8_COUNT})")
+    # the names before 0.2.0, kept one release: --calib meant a camera file everywhere else
+    p.add_argument("--calib", dest="old_frames", help=argparse.SUPPRESS)
+    p.add_argument("--calib-frames", dest="old_count", type=int, help=argparse.SUPPRESS)
+    p.add_argument("--method", choices=METHOD_NAMES, default="minmax", help="calibration method (default minmax)")
+    p.add_argument("--activations", choices=TYPE_NAMES, default="uint8", help="activation type (default uint8)")
+    p.add_argument("--weights", choices=TYPE_NAMES, default="int8", help="weight type (default int8)")
     p.add_argument("--per-tensor", action="store_true", help="per-tensor weights instead of per-channel")
     p.add_argument("--weight-bits", type=int, choices=(7, 8), default=7,
                    help="7 (default): weights in [-64, 63], exact at full speed on every x86 CPU; 8: the whole "
@@ -89,6 +96,8 @@ def signed(model: Path, key: str | None) -> int:
 
 
 def reseal(src: Path, out: Path) -> int:
+    from bsn_edge.export.seal import read_card, seal
+
     try:
         card = read_card(src, (DigestVersion.V2, DigestVersion.V1))
         sealed = seal(src, card.replace(graph_sha256="", self_test=None), out)
@@ -99,6 +108,20 @@ def reseal(src: Path, out: Path) -> int:
     print(f"wrote {out}: {sealed.variant} {sealed.input_size[0]}x{sealed.input_size[1]}, graph sha256 "
           f"{sealed.graph_sha256[:16]}..., self-test recorded")
     return 0
+
+
+def _old_names(args: argparse.Namespace) -> None:
+    """The spellings before 0.2.0, still taken this release, each with a warning."""
+    for old, new, value, field in (("--calib", "--int8-frames", args.old_frames, "int8_frames"),
+                                   ("--calib-frames", "--int8-count", args.old_count, "int8_count")):
+        if value is None:
+            continue
+        print(f"{PROG}: warning: {old} is now {new} ({old} means a camera file in bsn-run and bsn-calibrate); "
+              "the old name goes in the next release", file=sys.stderr)
+        if getattr(args, field) is None:
+            setattr(args, field, value)
+    if args.int8_count is None:
+        args.int8_count = INT8_COUNT
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -126,8 +149,11 @@ def main(argv: list[str] | None = None) -> int:
         return _integer_input(args.integer_input, out) or signed(out, args.sign)
     if not args.checkpoint:
         return fail(PROG, "--checkpoint RUN is required (or --reseal / --integer-input MODEL.onnx)")
-    if args.int8 and not args.calib:
-        return fail(PROG, "--int8 needs --calib DIR_OR_VIDEO (frames to calibrate activation ranges on)")
+    _old_names(args)
+    if args.int8 and not args.int8_frames:
+        return fail(PROG, "--int8 needs --int8-frames DIR_OR_VIDEO (frames to calibrate activation ranges on)")
+    from bsn_edge.train.run import Run
+
     if args.ship_run and Run(args.ship_run).exists() and not args.force:
         return fail(PROG, f"--ship-run {args.ship_run} already holds a run; pass --force to replace it")
     return _export(args, out) or signed(out, args.sign) or _ship(args)
@@ -157,10 +183,13 @@ def _integer_input(src: str, out: Path) -> int:
 
 
 def _export(args: argparse.Namespace, out: Path) -> int:
+    from bsn_edge.export.pipeline import export_run
+    from bsn_edge.export.quantize import QuantConfig
+
     try:
         qcfg = QuantConfig(args.method, args.activations, args.weights, not args.per_tensor, not args.quantize_heads,
                            args.weight_bits == 7)
-        summary = export_run(args.checkpoint, out, args.size, args.int8, args.calib, args.calib_frames, qcfg)
+        summary = export_run(args.checkpoint, out, args.size, args.int8, args.int8_frames, args.int8_count, qcfg)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     print(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); fp32 parity: max |dp| "
@@ -178,6 +207,8 @@ def _export(args: argparse.Namespace, out: Path) -> int:
 def _ship(args: argparse.Namespace) -> int:
     if not args.ship_run:
         return 0
+    from bsn_edge.train.run import Run
+
     try:
         shipped = Run(args.checkpoint).ship(args.ship_run, force=args.force)
     except (FileNotFoundError, ValueError) as e:

@@ -26,10 +26,12 @@ from bsn_edge.card import SEVEN_BIT_WEIGHTS
 from bsn_edge.export.fused import NORMALISE
 from bsn_edge.export.integer_input import INTEGER_INPUT, integer_input
 from bsn_edge.export.seal import read_card, seal
+from bsn_edge.modelfile.quant_names import METHOD_NAMES, TYPE_NAMES
 
 METHODS = {"minmax": CalibrationMethod.MinMax, "entropy": CalibrationMethod.Entropy,
            "percentile": CalibrationMethod.Percentile}
 TYPES = {"uint8": QuantType.QUInt8, "int8": QuantType.QInt8}
+assert set(METHODS) == set(METHOD_NAMES) and set(TYPES) == set(TYPE_NAMES), "quant_names.py lists every choice"
 
 
 @dataclass(frozen=True)

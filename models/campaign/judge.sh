@@ -22,7 +22,7 @@ fi
 mkdir -p "$OUT"
 MODEL=$OUT/model_int8.onnx
 SHIPPED=$("$B/python" -c "from bsn_edge.default_model import DEFAULT_MODEL; print(DEFAULT_MODEL)")
-"$B/bsn-export" --checkpoint "$RUN" --out "$MODEL" --int8 --reduce-range --calib calib
+"$B/bsn-export" --checkpoint "$RUN" --out "$MODEL" --int8 --reduce-range --int8-frames calib
 cp "$REPO/benchmarks/results/cameras.json" "$OUT/"
 cd "$REPO"
 "$B/python" -m benchmarks.bench_cameras --keep --out "$OUT" \

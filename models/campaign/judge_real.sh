@@ -28,7 +28,7 @@ fi
 mkdir -p "$OUT"
 MODEL=$OUT/model_int8.onnx
 SHIPPED=$("$B/python" -c "from bsn_edge.default_model import DEFAULT_MODEL; print(DEFAULT_MODEL)")
-[ -f "$MODEL" ] || "$B/bsn-export" --checkpoint "$RUN" --out "$MODEL" --int8 --reduce-range --calib calib
+[ -f "$MODEL" ] || "$B/bsn-export" --checkpoint "$RUN" --out "$MODEL" --int8 --reduce-range --int8-frames calib
 models=(--model "default=$SHIPPED" --model "$LABEL=$MODEL")
 [ -n "$OTHER" ] && models+=(--model "$OTHER")
 cd "$REPO"

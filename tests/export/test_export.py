@@ -135,7 +135,7 @@ def cli_int8(run, spread, tmp_path_factory):
     _, clip, _ = run
     out = tmp_path_factory.mktemp("cli_int8") / "q.onnx"
     assert export_main(["--checkpoint", str(spread[0]), "--out", str(out), "--size", "64x128", "--int8",
-                        "--calib", str(clip), "--calib-frames", "6"]) == 0
+                        "--int8-frames", str(clip), "--int8-count", "6"]) == 0
     return out
 
 
@@ -171,9 +171,9 @@ def test_head_nodes_walk_back_to_the_first_convolution(exported):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--int8"], "needs --calib"),
-    (["--int8", "--calib", "{empty}"], "no readable frames"),
-    (["--int8", "--calib", "{nope}"], "not found"),
+    (["--int8"], "needs --int8-frames"),
+    (["--int8", "--int8-frames", "{empty}"], "no readable frames"),
+    (["--int8", "--int8-frames", "{nope}"], "not found"),
 ])
 def test_bad_inputs_are_explained(run, tmp_path, capsys, argv, message):
     path, _, _ = run
@@ -406,9 +406,20 @@ def test_the_calibration_method_and_activation_type_reach_the_graph(run, spread,
     assert min(q["pct"][k][0] / q["minmax"][k][0] for k in shared) < 0.99
     out = tmp_path / "cli.onnx"
     with pytest.warns(RuntimeWarning, match="--weight-bits 7"):   # said, not hidden
-        assert export_main(["--checkpoint", str(spread[0]), "--size", "64x128", "--int8", "--calib", str(clip),
-                            "--calib-frames", "2", "--out", str(out), "--activations", "int8",
+        assert export_main(["--checkpoint", str(spread[0]), "--size", "64x128", "--int8", "--int8-frames", str(clip),
+                            "--int8-count", "2", "--out", str(out), "--activations", "int8",
                             "--method", "percentile"]) == 0
     assert {zp.dtype for _, zp in _activation_quantizers(out).values()} == {np.dtype(np.int8)}
     scheme = read_card(out).quantization
     assert "activations int8" in scheme and "percentile calibration" in scheme
+
+
+def test_the_old_names_of_the_int8_frames_still_work_this_release_with_a_warning(run, spread, tmp_path, capsys):
+    """--calib means a camera file in bsn-run and bsn-calibrate; bsn-export's frames are --int8-frames now."""
+    out = tmp_path / "old.onnx"
+    assert export_main(["--checkpoint", str(spread[0]), "--out", str(out), "--size", "64x128", "--int8",
+                        "--calib", str(run[1]), "--calib-frames", "2"]) == 0
+    said = capsys.readouterr()
+    assert "warning: --calib is now --int8-frames" in said.err
+    assert "warning: --calib-frames is now --int8-count" in said.err
+    assert "2 calibration frames" in said.out or "2 frames" in said.out, said.out
