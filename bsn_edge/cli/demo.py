@@ -31,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="synthetic world style of the clip (default town)")
     p.add_argument("--model", default=str(DEFAULT_MODEL),
                    help="fused ONNX model (default: the shipped one, signed with the project's key)")
+    p.add_argument("--force", action="store_true", help="write into --out even if it holds files already")
     p.add_argument("--allow-unsigned", action="store_true",
                    help="let bsn-run run a --model not signed by a trusted key (see bsn-run --help)")
     return p
@@ -42,6 +43,10 @@ def main(argv: list[str] | None = None) -> int:
     model = Path(args.model)
     if not model.is_file():
         return fail(PROG, f"model {model} not found; make one with bsn-train and bsn-export (see models/README.md)")
+    if out.is_dir() and any(out.iterdir()) and not args.force:
+        return fail(PROG, f"{out} holds files already; pass --force to write the demo over them, or --out ANOTHER")
+    if out.exists() and not out.is_dir():
+        return fail(PROG, f"{out} exists and is not a folder")
     try:                           # verified (seal, signature, graph, self-test) before the clip is rendered
         Engine(model, trust=TrustPolicy.default(allow_unsigned=args.allow_unsigned))
     except (ValueError, OSError) as e:
@@ -51,14 +56,14 @@ def main(argv: list[str] | None = None) -> int:
                      "--force"])
     if rc:
         return rc
-    rc = sheet.main([str(clip), "--out", str(out / "contact_sheet.png")])
+    rc = sheet.main([str(clip), "--out", str(out / "contact_sheet.png"), "--force"])
     if rc:
         return rc
     summary = out / "summary.json"
     rc = run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--overlay",
                        str(out / "overlay.mp4"), "--log", str(out / "alerts.jsonl"), "--can-log",
                        str(out / "alerts.log"), "--summary", str(summary), "--calib", str(clip / "calibration.json"),
-                       *(["--allow-unsigned"] if args.allow_unsigned else [])])
+                       "--force", *(["--allow-unsigned"] if args.allow_unsigned else [])])
     if rc:
         return rc
     s = json.loads(summary.read_text())

@@ -13,10 +13,10 @@ import signal
 import sys
 import threading
 from collections.abc import Callable
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from bsn_edge.cli.common import fail
+from bsn_edge.cli.outputs import OutputKind, check_outputs
 from bsn_edge.default_model import DEFAULT_MODEL
 
 if TYPE_CHECKING:
@@ -105,7 +105,9 @@ def _outputs(p: argparse.ArgumentParser) -> None:
                         "256, 0 = none) in the raw frame's own pixels, NAME the image's stem or the frame number; "
                         "a folder that already holds maps is refused unless --force")
     g.add_argument("--force", action="store_true",
-                   help="let --save-calib overwrite an existing file and --save-maps write over an earlier run's maps")
+                   help="replace existing output files (--overlay, --log, --summary, --can-log, --save-calib) and "
+                        "let --save-maps write over an earlier run's maps; without it they are refused before the "
+                        "first frame. Missing folders are made")
 
 
 def _speed(p: argparse.ArgumentParser) -> None:
@@ -130,6 +132,7 @@ def _speed(p: argparse.ArgumentParser) -> None:
 
 
 CAN_LOG_EXTS = (".log", ".asc", ".blf")   # what python-can writes and bsn-listen reads back
+OVERLAY_EXTS = (".mp4", ".avi", ".mov", ".mkv")   # what OpenCV's mp4v writer fills
 OPEN_DEADLINE_S = 1.0     # a bus or CAN log that has not opened by then never will (a FIFO nobody reads, a hung mount)
 
 
@@ -155,6 +158,17 @@ def open_within(opener: Callable[[], T], seconds: float, what: str) -> T:
     return value
 
 
+def _output_files(args: argparse.Namespace) -> list[tuple[OutputKind, str | None]]:
+    """The files a run writes, with what each writer knows, the CAN log first (``--save-maps`` is a folder:
+    ``MapWriter``'s)."""
+    return [(OutputKind("--can-log", CAN_LOG_EXTS, "CAN log (candump, ASC or BLF, which bsn-listen reads back)"),
+             args.can_log),
+            (OutputKind("--overlay", OVERLAY_EXTS, "video"), args.overlay),
+            (OutputKind("--log", (".jsonl",), "frame log"), args.log),
+            (OutputKind("--summary", (".json",), "summary"), args.summary),
+            (OutputKind("--save-calib", (".json",), "camera"), args.save_calib)]
+
+
 def make_senders(args: argparse.Namespace) -> list[Sender]:
     """The configured senders; ``ValueError`` names the bad option (a sender already opened is
     closed again)."""
@@ -162,12 +176,6 @@ def make_senders(args: argparse.Namespace) -> list[Sender]:
     from bsn_edge.alerts.senders import CanSender, SerialSender
 
     senders: list[Sender] = []
-    if args.can_log:
-        ext = Path(args.can_log).suffix.lower()
-        if ext not in CAN_LOG_EXTS:
-            raise ValueError(f"--can-log {args.can_log}: write {', '.join(CAN_LOG_EXTS)} (candump, ASC or BLF), "
-                             f"which bsn-listen can read back; not {ext or 'a file without extension'}")
-        Path(args.can_log).parent.mkdir(parents=True, exist_ok=True)
     try:
         if args.can or args.can_log:
             iface, _, channel = (args.can or f"virtual:{LOG_CHANNEL}").partition(":")
@@ -342,11 +350,14 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     from bsn_edge.runtime import run
     if stopper.event.is_set():          # a signal while the runtime loaded
         return _stopped_early(args, stopper)
+    files = _output_files(args)
     try:
+        check_outputs(files[:1], args.force)          # the CAN log is the virtual bus's own sender
         senders = make_senders(args)
-    except ValueError as e:
+    except (ValueError, FileExistsError) as e:
         return fail(PROG, str(e))
-    try:
+    try:                                              # from here a refusal is UNAVAILABLE on the bus
+        check_outputs(files[1:], args.force)
         engine, camera, source, cfg, maps = _start(args)
     except (FileNotFoundError, ValueError, OSError) as e:
         return refuse(senders, str(e))
@@ -392,8 +403,6 @@ def _start(args: argparse.Namespace):
     calibration = Calibration.read(args.calib) if args.calib else None
     if args.height is not None:
         check_height(args.height, "--height")
-    if args.save_calib and Path(args.save_calib).exists() and not args.force:
-        raise FileExistsError(f"--save-calib {args.save_calib} exists; pass --force to overwrite it")
     maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
     trust = TrustPolicy.default(args.trust, args.allow_unsigned)
     cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.in_turn, in_flight=args.in_flight)

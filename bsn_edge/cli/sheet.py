@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from bsn_edge.cli.common import fail
+from bsn_edge.cli.outputs import OutputKind, check_output
 from bsn_edge.sequence import write_image
 from bsn_edge.synth.sheet import contact_sheet
 
@@ -20,6 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("seqs", nargs="+", help="sequence folders")
     p.add_argument("--out", required=True, help="output PNG")
     p.add_argument("--rows", type=int, default=3, help="frames per sequence (default 3)")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
     return p
 
 
@@ -28,11 +29,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.rows < 1:
         return fail(PROG, f"--rows must be >= 1, got {args.rows}")
     try:
+        out = check_output(OutputKind("--out", (".png",), "contact sheet"), args.out, args.force)
         img = contact_sheet(args.seqs, rows=args.rows)
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
         write_image(out, img)
-    except (FileNotFoundError, ValueError, OSError) as e:
+    except (FileNotFoundError, FileExistsError, ValueError, OSError) as e:
         return fail(PROG, str(e))
     print(f"wrote {out} ({img.shape[0]}x{img.shape[1]})")
     return 0

@@ -152,5 +152,6 @@ def test_bsn_run_takes_the_lens_of_pictures_without_a_camera_file(setup, tmp_pat
     # the same pictures without the record: the model camera, rescaled
     for p in folder.iterdir():
         cv2.imwrite(str(p), cv2.imread(str(p)))
-    assert run_cli.main(["--model", str(model), "--source", str(folder), "--summary", str(tmp_path / "s.json")]) == 0
+    assert run_cli.main(["--model", str(model), "--source", str(folder), "--summary", str(tmp_path / "s.json"),
+                         "--force"]) == 0
     assert json.loads((tmp_path / "s.json").read_text())["camera"]["intrinsics"].startswith("assumed")

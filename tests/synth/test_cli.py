@@ -84,5 +84,5 @@ def test_contact_sheet(tmp_path, capsys):
     assert sheet.main([str(seq), str(seq), "--out", str(png), "--rows", "2"]) == 0
     img = cv2.imread(str(png))
     assert img.shape[1] == 4 * 96 and img.shape[0] > 2 * 2 * 48
-    assert sheet.main([str(tmp_path / "missing"), "--out", str(png)]) == 2
+    assert sheet.main([str(tmp_path / "missing"), "--out", str(tmp_path / "other.png")]) == 2
     assert "not a sequence folder" in capsys.readouterr().err

@@ -1,0 +1,58 @@
+"""One policy for every file a command writes, checked before any work.
+
+- an existing file is not replaced without ``--force`` (a pipe or a device is written to as asked);
+- a suffix the writer does not know is refused, naming those it knows;
+- a missing folder is created (for every output alike), and a folder that cannot be created or
+  written is refused: all before the first frame, so a long run never ends with nothing written.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class OutputKind:
+    """What an output flag writes: its name on the command line and the suffixes its writer knows
+    (lower case; empty: any)."""
+
+    flag: str
+    suffixes: tuple[str, ...] = ()
+    what: str = ""
+
+
+def check_output(kind: OutputKind, path: str | os.PathLike, force: bool) -> Path:
+    """``path`` checked and its folder made; ``FileExistsError`` or ``ValueError`` naming the flag."""
+    p = Path(path)
+    name = f"{kind.flag} {p}"
+    if p.exists() and not p.is_file() and not p.is_dir():
+        return p                          # a pipe or a device (/dev/null, /dev/full): written to as asked
+    if kind.suffixes and p.suffix.lower() not in kind.suffixes:
+        known = ", ".join(kind.suffixes)
+        raise ValueError(f"{name}: {kind.what + ' ' if kind.what else ''}files end in {known}, "
+                         f"not {p.suffix or 'nothing'}")
+    if p.is_dir():
+        raise ValueError(f"{name}: is a folder; give a file name")
+    if p.is_file() and not force:
+        raise FileExistsError(f"{name} exists; pass --force to replace it")
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ValueError(f"{name}: its folder cannot be made ({e.strerror or e})") from e
+    probe = p.parent / f".{p.name}.{os.getpid()}.probe"      # what the disk says, read-only or full
+    try:
+        probe.open("xb").close()
+        probe.unlink()
+    except OSError as e:
+        raise ValueError(f"{name}: cannot be written here ({e.strerror or e})") from e
+    return p
+
+
+def check_outputs(outputs: Iterable[tuple[OutputKind, str | os.PathLike | None]], force: bool) -> None:
+    """Every given output of a command checked (those not asked for are None)."""
+    for kind, path in outputs:
+        if path:
+            check_output(kind, path, force)

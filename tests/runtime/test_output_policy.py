@@ -1,0 +1,73 @@
+"""One output policy for every command: an existing file is not replaced without --force, a suffix the writer
+does not know or a place that cannot be written is refused before the first frame (nothing written, nothing
+sent but what the refusal sends), and missing folders are made for every output alike."""
+
+import json
+
+import pytest
+
+from bsn_edge.cli import demo, sheet
+from bsn_edge.cli import run as run_cli
+
+
+def _run(model, clip, *extra):
+    return run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--max-frames", "3", *extra])
+
+
+@pytest.mark.parametrize("flag,name", [("--overlay", "o.mp4"), ("--log", "f.jsonl"), ("--summary", "s.json"),
+                                       ("--can-log", "c.log"), ("--save-calib", "cam.json")])
+def test_an_existing_output_is_refused_before_the_first_frame_and_replaced_with_force(setup, tmp_path, capsys,
+                                                                                       flag, name):
+    model, clip = setup
+    path = tmp_path / name
+    path.write_bytes(b"the user's own\n")
+    assert _run(model, clip, flag, str(path)) == 2
+    assert path.read_bytes() == b"the user's own\n"
+    assert f"{flag} {path} exists; pass --force to replace it" in capsys.readouterr().err
+    assert _run(model, clip, flag, str(path), "--force") == 0
+    if flag != "--save-calib":                   # written only once calibration converges
+        assert path.read_bytes() != b"the user's own\n"
+
+
+@pytest.mark.parametrize("flag,name,known", [("--overlay", "o.txt", ".mp4"), ("--log", "f.csv", ".jsonl"),
+                                             ("--summary", "s.yaml", ".json"), ("--can-log", "c.txt", ".blf"),
+                                             ("--save-calib", "cam", ".json")])
+def test_a_suffix_the_writer_does_not_know_is_refused_and_nothing_is_written(setup, tmp_path, capsys, flag, name,
+                                                                              known):
+    model, clip = setup
+    out = tmp_path / "new" / name
+    assert _run(model, clip, flag, str(out)) == 2
+    err = capsys.readouterr().err
+    assert f"{flag} {out}" in err and known in err
+    assert not out.exists()
+
+
+def test_missing_folders_are_made_for_every_output(setup, tmp_path):
+    model, clip = setup
+    outs = {"--overlay": "a/o.mp4", "--log": "b/c/f.jsonl", "--summary": "d/s.json", "--can-log": "e/c.log",
+            "--save-maps": "f/maps"}
+    args = [x for flag, rel in outs.items() for x in (flag, str(tmp_path / rel))]
+    assert _run(model, clip, *args) == 0
+    for flag, rel in outs.items():
+        assert (tmp_path / rel).exists(), flag
+    assert json.loads((tmp_path / "d/s.json").read_text())["frames"] == 3
+
+
+def test_an_output_under_a_file_is_refused_before_the_first_frame(setup, tmp_path, capsys):
+    model, clip = setup
+    (tmp_path / "file").write_text("x")
+    assert _run(model, clip, "--log", str(tmp_path / "file" / "f.jsonl")) == 2
+    assert "its folder cannot be made" in capsys.readouterr().err
+
+
+def test_the_contact_sheet_and_the_demo_keep_what_is_there_without_force(setup, tmp_path, capsys):
+    _, clip = setup
+    png = tmp_path / "sheet.png"
+    png.write_bytes(b"mine")
+    assert sheet.main([str(clip), "--out", str(png)]) == 2 and png.read_bytes() == b"mine"
+    assert sheet.main([str(clip), "--out", str(tmp_path / "sheet.jpg")]) == 2
+    assert sheet.main([str(clip), "--out", str(png), "--force"]) == 0 and png.read_bytes() != b"mine"
+    (tmp_path / "demo").mkdir()
+    (tmp_path / "demo" / "notes.txt").write_text("mine")
+    assert demo.main(["--out", str(tmp_path / "demo"), "--frames", "3"]) == 2
+    assert "holds files already; pass --force" in capsys.readouterr().err
