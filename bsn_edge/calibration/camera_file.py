@@ -97,9 +97,13 @@ class Calibration:
 
     def to_dict(self) -> dict[str, Any]:
         """The file's fields, the intrinsics flat at the top (``fx``, ``fy``, ``cx``, ``cy``, ``width``,
-        ``height``), as camera files have always been written."""
+        ``height``), as camera files have always been written; the chessboard's (``board``, ``square_m``,
+        ``rms_px``, ``used``, ``skipped``) only when one measured the intrinsics."""
         d = asdict(self)
         d = {**d.pop("intrinsics"), **d}
+        if not self.used:         # no chessboard measured these intrinsics: nothing of one is written
+            for k in ("rms_px", "used", "skipped", "board", "square_m"):
+                d.pop(k)
         d["mounting"] = None if self.mounting is None else self.mounting.to_dict()
         if self.hood is None:
             d.pop("hood")

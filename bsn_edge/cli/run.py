@@ -295,8 +295,19 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
                      "forward driving, longer with turns, stops or little texture (or run bsn-calibrate --mount once "
                      "and pass --calib)")
     elif m is not None:
+        report = summary["camera"]["calibration"]
+        source = report.get("source", "camera file")
+        at = report.get("converged_at")
+        if at:
+            source += f", converged at frame {at['frame']}" + (f", {at['seconds']:g} s in" if at["seconds"] else "")
         lines.append(f"  camera: height {m['height_m']:.2f} m, pitch {m['pitch_deg']:+.2f}, yaw {m['yaw_deg']:+.2f}, "
-                     f"roll {m['roll_deg']:+.2f} deg ({summary['camera']['calibration'].get('source', 'camera file')})")
+                     f"roll {m['roll_deg']:+.2f} deg ({source})")
+    guess = summary["camera"].get("first_guess")
+    if guess:
+        lines.append("  first guess: " + (f"pitch {guess['pitch_deg']:+.2f} yaw {guess['yaw_deg']:+.2f} deg from the "
+                                          f"road's vanishing point ({guess['frames_found']} frames agree)"
+                                          if guess["used"] else f"the model camera's mounting (vanishing point "
+                                          f"{guess['state']})"))
     lines.append(f"  hood: {camera.hood.describe() if camera.hood is not None else camera.hood_progress()}")
     outputs = [(name, getattr(args, key)) for name, key in (("overlay", "overlay"), ("frame log", "log"),
                                                                ("CAN log", "can_log"), ("maps", "save_maps"),

@@ -79,6 +79,8 @@ class CameraState:
         # until online calibration has converged: pitch and yaw from the road's vanishing point
         self._vanishing = VanishingGuess() if self.mounting is None else None
         self._guess_seen = 0
+        self._observed = 0                 # frames seen by observe(): when calibration converged
+        self._fps: float | None = None
 
     @property
     def calibrating(self) -> bool:
@@ -93,6 +95,7 @@ class CameraState:
         if self.calibrate_every is None and self._calibrator is None and fps > 0:
             self.calibrate_every = max(1, round(fps / self.calibrate_hz))
         self.calibrate_wait = not live
+        self._fps = fps if fps > 0 else None
 
     def close(self) -> None:
         """Stop online calibration's thread (idempotent)."""
@@ -117,6 +120,7 @@ class CameraState:
         mounting is taken (and the camera file written, when asked). The runtime's frame path calls it
         before :meth:`frame_for`, frame by frame in order. Until the hood is known (from the camera file,
         or found in the frames fed, one in ``calibrate_every``) it is looked for too."""
+        self._observed += 1
         if self._hood_finder is not None:
             self._look_for_hood(frame)
         if self.calibrating:
@@ -189,6 +193,9 @@ class CameraState:
                 self.report["error"] = self._calibrator.error
             if m is not None:
                 self.mounting = m
+                self.report["converged_at"] = {
+                    "frame": self._observed,
+                    "seconds": None if self._fps is None else round(self._observed / self._fps, 2)}
                 if self.save_to is not None:
                     cam.with_mounting(m, **report).write(self.save_to)
                     self.report["saved"] = str(self.save_to)

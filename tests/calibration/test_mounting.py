@@ -161,7 +161,7 @@ def test_online_calibration_on_its_thread_is_the_estimate_of_the_same_frames_inl
     assert abs(m.pitch_deg - truth.mounting.pitch_deg) < 0.3 and abs(m.yaw_deg - truth.mounting.yaw_deg) < 0.3
 
 
-def test_bsn_run_leaves_calibrating_and_saves_the_camera_file(long_drive, small_light_onnx, tmp_path):
+def test_bsn_run_leaves_calibrating_and_saves_the_camera_file(long_drive, small_light_onnx, tmp_path, capsys):
     """Online calibration through the product: CALIBRATING on the bus until the estimate converges,
     then not; --save-calib writes the camera file with the estimate, near the clip's true mounting."""
     import can
@@ -190,6 +190,14 @@ def test_bsn_run_leaves_calibrating_and_saves_the_camera_file(long_drive, small_
     assert len(after) > 10 and after[0] in (SystemState.OK, SystemState.DEGRADED)
     got = Calibration.read(saved).mounting
     assert abs(got.pitch_deg - truth.mounting.pitch_deg) < 0.3 and abs(got.yaw_deg - truth.mounting.yaw_deg) < 0.3
+    import json
+    import re
+    written = json.loads(saved.read_text())
+    assert not {"board", "square_m", "rms_px", "used", "skipped"} & set(written), "no chessboard was used"
+    # the end lines say when calibration converged: the frame, and its time at the folder's 10 frames/s
+    said = re.search(r"online, converged at frame (\d+), ([\d.]+) s in", capsys.readouterr().out)
+    assert said and 0 < int(said[1]) <= len(list((long_drive / "rgb").iterdir()))
+    assert float(said[2]) == pytest.approx(int(said[1]) / 10.0)
 
 
 def test_road_normal_of_exact_correspondences_is_the_plane_down_direction():

@@ -155,3 +155,14 @@ def test_bsn_run_takes_the_lens_of_pictures_without_a_camera_file(setup, tmp_pat
     assert run_cli.main(["--model", str(model), "--source", str(folder), "--summary", str(tmp_path / "s.json"),
                          "--force"]) == 0
     assert json.loads((tmp_path / "s.json").read_text())["camera"]["intrinsics"].startswith("assumed")
+
+
+def test_the_end_lines_say_where_the_first_guess_came_from(setup, capsys):
+    """Without a camera file the end lines say whether the vanishing point was used, and why not."""
+    model, clip = setup
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--max-frames", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "  first guess: the model camera's mounting (vanishing point not used yet: " in out
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--max-frames", "3",
+                         "--calib", str(clip / "calibration.json")]) == 0
+    assert "first guess" not in capsys.readouterr().out, "a camera file's mounting needs no guess"
