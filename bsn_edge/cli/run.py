@@ -22,6 +22,7 @@ from bsn_edge.default_model import DEFAULT_MODEL
 if TYPE_CHECKING:
     from bsn_edge.alerts.senders import Sender
     from bsn_edge.runtime.camera_state import CameraState
+    from bsn_edge.runtime.loop import RuntimeConfig
 
 T = TypeVar("T")
 
@@ -45,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     _model_and_source(p)
     _camera(p)
     _outputs(p)
+    _settings(p)
     _speed(p)
     return p
 
@@ -94,7 +96,8 @@ def _outputs(p: argparse.ArgumentParser) -> None:
                    help="log every CAN frame sent: .log (candump format, readable by python -m cantools decode), "
                         ".asc or .blf; without --can, frames go to a virtual bus")
     g.add_argument("--serial", metavar="URL", help="send on this serial port (pyserial URL, e.g. /dev/ttyUSB0)")
-    g.add_argument("--cycle", type=float, default=0.1, help="send cycle in seconds (default 0.1)")
+    g.add_argument("--cycle", type=float, default=None,
+                   help="send cycle in seconds (default 0.1; runtime.cycle_s in --config)")
     g.add_argument("--overlay", metavar="OUT.mp4",
                    help="write a video with blind spots and sector levels (drawn on a thread of its own: from a "
                         "camera, frames it falls behind on are left out of it and counted, never the alerts)")
@@ -110,11 +113,22 @@ def _outputs(p: argparse.ArgumentParser) -> None:
                         "first frame. Missing folders are made")
 
 
+def _settings(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("the runtime's settings (sectors, smoothing, levels, health, the cycle)")
+    g.add_argument("--config", metavar="RUNTIME.toml",
+                   help="the runtime's settings in one file (configs/runtime.toml lists each at its default, with "
+                        "what it does); the summary holds the resolved settings and their digest")
+    g.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="change one setting, after --config: e.g. --set sectors.left_edge_deg=-15 --set "
+                        "alerts.tau_s=0.5 --set alerts.warning.on=0.7 (repeatable). --cycle, --in-flight and "
+                        "--in-turn are shorthands for runtime.cycle_s, runtime.in_flight and runtime.overlap")
+
+
 def _speed(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("speed on the car's cores")
     g.add_argument("--threads", type=int, default=None,
                    help="onnxruntime intra-op threads per inference (default 2, or 1 with --in-flight 2 and more)")
-    g.add_argument("--in-flight", type=int, default=1, metavar="N",
+    g.add_argument("--in-flight", type=int, default=None, metavar="N",
                    help="frames the model runs at once, each on a thread of its own (default 1). On 2 cores, 2 "
                         "gives more frames a second than one inference split over both, each frame's answer "
                         "later (see the README); needs reading overlapped")
@@ -156,6 +170,15 @@ def open_within(opener: Callable[[], T], seconds: float, what: str) -> T:
     if not ok:
         raise value
     return value
+
+
+def runtime_settings(args: argparse.Namespace) -> RuntimeConfig:
+    """The runtime's settings: the defaults, ``--config``, ``--set``, then the shorthand flags."""
+    from bsn_edge.runtime.config_file import load_runtime_config
+
+    shorthand = [f"runtime.{k}={v}" for k, v in (("cycle_s", args.cycle), ("in_flight", args.in_flight))
+                 if v is not None] + (["runtime.overlap=false"] if args.in_turn else [])
+    return load_runtime_config(args.config, [*args.overrides, *shorthand])
 
 
 def _output_files(args: argparse.Namespace) -> list[tuple[OutputKind, str | None]]:
@@ -397,6 +420,8 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
         for s in senders:
             s.close()
     summary["signal"] = stopper.signal
+    from bsn_edge.runtime.config_file import digest, to_dict
+    summary["settings"], summary["settings_digest"] = to_dict(cfg), digest(cfg)
     return _report(summary, args, camera, senders, stopper)
 
 
@@ -407,7 +432,7 @@ def _start(args: argparse.Namespace):
     from bsn_edge.calibration.exif import from_exif
     from bsn_edge.modelfile.trust import TrustPolicy
     from bsn_edge.mounting import check_height
-    from bsn_edge.runtime import Engine, RuntimeConfig, open_source
+    from bsn_edge.runtime import Engine, open_source
     from bsn_edge.runtime.camera_state import CameraState
     from bsn_edge.runtime.maps import MapWriter
 
@@ -416,7 +441,7 @@ def _start(args: argparse.Namespace):
         check_height(args.height, "--height")
     maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
     trust = TrustPolicy.default(args.trust, args.allow_unsigned)
-    cfg = RuntimeConfig(cycle_s=args.cycle, overlap=not args.in_turn, in_flight=args.in_flight)
+    cfg = runtime_settings(args)
     threads = cfg.engine_threads if args.threads is None else args.threads
     engine = Engine(args.model, threads, args.spin, trust=trust)
     if not engine.authentic:

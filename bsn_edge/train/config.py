@@ -5,12 +5,12 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.config_toml import KINDS, coerce, default_of, merge_overrides, read_toml
 from bsn_edge.data.guessed_camera import GuessedDepth
 from bsn_edge.model_frame import MODEL_HFOV_DEG, MODEL_PITCH_DEG, model_camera
 from bsn_edge.models import get_spec, teacher_encoder
@@ -199,52 +199,11 @@ class Config:
 SECTIONS = {"model": ModelConfig, "data": DataConfig, "train": TrainConfig, "teacher": TeacherConfig}
 
 
-def _coerce(cls, key: str, value: Any) -> Any:
-    f = {f.name: f for f in dataclasses.fields(cls)}[key]
-    default = f.default if f.default is not dataclasses.MISSING else None
-    if isinstance(default, tuple) and isinstance(value, list | tuple):
-        return tuple(value)
-    if isinstance(default, bool):
-        if isinstance(value, str):
-            return value.lower() in ("1", "true", "yes", "on")
-        return bool(value)
-    if isinstance(default, float) and isinstance(value, int | str):
-        return float(value)
-    if isinstance(default, int) and isinstance(value, str):
-        return int(value)
-    return value
-
-
-def parse_override(text: str) -> tuple[str, str, Any]:
-    """``section.key=value`` -> (section, key, value); the value is read as TOML if it can be."""
-    if "=" not in text or "." not in text.split("=", 1)[0]:
-        raise ValueError(f"override {text!r} must look like section.key=value (e.g. train.steps=100)")
-    dotted, raw = text.split("=", 1)
-    section, key = dotted.strip().split(".", 1)
-    try:
-        value = tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = raw
-    return section, key, value
-
-
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> Config:
     """Read a TOML config and apply overrides; unknown sections or keys are errors that list the
-    valid ones."""
-    raw: dict[str, dict[str, Any]] = {}
-    if path is not None:
-        p = Path(path)
-        if not p.is_file():
-            raise FileNotFoundError(f"config {p} not found")
-        try:
-            raw = tomllib.loads(p.read_text())
-        except tomllib.TOMLDecodeError as e:
-            raise ValueError(f"{p}: invalid TOML: {e}") from None
-    from_override: set[tuple[str, str]] = set()
-    for ov in overrides:
-        section, key, value = parse_override(ov)
-        raw.setdefault(section, {})[key] = value
-        from_override.add((section, key))
+    valid ones (the mechanism of :mod:`bsn_edge.config_toml`)."""
+    raw = read_toml(path)
+    given = merge_overrides(raw, overrides)
     parts = {}
     for section, values in raw.items():
         if section not in SECTIONS:
@@ -254,28 +213,13 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
         bad = sorted(set(values) - names)
         if bad:
             raise ValueError(f"unknown key(s) {bad} in [{section}]; valid: {', '.join(sorted(names))}")
-        try:
-            coerced = {k: _coerce(cls, k, v) for k, v in values.items()}
-        except ValueError:
-            bad = next(k for k, v in values.items() if not _coerces(cls, k, v))
-            where = "--set" if (section, bad) in from_override else str(path)
-            kind = KINDS.get(type(_default(cls, bad)), type(_default(cls, bad)).__name__)
-            raise ValueError(f"{section}.{bad} = {values[bad]!r} ({where}) must be {kind}") from None
+        coerced = {}
+        for k, v in values.items():
+            try:
+                coerced[k] = coerce(cls, k, v)
+            except ValueError:
+                where = "--set" if f"{section}.{k}" in given else str(path)
+                kind = KINDS.get(type(default_of(cls, k)), type(default_of(cls, k)).__name__)
+                raise ValueError(f"{section}.{k} = {v!r} ({where}) must be {kind}") from None
         parts[section] = cls(**coerced)
     return Config(**parts)
-
-
-KINDS = {int: "a whole number", float: "a number", str: "a string", bool: "true or false", tuple: "a list"}
-
-
-def _default(cls, key: str) -> Any:
-    f = {f.name: f for f in dataclasses.fields(cls)}[key]
-    return f.default if f.default is not dataclasses.MISSING else None
-
-
-def _coerces(cls, key: str, value: Any) -> bool:
-    try:
-        _coerce(cls, key, value)
-    except ValueError:
-        return False
-    return True

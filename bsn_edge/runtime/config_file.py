@@ -1,0 +1,62 @@
+"""The runtime's settings in one TOML file: what an integrator tunes without code.
+
+``configs/runtime.toml`` holds every one at its default, with what it does:
+
+- ``[runtime]``: the loop (``cycle_s``, ``warmup``, ``overlap``, ``in_flight``, ``feeder_nice``);
+- ``[sectors]``: the sector edges as bearings and how far blind spots count (:class:`SectorConfig`);
+- ``[alerts]``: smoothing (``tau_s``) and each level's rule (``[alerts.caution]``, ``[alerts.warning]``:
+  ``on``, ``off``, ``delay_s``, ``hold_s``; :class:`AlertConfig`);
+- ``[health]``: when the status says DEGRADED or UNAVAILABLE (:class:`HealthConfig`).
+
+``bsn-run --config FILE --set sectors.left_edge_deg=-15`` reads it with the mechanism the training config
+has (:mod:`bsn_edge.config_toml`): a key the runtime does not have, or a value out of range, is refused
+naming the key. The resolved settings and their digest go into the run's summary.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+from bsn_edge.alerts.health import HealthConfig
+from bsn_edge.alerts.sectors import SectorConfig
+from bsn_edge.alerts.state_machine import AlertConfig
+from bsn_edge.config_toml import build, merge_overrides, read_toml
+from bsn_edge.runtime.loop import RuntimeConfig
+
+NESTED: dict[str, type] = {"sectors": SectorConfig, "alerts": AlertConfig, "health": HealthConfig}
+LOOP = "runtime"
+
+
+def load_runtime_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()
+                        ) -> RuntimeConfig:
+    """The runtime's settings: the defaults, then the file at ``path``, then ``overrides``
+    (``section.key=value``); ``ValueError`` or ``FileNotFoundError`` naming what is wrong."""
+    raw = read_toml(path)
+    given = merge_overrides(raw, overrides)
+    where = str(path) if path is not None else "--set"
+    valid = [LOOP, *NESTED]
+    unknown = sorted(set(raw) - set(valid))
+    if unknown:
+        raise ValueError(f"unknown section(s) {unknown}; valid: {', '.join(valid)}")
+    loop_keys = {f.name for f in dataclasses.fields(RuntimeConfig)} - set(NESTED)
+    loop = raw.get(LOOP, {})
+    bad = sorted(set(loop) - loop_keys)
+    if bad:
+        raise ValueError(f"unknown key(s) {bad} in [{LOOP}]; valid: {', '.join(sorted(loop_keys))}")
+    parts = {name: build(cls, raw[name], name, where, given) for name, cls in NESTED.items() if name in raw}
+    return dataclasses.replace(build(RuntimeConfig, loop, LOOP, where, given), **parts)
+
+
+def to_dict(cfg: RuntimeConfig) -> dict[str, Any]:
+    """The settings as the file lays them out."""
+    d = dataclasses.asdict(cfg)
+    return {LOOP: {k: v for k, v in d.items() if k not in NESTED}, **{k: d[k] for k in NESTED}}
+
+
+def digest(cfg: RuntimeConfig) -> str:
+    """Short sha256 of the resolved settings: two runs with the same digest were tuned alike."""
+    return hashlib.sha256(json.dumps(to_dict(cfg), sort_keys=True).encode()).hexdigest()[:16]
