@@ -2,9 +2,13 @@
 
 Lowest first. A module imports from its own package or from a lower layer, never from its own layer's
 other packages or from above: ``import bsn_edge.x``, ``from bsn_edge.x import y``, ``from bsn_edge
-import x`` and ``importlib.import_module("bsn_edge.x")`` alike, at the top or inside functions.
-This file is the one place that says which packages are torch-free (:data:`TORCH_FREE`): the car's
-side, which ``bsn-run``, ``bsn-listen`` and ``bsn-calibrate`` load.
+import x``, relative imports (``from ..x import y``, resolved against the module's own place) and
+``importlib.import_module("bsn_edge.x")`` alike, at the top or inside functions; ``from X import Y`` is
+read as both ``X`` and ``X.Y`` for every ``X`` (``from onnxruntime import quantization`` names the
+quantization tools), and an ``import_module`` or ``__import__`` whose name is not written out is refused
+(nothing could say what it loads). This file is the one place that says which packages are torch-free
+(:data:`TORCH_FREE`) and what they must not load (:data:`HEAVY`, which ``tests/runtime/test_core_imports.py``
+checks at run time too): the car's side, which ``bsn-run``, ``bsn-listen`` and ``bsn-calibrate`` load.
 """
 
 import ast
@@ -15,7 +19,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "bsn_edge"
 LAYERS = [
-    ("fields",),
+    ("fields", "config_toml", "progress", "default_model"),
     ("camera",),
     ("mounting",),
     ("semantics", "sequence", "tracks", "metrics", "card", "model_frame"),
@@ -33,7 +37,8 @@ LAYERS = [
 ]
 LEVEL = {pkg: i for i, layer in enumerate(LAYERS) for pkg in layer}
 # the car's side: never torch, onnx or the quantization tools, even on a path taken only sometimes
-TORCH_FREE = ("fields", "camera", "mounting", "semantics", "sequence", "tracks", "metrics", "card",
+TORCH_FREE = ("fields", "config_toml", "progress", "default_model", "camera", "mounting", "semantics", "sequence",
+              "tracks", "metrics", "card",
               "model_frame", "modelfile", "calibration", "synth", "alerts", "runtime")
 HEAVY = ("torch", "onnx", "onnxruntime.quantization", "matplotlib")
 
@@ -51,24 +56,38 @@ def modules(root: Path = PACKAGE):
         yield f, rel.parts[0].removesuffix(".py") if rel.parts[0] != "__init__.py" else None
 
 
-def imported(tree: ast.AST) -> list[tuple[int, str]]:
-    """``(line, module)`` of every import in ``tree``: ``from bsn_edge import x`` names ``bsn_edge.x``,
-    and a call of ``import_module`` or ``__import__`` with a literal name names that module."""
+def imported(tree: ast.AST, here: str = "bsn_edge") -> list[tuple[int, str]]:
+    """``(line, module)`` of every import in ``tree`` of the module ``here`` (dotted, for relative imports):
+    ``from X import y`` names ``X`` and ``X.y``, a relative import is resolved, and a call of
+    ``import_module`` or ``__import__`` names its module when written out, else ``<dynamic>``."""
     out = []
+    package = here.split(".")
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             out += [(node.lineno, a.name) for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            out.append((node.lineno, node.module))
-            if node.module == "bsn_edge":
-                out += [(node.lineno, f"bsn_edge.{a.name}") for a in node.names]
-        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
-                and isinstance(node.args[0].value, str):
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                # level 1 is the module's own package, each further level one above it
+                up = package[:len(package) - node.level + 1] if node.level <= len(package) else []
+                base = ".".join([*up, *([base] if base else [])])
+            if base:
+                out.append((node.lineno, base))
+            out += [(node.lineno, f"{base}.{a.name}" if base else a.name) for a in node.names if a.name != "*"]
+        elif isinstance(node, ast.Call):
             f = node.func
             name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
             if name in ("import_module", "__import__"):
-                out.append((node.lineno, node.args[0].value))
+                literal = node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)
+                out.append((node.lineno, node.args[0].value if literal else "<dynamic>"))
     return out
+
+
+def dotted(f: Path, root: Path) -> str:
+    """The package a module's relative imports start from: ``bsn_edge/labels/vo.py`` -> ``bsn_edge.labels``
+    (a package's ``__init__`` is in its own package)."""
+    rel = f.relative_to(root.parent).with_suffix("")
+    return ".".join(rel.parts[:-1])
 
 
 def upward_imports(root: Path = PACKAGE) -> list[str]:
@@ -76,7 +95,10 @@ def upward_imports(root: Path = PACKAGE) -> list[str]:
     for f, pkg in modules(root):
         if pkg is None:
             continue
-        for line, name in imported(ast.parse(f.read_text())):
+        for line, name in imported(ast.parse(f.read_text()), dotted(f, root)):
+            if name == "<dynamic>":
+                bad.append(f"{f.relative_to(root.parent)}:{line} ({pkg}) imports a module named at run time")
+                continue
             target = unit(name)
             if target is None or target == pkg:
                 continue
@@ -90,7 +112,7 @@ def heavy_imports(root: Path = PACKAGE) -> list[str]:
     for f, pkg in modules(root):
         if pkg not in TORCH_FREE:
             continue
-        for line, name in imported(ast.parse(f.read_text())):
+        for line, name in imported(ast.parse(f.read_text()), dotted(f, root)):
             if any(name == h or name.startswith(h + ".") for h in HEAVY):
                 bad.append(f"{f.relative_to(root.parent)}:{line} ({pkg}, torch-free) imports {name}")
     return bad
@@ -118,6 +140,10 @@ def test_no_torch_free_package_names_a_training_tool():
     ("camera.py", "from bsn_edge import mounting"),
     ("runtime/loop.py", "from bsn_edge.train import trainer"),
     ("calibration/camera_file.py", "import torch"),
+    ("runtime/loop.py", "from ..train import trainer"),
+    ("runtime/loop.py", "from .. import export"),
+    ("runtime/loop.py", "from onnxruntime import quantization"),
+    ("alerts/sectors.py", "importlib.import_module('bsn_edge.' + 'train')"),
 ])
 def test_the_checks_catch_each_way_of_importing_upwards(tmp_path, module, line):
     """Each form, written into a copy of the package, is found (and the copy is clean without it)."""

@@ -1,20 +1,31 @@
-"""The car-side core stays small: bsn-run, bsn-listen and bsn-calibrate load no training tools (the
-static check of every torch-free package is in tests/test_layers.py)."""
+"""The car-side core stays small: every module of every torch-free package (tests/test_layers.py's
+TORCH_FREE, the static check's own list), and the car's commands, load none of the training tools (HEAVY,
+the same list the static check uses) when imported, all in one interpreter as bsn-run would."""
 
 import json
 import subprocess
 import sys
 
-import pytest
-
 from bsn_edge.cli.common import CHECKOUT
+from tests.test_layers import HEAVY, PACKAGE, TORCH_FREE, modules
 
-HEAVY = ("torch", "onnx", "onnxruntime.quantization", "matplotlib")
+CAR_COMMANDS = ("bsn_edge.cli.run", "bsn_edge.cli.listen", "bsn_edge.cli.calibrate")
 
 
-@pytest.mark.parametrize("module", ["bsn_edge.cli.run", "bsn_edge.cli.listen", "bsn_edge.cli.calibrate"])
-def test_importing_a_car_command_loads_no_training_tool(module):
-    code = (f"import sys, json, {module}; "
+def car_side_modules() -> list[str]:
+    out = []
+    for f, pkg in modules():
+        if pkg in TORCH_FREE:
+            rel = f.relative_to(PACKAGE.parent).with_suffix("")
+            out.append(".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts))
+    return sorted(out)
+
+
+def test_every_car_side_module_and_command_loads_no_training_tool():
+    names = [*car_side_modules(), *CAR_COMMANDS]
+    assert len(names) > 60, "every module of the car's side"
+    code = ("import importlib, json, sys\n"
+            f"for n in {names!r}:\n    importlib.import_module(n)\n"
             f"print(json.dumps([m for m in {HEAVY!r} if m in sys.modules]))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=CHECKOUT)
-    assert json.loads(out.stdout) == [], f"{module} imports {out.stdout.strip()}"
+    assert json.loads(out.stdout) == [], f"the car's side loads {out.stdout.strip()}"
