@@ -2,7 +2,7 @@
 
     python3 .ci/readme_commands.py [--latest]
 
-prints one shell script. ``--latest`` drops the ``-c constraints.txt`` pins from the pip commands, so
+prints one shell script that times each block. ``--latest`` drops the ``-c constraints.txt`` pins from the pip commands, so
 the same commands install the newest versions the registries serve.
 """
 
@@ -24,7 +24,9 @@ def commands(readme: str, latest: bool = False) -> list[str]:
 def main(argv: list[str]) -> int:
     readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
     for i, block in enumerate(commands(readme, "--latest" in argv), 1):
-        print(f"echo '== README command block {i}'\n{block}\n")
+        # each block timed, so the README's durations can be checked against what CI measured
+        print(f"echo '== README command block {i}'\nstart=$SECONDS\n{block}\n"
+              f"echo \"== README command block {i} took $((SECONDS - start)) s\"\n")
     return 0
 
 
