@@ -6,9 +6,10 @@ import pytest
 
 from bsn_edge.card import ModelCard
 from bsn_edge.cli import demo
+from bsn_edge.cli.common import CHECKOUT
 from bsn_edge.modelfile.read import ModelFile
 
-SHIPPED_RUN = demo.DEFAULT_MODEL.parent / "default"
+SHIPPED_RUN = CHECKOUT / "models" / "default"      # the run it was exported from: a checkout's, not the wheel's
 
 
 @pytest.mark.skipif(not demo.DEFAULT_MODEL.is_file(), reason="the shipped model is not in this checkout")
