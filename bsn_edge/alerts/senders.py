@@ -8,7 +8,9 @@ import contextlib
 import errno
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 from bsn_edge.alerts.can_codec import CanEncoder
 from bsn_edge.alerts.frame import AlertFrame
@@ -27,15 +29,25 @@ class SenderStats:
     log_error: str = ""
 
 
+class Encoder(Protocol):
+    """How an AlertFrame becomes the frames a transport carries: ``(id, payload)`` pairs. The encoding is
+    the bus protocol's (:class:`~bsn_edge.alerts.can_codec.CanEncoder`: the DBC's hazard and status
+    frames, with their counters and CRCs); a transport only carries what it is given."""
+
+    def encode(self, frame: AlertFrame) -> list[tuple[int, bytes]]: ...
+
+
 class Sender(ABC):
-    """Base class: ``send`` never raises; ``close`` is idempotent; usable as a context manager."""
+    """Base class: ``send`` never raises; ``close`` is idempotent; usable as a context manager. A sender
+    is given its encoder (the protocol's, :class:`CanEncoder`, unless told otherwise) and owns only the
+    transport: a subclass fills :meth:`_send`."""
 
     name = "sender"
     tx_fault = Fault.TX_ERRORS       # what a failed send counts as
 
-    def __init__(self) -> None:
+    def __init__(self, encoder: Encoder | None = None) -> None:
         self.stats = SenderStats()
-        self.encoder = CanEncoder()
+        self.encoder: Encoder = encoder if encoder is not None else CanEncoder()
         self._closed = False
 
     @abstractmethod
@@ -91,8 +103,8 @@ class CanSender(Sender):
     name = "can"
 
     def __init__(self, interface: str, channel: str, log_path: str | None = None, bus=None,
-                 timeout_s: float = 0.01) -> None:
-        super().__init__()
+                 timeout_s: float = 0.01, encoder: Encoder | None = None) -> None:
+        super().__init__(encoder)
         import can
 
         self._can = can
@@ -156,8 +168,9 @@ class SerialSender(Sender):
     name = "serial"
     tx_fault = Fault.SERIAL_ERRORS
 
-    def __init__(self, url: str, baudrate: int = 115200, port=None, retry_s: float = 1.0) -> None:
-        super().__init__()
+    def __init__(self, url: str, baudrate: int = 115200, port=None, retry_s: float = 1.0,
+                 encoder: Encoder | None = None) -> None:
+        super().__init__(encoder)
         import serial
 
         self._serial = serial
@@ -189,3 +202,29 @@ class SerialSender(Sender):
     def _close(self) -> None:
         if self.port is not None:
             self.port.close()
+
+
+def _can(target: str, encoder: Encoder, log_path: str | None) -> Sender:
+    iface, _, channel = target.partition(":")
+    if not (iface and channel):
+        raise ValueError(f"can:{target}: give can:IFACE:CHANNEL, e.g. can:socketcan:can0")
+    return CanSender(iface, channel, log_path=log_path, encoder=encoder)
+
+
+def _serial(target: str, encoder: Encoder, log_path: str | None) -> Sender:
+    if log_path:
+        raise ValueError("a serial output keeps no CAN log")
+    return SerialSender(target, encoder=encoder)
+
+
+# the transports, by the scheme an output is named with: a new bus is one Sender subclass and one entry
+SENDERS: dict[str, Callable[[str, Encoder, str | None], Sender]] = {"can": _can, "serial": _serial}
+
+
+def open_sender(output: str, encoder: Encoder | None = None, log_path: str | None = None) -> Sender:
+    """The sender of ``SCHEME:TARGET`` (``can:socketcan:can0``, ``serial:/dev/ttyUSB0``) with ``encoder``
+    (the protocol's by default); ``ValueError`` naming the valid schemes for another."""
+    scheme, _, target = output.partition(":")
+    if scheme not in SENDERS or not target:
+        raise ValueError(f"output {output!r}: give SCHEME:TARGET with SCHEME one of {', '.join(sorted(SENDERS))}")
+    return SENDERS[scheme](target, encoder if encoder is not None else CanEncoder(), log_path)

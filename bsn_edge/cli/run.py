@@ -195,29 +195,29 @@ def _output_files(args: argparse.Namespace) -> list[tuple[OutputKind, str | None
 def make_senders(args: argparse.Namespace) -> list[Sender]:
     """The configured senders; ``ValueError`` names the bad option (a sender already opened is
     closed again)."""
+    from bsn_edge.alerts.can_codec import CanEncoder
     from bsn_edge.alerts.frame import AlertFrame
-    from bsn_edge.alerts.senders import CanSender, SerialSender
+    from bsn_edge.alerts.senders import open_sender
 
+    outputs: list[tuple[str, str | None, str]] = []        # (SCHEME:TARGET, its log, what to call it)
+    if args.can or args.can_log:
+        can = args.can or f"virtual:{LOG_CHANNEL}"
+        if ":" not in can:
+            raise ValueError(f"--can needs IFACE:CHANNEL, got {args.can!r}")
+        iface, _, channel = can.partition(":")
+        what = f"CAN interface {iface!r} channel {channel!r}" + (f" with its log {args.can_log}" if args.can_log
+                                                                 else "")
+        outputs.append((f"can:{can}", args.can_log, what))
+    if args.serial:
+        outputs.append((f"serial:{args.serial}", None, f"serial port {args.serial!r}"))
     senders: list[Sender] = []
     try:
-        if args.can or args.can_log:
-            iface, _, channel = (args.can or f"virtual:{LOG_CHANNEL}").partition(":")
-            if not channel:
-                raise ValueError(f"--can needs IFACE:CHANNEL, got {args.can!r}")
-            what = f"--can-log {args.can_log}" if args.can_log else f"CAN interface {iface!r} channel {channel!r}"
+        for output, log_path, what in outputs:
             try:
-                senders.append(open_within(lambda: CanSender(iface, channel, log_path=args.can_log),
+                senders.append(open_within(lambda o=output, lp=log_path: open_sender(o, CanEncoder(), lp),
                                            OPEN_DEADLINE_S, what))
             except Exception as e:
-                raise ValueError(f"cannot open CAN interface {iface!r} channel {channel!r}"
-                                 + (f" with its log {args.can_log}" if args.can_log else "")
-                                 + f": {type(e).__name__}: {e}") from None
-        if args.serial:
-            try:
-                senders.append(open_within(lambda: SerialSender(args.serial), OPEN_DEADLINE_S,
-                                           f"serial port {args.serial}"))
-            except Exception as e:
-                raise ValueError(f"cannot open serial port {args.serial!r}: {type(e).__name__}: {e}") from None
+                raise ValueError(f"cannot open {what}: {type(e).__name__}: {e}") from None
     except BaseException:
         # a second output that cannot be opened (or Ctrl-C meanwhile): what is open already says so
         frame = AlertFrame.unavailable(0.0)
