@@ -2,8 +2,8 @@
 
     python3 .ci/readme_commands.py [--latest]
 
-prints one shell script that times each block. ``--latest`` drops the ``-c constraints.txt`` pins from the pip commands, so
-the same commands install the newest versions the registries serve.
+prints one shell script that times each block. ``--latest`` drops the ``-c constraints.txt`` pins from
+the pip commands, so the same commands install the newest versions the registries serve.
 """
 
 from __future__ import annotations
