@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.model_frame import ModelFrame
 
 SECTORS = ("LEFT", "CENTRE", "RIGHT")
 
@@ -75,3 +76,10 @@ class SectorGeometry:
 def bearing_deg(u: float, intrinsics: Intrinsics) -> float:
     """Bearing of image column ``u``, degrees, negative to the left."""
     return math.degrees(math.atan2(u - intrinsics.cx, intrinsics.fx))
+
+
+def blind_spots(prob: np.ndarray, threshold: float, mf: ModelFrame) -> np.ndarray:
+    """The blind-spot mask the sectors read, the first step of post-processing: above the card's threshold
+    and where the camera sees. Where a camera narrower than the model camera sees nothing, the model's
+    input is the frame mirrored from its edge; a blind spot found in a mirrored car is not in the world."""
+    return (prob >= threshold) & mf.seen

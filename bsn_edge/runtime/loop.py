@@ -28,6 +28,7 @@ from bsn_edge.alerts import (
     SectorState,
 )
 from bsn_edge.alerts.health import Fault, Health
+from bsn_edge.alerts.sectors import blind_spots
 from bsn_edge.alerts.senders import Sender
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CameraState
@@ -46,13 +47,6 @@ from bsn_edge.sequence.folder import frame_name
 
 STAGES = ("decode", "preprocess", "inference", "postprocess", "send")
 MAX_IN_FLIGHT = 4
-
-
-def blind_spots(prob: np.ndarray, threshold: float, mf: ModelFrame) -> np.ndarray:
-    """The blind-spot mask the sectors read: above threshold and where the camera sees. Where a
-    camera narrower than the model camera sees nothing, the model's input is the frame mirrored
-    from its edge; a blind spot found in a mirrored car is not in the world."""
-    return (prob >= threshold) & mf.seen
 
 
 @dataclass(frozen=True)

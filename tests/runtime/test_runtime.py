@@ -320,10 +320,10 @@ def test_frames_replaced_before_the_loop_first_asks_are_not_drops():
 def test_a_narrow_camera_reads_no_blind_spot_in_the_mirrored_border():
     """A 40 degree camera fills tan(20) / tan(40) of an 80 degree model camera's width; outside it
     the model sees the frame mirrored, and nothing found there may reach the sectors."""
+    from bsn_edge.alerts.sectors import blind_spots
     from bsn_edge.calibration import Calibration
     from bsn_edge.camera import Intrinsics
     from bsn_edge.mounting import Mounting
-    from bsn_edge.runtime.loop import blind_spots
 
     model, mount = Intrinsics.from_fov(512, 256, 80.0), Mounting(1.5, 1.5)
     mf = Calibration.of(Intrinsics.from_fov(640, 360, 40.0), (), mount).model_frame(640, 360, model, mount)
