@@ -222,8 +222,9 @@ def _ground_first(clip: ClipData, cfg: LabelConfig, seg: SegSource, idx: np.ndar
     each step's length comes from it at once (no seed trajectory to scale, and no scale to fit
     afterwards: the steps are measured in the plane's metres). Label frames further
     apart than :data:`FEATURES_BELOW_FPS` allows are matched by features on the classes that do
-    not move. A camera file without a mounting gets one from the drive itself: the road's normal
-    is square to the direction the car travels, which a first pass of the odometry gives."""
+    not move. A camera file without a mounting gets one from the drive itself when the camera's
+    height is stated (``--camera-height`` or meta.json's): the road's normal is square to the
+    direction the car travels, which a first pass of the odometry gives."""
     from bsn_edge.labels.sources.ground_depth import GroundDepth, PlaneDepth
     from bsn_edge.labels.vo import travel_direction, visual_odometry
     from bsn_edge.mounting import Mounting
@@ -239,6 +240,11 @@ def _ground_first(clip: ClipData, cfg: LabelConfig, seg: SegSource, idx: np.ndar
     cal = clip.info.get("calibration")
     mounting, found = (cal.mounting if cal is not None else None), "camera file"
     if mounting is None:
+        if not (cfg.camera_height or clip.meta.extra.get("camera_height")):
+            # pitch and yaw can be found from the drive, the height cannot: it must be stated
+            raise ClipRejectedError("depth from the road plane needs the camera's mounting (height, pitch, roll): "
+                                    "give a camera file with one (bsn-calibrate --mount), or state the camera's "
+                                    "height (--camera-height) to find pitch and yaw from the direction of travel")
         forward = travel_direction(visual_odometry(grays, K, matches=by_k)[0])
         if forward is None:
             raise ClipRejectedError("the camera never moved: no road plane from the drive, and no mounting given")
