@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from bsn_edge.camera import Intrinsics
-from bsn_edge.config_toml import KINDS, coerce, default_of, merge_overrides, read_toml
+from bsn_edge.config_toml import build, merge_overrides, read_toml
 from bsn_edge.data.guessed_camera import GuessedDepth
 from bsn_edge.model_frame import MODEL_HFOV_DEG, MODEL_PITCH_DEG, model_camera
 from bsn_edge.models import get_spec, teacher_encoder
@@ -208,18 +208,5 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
     for section, values in raw.items():
         if section not in SECTIONS:
             raise ValueError(f"unknown config section [{section}]; valid: {', '.join(SECTIONS)}")
-        cls = SECTIONS[section]
-        names = {f.name for f in dataclasses.fields(cls)}
-        bad = sorted(set(values) - names)
-        if bad:
-            raise ValueError(f"unknown key(s) {bad} in [{section}]; valid: {', '.join(sorted(names))}")
-        coerced = {}
-        for k, v in values.items():
-            try:
-                coerced[k] = coerce(cls, k, v)
-            except ValueError:
-                where = "--set" if f"{section}.{k}" in given else str(path)
-                kind = KINDS.get(type(default_of(cls, k)), type(default_of(cls, k)).__name__)
-                raise ValueError(f"{section}.{k} = {v!r} ({where}) must be {kind}") from None
-        parts[section] = cls(**coerced)
+        parts[section] = build(SECTIONS[section], values, section, str(path), given)
     return Config(**parts)
