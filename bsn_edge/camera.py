@@ -36,8 +36,9 @@ class Intrinsics:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "intrinsics") -> Intrinsics:
         """Every field required and numeric; ``ValueError`` names the field and ``where``."""
-        return cls(*(number(d, k, where) for k in ("fx", "fy", "cx", "cy")),
-                   *(number(d, k, where, int) for k in ("width", "height")))
+        fx, fy, cx, cy = (float(number(d, k, where)) for k in ("fx", "fy", "cx", "cy"))
+        width, height = (int(number(d, k, where, int)) for k in ("width", "height"))
+        return cls(fx, fy, cx, cy, width, height)
 
     @classmethod
     def from_fov(cls, width: int, height: int, hfov_deg: float) -> Intrinsics:

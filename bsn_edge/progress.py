@@ -28,7 +28,8 @@ class LineProgress:
         if total is None and iterable is not None and hasattr(iterable, "__len__"):
             total = initial + len(iterable)   # type: ignore[arg-type]
         self.iterable, self.total, self.desc, self.unit = iterable, total, desc, unit
-        self.n, self.initial, self.file, self.every_s, self.clock = initial, initial, file or sys.stderr, every_s, clock
+        self.n: float = initial
+        self.initial, self.file, self.every_s, self.clock = initial, file or sys.stderr, every_s, clock
         self.postfix = ""
         self.start = self.last = clock()
         self.closed = False

@@ -28,10 +28,10 @@ def track(g0: np.ndarray, g1: np.ndarray, pts: np.ndarray, window: int = WINDOW_
     if not len(pts):
         return pts, np.zeros(0, bool)
     p0 = pts.reshape(-1, 1, 2).astype(np.float32)
-    lk = {"winSize": (window, window), "maxLevel": 3,
-          "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)}
-    p1, st1, _ = cv2.calcOpticalFlowPyrLK(g0, g1, p0, None, **lk)
-    back, st2, _ = cv2.calcOpticalFlowPyrLK(g1, g0, p1, None, **lk)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+    p1, st1, _ = cv2.calcOpticalFlowPyrLK(g0, g1, p0, None, winSize=(window, window), maxLevel=3, criteria=criteria)
+    back, st2, _ = cv2.calcOpticalFlowPyrLK(g1, g0, p1, None, winSize=(window, window), maxLevel=3,
+                                            criteria=criteria)
     fb = np.linalg.norm((back - p0).reshape(-1, 2), axis=1)
     h, w = g0.shape[:2]
     p1 = p1.reshape(-1, 2)
@@ -83,7 +83,7 @@ class FeatureMatches:
 
     def __init__(self, gray: Callable[[int], np.ndarray], static: Callable[[int], np.ndarray] | None = None) -> None:
         self.gray, self.static = gray, static
-        self._sift = cv2.SIFT_create(SIFT_FEATURES, contrastThreshold=SIFT_CONTRAST)
+        self._sift = cv2.SIFT.create(SIFT_FEATURES, contrastThreshold=SIFT_CONTRAST)
         self._clahe = cv2.createCLAHE(2.0, (8, 8))
         self._matcher = cv2.BFMatcher(cv2.NORM_L2)
         self._found: OrderedDict[int, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
@@ -96,7 +96,7 @@ class FeatureMatches:
         if self.static is not None:
             mask = cv2.erode(self.static(i).astype(np.uint8) * 255, np.ones((3, 3), np.uint8))
         kp, des = self._sift.detectAndCompute(self._clahe.apply(self.gray(i)), mask)
-        self._found[i] = (np.float32([k.pt for k in kp]).reshape(-1, 2), des)
+        self._found[i] = (np.array([k.pt for k in kp], np.float32).reshape(-1, 2), des)
         while len(self._found) > self.KEEP:
             self._found.popitem(last=False)
         return self._found[i]

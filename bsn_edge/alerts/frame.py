@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from bsn_edge.alerts.health import SystemState
+from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
 
 
@@ -20,18 +21,16 @@ class AlertFrame:
     """One cycle's content; senders encode it, listeners decode it back."""
 
     t: float
-    left: SectorAlert
-    centre: SectorAlert
-    right: SectorAlert
+    sectors: tuple[SectorAlert, ...]     # one per sector of ``SECTORS``, in its order
     state: SystemState
     fps: float
     faults: dict[str, int] = field(default_factory=dict)
 
-    @property
-    def sectors(self) -> tuple[SectorAlert, SectorAlert, SectorAlert]:
-        return self.left, self.centre, self.right
+    def __post_init__(self) -> None:
+        if len(self.sectors) != len(SECTORS):
+            raise ValueError(f"an alert frame has one reading per sector {SECTORS}, got {len(self.sectors)}")
 
     @classmethod
     def unavailable(cls, t: float, faults: dict[str, int] | None = None) -> AlertFrame:
         none = SectorAlert(0.0, Level.NONE, None)
-        return cls(t, none, none, none, SystemState.UNAVAILABLE, 0.0, dict(faults or {}))
+        return cls(t, (none,) * len(SECTORS), SystemState.UNAVAILABLE, 0.0, dict(faults or {}))

@@ -159,4 +159,4 @@ class Health:
         together."""
         w = t if wall is None else wall
         with self._lock:
-            return self._state(t, w), self._fps(w), dict(self._faults)
+            return self._state(t, w), self._fps(w), {str(f): n for f, n in self._faults.items()}

@@ -1,4 +1,5 @@
-"""Blind-spot masks -> LEFT / CENTRE / RIGHT hazard readings, by bearing from the intrinsics."""
+"""Blind-spot masks -> one hazard reading per sector (``SECTORS``: left, centre, right), by bearing from the
+intrinsics."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import numpy as np
 from bsn_edge.camera import Intrinsics
 from bsn_edge.model_frame import ModelFrame
 
-SECTORS = ("LEFT", "CENTRE", "RIGHT")
+SECTORS = ("LEFT", "CENTRE", "RIGHT")   # the one list of sectors, left to right: the bus, the alert and the geometry
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,11 @@ class SectorConfig:
         if not self.range_m > 0 or not 0 < self.full_area <= 1:
             raise ValueError("range_m must be positive and full_area in (0, 1]")
 
+    @property
+    def edges_deg(self) -> tuple[float, ...]:
+        """The bearings between neighbouring sectors, left to right (one fewer than ``SECTORS``)."""
+        return self.left_edge_deg, self.right_edge_deg
+
 
 @dataclass(frozen=True)
 class SectorReading:
@@ -47,14 +53,17 @@ class SectorGeometry:
 
     def __init__(self, intrinsics: Intrinsics, cfg: SectorConfig | None = None) -> None:
         self.cfg = cfg or SectorConfig()
+        edges = self.cfg.edges_deg
+        if len(edges) != len(SECTORS) - 1:
+            raise ValueError(f"{len(edges)} sector edges for the {len(SECTORS)} sectors {SECTORS}")
         bearing = np.degrees(np.arctan2(np.arange(intrinsics.width) - intrinsics.cx, intrinsics.fx))
-        self.column_sector = np.select([bearing < self.cfg.left_edge_deg, bearing > self.cfg.right_edge_deg],
-                                       [0, 2], default=1).astype(np.int8)
+        # a column exactly on an edge belongs to the sector on its right
+        self.column_sector = np.digitize(bearing, edges).astype(np.int8)
         self.height = intrinsics.height
-        self.sector_pixels = np.bincount(self.column_sector, minlength=3) * intrinsics.height
-        self.sector_columns = [np.nonzero(self.column_sector == s)[0] for s in range(3)]
+        self.sector_pixels = np.bincount(self.column_sector, minlength=len(SECTORS)) * intrinsics.height
+        self.sector_columns = [np.nonzero(self.column_sector == s)[0] for s in range(len(SECTORS))]
 
-    def read(self, mask: np.ndarray, depth: np.ndarray) -> tuple[SectorReading, SectorReading, SectorReading]:
+    def read(self, mask: np.ndarray, depth: np.ndarray) -> tuple[SectorReading, ...]:
         """Score each sector: blind-spot pixels within range, each weighted by nearness
         (1 at the camera, 0 at ``range_m``), over ``full_area`` of the sector."""
         rng = self.cfg.range_m
@@ -70,7 +79,7 @@ class SectorGeometry:
                 continue
             score = float(weights[cols].sum()) / (self.cfg.full_area * self.sector_pixels[s])
             out.append(SectorReading(min(score, 1.0), d))
-        return tuple(out)  # type: ignore[return-value]
+        return tuple(out)
 
 
 def bearing_deg(u: float, intrinsics: Intrinsics) -> float:

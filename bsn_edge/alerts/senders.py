@@ -147,8 +147,9 @@ class CanSender(Sender):
         self.stats.log_errors += 1
         self.stats.log_error = f"{type(e).__name__}: {e}"
         logger, self.logger = self.logger, None
-        with contextlib.suppress(Exception):
-            logger.stop()
+        if logger is not None:
+            with contextlib.suppress(Exception):
+                logger.stop()
 
     def _close(self) -> None:
         if self.logger is not None:

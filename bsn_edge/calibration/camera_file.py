@@ -20,7 +20,7 @@ import numpy as np
 
 from bsn_edge.calibration.hood import Hood
 from bsn_edge.camera import Intrinsics
-from bsn_edge.fields import number, read_json_object
+from bsn_edge.fields import read_json_object
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.mounting import Mounting
 from bsn_edge.sequence.images import atomic_write_bytes
@@ -122,12 +122,10 @@ class Calibration:
         d = read_json_object(p, "not a camera file")
         known = {f.name for f in fields(cls)}     # fields of other versions are left out, not guessed at
         try:
-            intrinsic = {k: number(d, k, str(p)) for k in ("fx", "fy", "cx", "cy")}
-            size = {k: number(d, k, str(p), int) for k in ("width", "height")}
             m = d.get("mounting")
             hood = d.get("hood")
             rest = {k: v for k, v in d.items() if k in known and k != "intrinsics"}
-            return cls(**{**rest, "intrinsics": Intrinsics(**intrinsic, **size), "dist": tuple(d.get("dist", ())),
+            return cls(**{**rest, "intrinsics": Intrinsics.from_dict(d, str(p)), "dist": tuple(d.get("dist", ())),
                           "used": tuple(d.get("used", ())), "skipped": tuple(d.get("skipped", ())),
                           "board": tuple(d.get("board", (9, 6))),
                           "mounting": None if m is None else Mounting.from_dict(m, f"{p}: mounting"),

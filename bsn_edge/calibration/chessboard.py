@@ -55,14 +55,14 @@ def calibrate(source: str | os.PathLike, board: tuple[int, int] = (9, 6), square
             skipped.append({"view": name, "reason": "unreadable image"})
             continue
         if size is None:
-            size = gray.shape[::-1]
+            size = (gray.shape[1], gray.shape[0])
         elif gray.shape[::-1] != size:
             # another size means another (resampled) camera matrix: never mixed in
             skipped.append({"view": name, "reason": f"size {gray.shape[1]}x{gray.shape[0]} (width x height) "
                                                     f"differs from {size[0]}x{size[1]}"})
             continue
         flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-        found, corners = cv2.findChessboardCorners(gray, (cols, rows), flags)
+        found, corners = cv2.findChessboardCorners(gray, (cols, rows), flags=flags)
         if not found:
             skipped.append({"view": name, "reason": f"no complete {cols}x{rows} board found"})
             continue
@@ -77,6 +77,7 @@ def calibrate(source: str | os.PathLike, board: tuple[int, int] = (9, 6), square
     if len(used) < 3:
         raise ValueError(f"{source}: found the {cols}x{rows} board in {len(used)} views; need at least 3 "
                          f"(skipped: {len(skipped)})")
+    assert size is not None     # a board was found in a view of this size
     rms, K, dist, _, _ = cv2.calibrateCamera(obj, img, size, None, None)
     k = Intrinsics(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), int(size[0]), int(size[1]))
     return Calibration(k, tuple(float(d) for d in dist.ravel()[:5]), float(rms), tuple(used), tuple(skipped),

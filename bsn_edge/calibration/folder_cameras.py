@@ -87,8 +87,8 @@ def _features(grey: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
         return np.zeros((0, 2), np.float32), None
     s = _WIDTH / grey.shape[1]
     small = cv2.resize(grey, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
-    kp, des = cv2.ORB_create(_ORB_FEATURES).detectAndCompute(small, None)
-    return np.float32([k.pt for k in kp]).reshape(-1, 2), des
+    kp, des = cv2.ORB.create(_ORB_FEATURES).detectAndCompute(small, None)
+    return np.array([k.pt for k in kp], np.float32).reshape(-1, 2), des
 
 
 def _shared(a: tuple[np.ndarray, np.ndarray | None], b: tuple[np.ndarray, np.ndarray | None]) -> int:

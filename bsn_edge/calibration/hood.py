@@ -212,7 +212,9 @@ def _fit_arch(rows: np.ndarray, clear: np.ndarray, h: int, fit_px: float, trials
         n = score(arch)
         if n > best_n:
             best, best_n = arch, n
-    for _ in range(3 if best is not None else 0):   # least squares on its outlines, while no worse
+    for _ in range(3):   # least squares on its outlines, while no worse
+        if best is None:
+            break
         shown = _agreeing(best, xs, rows, clear, h, fit_px)[0]
         if shown.sum() < 3:
             break

@@ -38,7 +38,7 @@ class LaneHeight:
     skipped: int = 0
     _maps: tuple[np.ndarray, np.ndarray] | None = None
 
-    def _build(self, width: int, height: int) -> None:
+    def _build(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
         k = self.intrinsics.scaled(width, height)
         xs = np.arange(LATERAL[0], LATERAL[1], STEP)
         zs = np.arange(AHEAD[1], AHEAD[0], -ROW_STEP)           # far at the top
@@ -48,12 +48,12 @@ class LaneHeight:
         pts, _ = cv2.projectPoints(cam, np.zeros(3), np.zeros(3), k.K, np.asarray(self.dist or (), np.float64))
         pts = pts.reshape(len(zs), len(xs), 2).astype(np.float32)
         self._maps = (pts[..., 0], pts[..., 1])
+        return self._maps
 
     def add(self, frame: np.ndarray) -> bool:
         gray = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-        if self._maps is None:
-            self._build(gray.shape[1], gray.shape[0])
-        bev = cv2.remap(gray, *self._maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+        mx, my = self._maps if self._maps is not None else self._build(gray.shape[1], gray.shape[0])
+        bev = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
         size = round(MARKING / STEP) | 1
         resp = cv2.morphologyEx(bev, cv2.MORPH_TOPHAT, np.ones((1, size), np.uint8)).astype(np.float32)
         profile = cv2.GaussianBlur(resp.mean(axis=0)[None], (0, 0), 2.0).ravel()

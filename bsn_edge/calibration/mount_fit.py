@@ -108,13 +108,13 @@ class MountFit:
             return False
         prev = self._prev.pop(0)
         self.pairs += 1
-        why = self._pair(prev, gray)
+        why = self._pair(prev, gray, self._K)
         if why:
             self.rejected[why] = self.rejected.get(why, 0) + 1
             return False
         return True
 
-    def _pair(self, g0: np.ndarray, g1: np.ndarray) -> str:
+    def _pair(self, g0: np.ndarray, g1: np.ndarray, K: np.ndarray) -> str:
         p0 = detect(g0, max_corners=self.cfg.max_corners)
         if len(p0) < self.cfg.min_inliers:
             return "too few corners"
@@ -125,10 +125,10 @@ class MountFit:
         if np.median(np.linalg.norm(p1 - p0, axis=1)) < self.cfg.min_flow_px:
             return "standing still"
         d = np.asarray(self.dist, np.float64) if self.dist else None
-        n0 = cv2.undistortPoints(p0[:, None].astype(np.float64), self._K, d).reshape(-1, 2)
-        n1 = cv2.undistortPoints(p1[:, None].astype(np.float64), self._K, d).reshape(-1, 2)
+        n0 = cv2.undistortPoints(p0[:, None].astype(np.float64), K, d).reshape(-1, 2)
+        n1 = cv2.undistortPoints(p1[:, None].astype(np.float64), K, d).reshape(-1, 2)
         E, mask = cv2.findEssentialMat(n0, n1, np.eye(3), ESSENTIAL_FITS[self.cfg.essential], 0.999,
-                                       1.0 / self._K[0, 0])
+                                       1.0 / K[0, 0])
         if E is None or E.shape != (3, 3):
             return "no essential matrix"
         n, R, t, mask = cv2.recoverPose(E, n0, n1, np.eye(3), mask=mask)
@@ -235,7 +235,7 @@ def _road_normal(n0: np.ndarray, n1: np.ndarray, R: np.ndarray, t: np.ndarray, f
     x0 = np.c_[n0[low], np.ones(low.sum())]
     x1 = np.c_[n1[low], np.ones(low.sum())]
     keep = np.ones(len(x0), bool)
-    m = None
+    m = np.zeros(3)
     for _ in range(3):
         # x1 is parallel to (R + t m^T) x0: x1 x (t (m . x0)) = -x1 x (R x0), three rows per corner
         a, b = x0[keep], x1[keep]

@@ -37,7 +37,8 @@ class Printer:
     """Prints each decoded frame; counts bad CRCs, repeats and losses per message."""
 
     def __init__(self, out=None) -> None:
-        self.out, self.last = out, {}
+        self.out = out
+        self.last: dict[str, int] = {}
         self.frames = self.bad_crc = self.lost = self.repeated = self.bad_lines = self.bad_fields = 0
 
     def __call__(self, frame_id: int, data: bytes, where: str = "") -> None:

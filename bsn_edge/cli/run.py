@@ -8,6 +8,7 @@ at any moment of start-up ends the run cleanly.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import signal
 import sys
@@ -214,7 +215,7 @@ def make_senders(args: argparse.Namespace) -> list[Sender]:
     try:
         for output, log_path, what in outputs:
             try:
-                senders.append(open_within(lambda o=output, lp=log_path: open_sender(o, CanEncoder(), lp),
+                senders.append(open_within(functools.partial(open_sender, output, CanEncoder(), log_path),
                                            OPEN_DEADLINE_S, what))
             except Exception as e:
                 raise ValueError(f"cannot open {what}: {type(e).__name__}: {e}") from None
@@ -260,7 +261,8 @@ class StopOnSignal:
     in a program that calls :func:`main` itself the handlers it had come back."""
 
     def __init__(self, source=None, keep: bool = False) -> None:
-        self.source, self.event, self.signal = source, threading.Event(), None
+        self.source, self.event = source, threading.Event()
+        self.signal: str | None = None
         self.later = 0
         self.keep = keep
         self._old: dict[int, Any] = {}
@@ -448,7 +450,7 @@ def _start(args: argparse.Namespace):
         print(f"{PROG}: warning: {engine.verdict.note}; it runs because of --allow-unsigned, and the status says "
               "Model_Unsigned on every cycle", file=sys.stderr)
     source = open_source(args.source, pace=args.pace, stall_s=args.stall)
-    if calibration is None and not source.one_camera:
+    if calibration is None and source.cameras is not None and not source.one_camera:
         from bsn_edge.runtime.picture_cameras import PictureCameras
         print(f"{PROG}: note: {source.cameras.cameras.value}: {source.cameras.why}; each is warped with its own lens "
               "(EXIF, else assumed) and the model camera's mounting (pass --calib if they are one camera)",

@@ -52,10 +52,10 @@ def test_frame(height: int, width: int) -> np.ndarray:
         x0 = cx + k * int(0.42 * w)
         pts = np.array([[cx + k * int(0.02 * w), horizon], [x0, h - 1], [x0 + k * int(0.03 * w), h - 1]])
         cv2.fillConvexPoly(img, pts.astype(np.int32), (235, 235, 235))
-    for (x0, x1, color) in ((0.10, 0.34, (35, 30, 30)), (0.64, 0.88, (240, 240, 238))):   # dark car, white car
+    for (a, b, color) in ((0.10, 0.34, (35, 30, 30)), (0.64, 0.88, (240, 240, 238))):   # dark car, white car
         top, bottom = horizon - int(0.06 * h), horizon + int(0.22 * h)
-        cv2.rectangle(img, (int(x0 * w), top), (int(x1 * w), bottom), color, -1)
-        cv2.rectangle(img, (int(x0 * w), bottom - int(0.03 * h)), (int(x1 * w), bottom), (20, 20, 20), -1)
+        cv2.rectangle(img, (int(a * w), top), (int(b * w), bottom), color, -1)
+        cv2.rectangle(img, (int(a * w), bottom - int(0.03 * h)), (int(b * w), bottom), (20, 20, 20), -1)
     img += _hash_noise(h, w)[..., None]
     return np.clip(img, 0, 255).astype(np.uint8)
 

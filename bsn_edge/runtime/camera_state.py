@@ -121,8 +121,8 @@ class CameraState:
         before :meth:`frame_for`, frame by frame in order. Until the hood is known (from the camera file,
         or found in the frames fed, one in ``calibrate_every``) it is looked for too."""
         self._observed += 1
-        if self._hood_finder is not None:
-            self._look_for_hood(frame)
+        if (finder := self._hood_finder) is not None:
+            self._look_for_hood(finder, frame)
         if self.calibrating:
             self._look_for_vanishing_point(frame)
             self._calibrate(frame)
@@ -144,11 +144,10 @@ class CameraState:
                 self._frames[key] = mf
             return mf
 
-    def _look_for_hood(self, frame: np.ndarray) -> None:
+    def _look_for_hood(self, finder: HoodFinder, frame: np.ndarray) -> None:
         self._hood_seen += 1
         if (self._hood_seen - 1) % (self.calibrate_every or 1):
             return
-        finder = self._hood_finder
         finder.add(frame)
         if finder.ready:
             hood = finder.result()

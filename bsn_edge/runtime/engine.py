@@ -48,6 +48,9 @@ class Engine:
             raise ModelError(f"{self.path}: the model carries no integrity digest or self-test answer (exported "
                              f"before models were sealed); seal a copy you trust with: bsn-export --reseal "
                              f"{self.path} --out SEALED.onnx")
+        if self.card.threshold is None:
+            raise ModelError(f"{self.path}: the model's card has no decision threshold (its training chose none)")
+        self.threshold: float = self.card.threshold
         if mf.graph_sha256 != self.card.graph_sha256:
             raise ModelError(f"{self.path}: the model file is damaged: the sha256 of its graph and weights "
                              f"({mf.graph_sha256[:12]}...) is not the one its export recorded "
@@ -69,8 +72,10 @@ class Engine:
         self._check_io()
         h, w = self.card.input_size
         self.buf = np.empty((1, h, w, 3), np.uint8)
+        expected = self.card.self_test
+        assert expected is not None     # a sealed card has its answer (checked above)
         try:
-            self.self_test = selftest.check(lambda f: self.infer(f[None]), self.card.input_size, self.card.self_test)
+            self.self_test = selftest.check(lambda f: self.infer(f[None]), self.card.input_size, expected)
         except selftest.SelfTestError as e:
             raise ModelError(f"{self.path}: {e}") from None
 

@@ -180,6 +180,8 @@ class FramePipeline:
         """The frame shown to online calibration, then into the model camera, written into the input
         buffer ``buf``; whether the camera was still calibrating for it."""
         frame = cap.frame
+        if frame is None:
+            raise ValueError(f"frame {cap.index} did not decode: nothing to warp")
         self.camera.picture(cap.picture, frame)
         self.camera.observe(frame)
         mf = self.camera.frame_for(frame)
@@ -210,7 +212,7 @@ class FramePipeline:
     def sectors(self, cap: Captured, mf: ModelFrame, prob: np.ndarray,
                 depth: np.ndarray) -> tuple[AlertFrame, np.ndarray]:
         """Mask and depth -> sector readings -> smoothed levels -> the alert, published to the send cycle."""
-        mask = blind_spots(prob, self.engine.card.threshold, mf)
+        mask = blind_spots(prob, self.engine.threshold, mf)
         readings = self.geometry.read(mask, mf.depth_to_metres(depth))
         sectors = []
         for m, r in zip(self.machines, readings, strict=True):
@@ -220,7 +222,7 @@ class FramePipeline:
         self.health.valid(cap.t, now)
         self.valid += 1
         state, fps_now, faults = self.health.snapshot(cap.t, now)
-        alert = AlertFrame(cap.t, *sectors, state, fps_now, faults)
+        alert = AlertFrame(cap.t, tuple(sectors), state, fps_now, faults)
         self.emitter.publish(alert)
         return alert, mask
 
@@ -253,7 +255,7 @@ class FramePipeline:
             self.health.fault(Fault.SINK_ERRORS)
 
         # drawing and encoding the overlay, and encoding the maps, on threads of their own
-        behind = {"behind": self.SINK_BEHIND, "drop_when_full": self.source.live}
+        behind: dict[str, Any] = {"behind": self.SINK_BEHIND, "drop_when_full": self.source.live}
         if out.overlay is not None:
             writer = OverlayWriter(out.overlay, self.source.fps)
 
@@ -289,7 +291,8 @@ class FramePipeline:
             prob, depth, began, seconds = self.infer(item.buf) if inflight is None else inflight.result()
             t0 = min(t0, began)          # the frame's path began with its inference at the latest
             out = self.checked(prob, depth)
-            self.feeder.release(item.buf)
+            if self.feeder is not None:
+                self.feeder.release(item.buf)
             t2 = time.perf_counter()
             self.timer.add("inference", seconds)
             if out is None:
@@ -389,7 +392,7 @@ class FramePipeline:
             camera=self.camera.summary(), maps_written=0 if maps is None else maps.written,
             sinks={name: SinkSummary(k.written, k.dropped, None if k.ok else vars(k.failure))
                    for name, k in self.sinks.items()},
-            model=ModelSummary(card.variant, tuple(card.input_size), card.threshold, card.quantization,
+            model=ModelSummary(card.variant, card.input_size, self.engine.threshold, card.quantization,
                                self.engine.kernels, self.engine.self_test, self.engine.signer,
                                self.engine.authentic, self.engine.verdict.note))
 

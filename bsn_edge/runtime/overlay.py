@@ -81,7 +81,7 @@ class OverlayWriter:
         h, w = img.shape[:2]
         if self.writer is None:
             self.size = (w, h)
-            self.writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
+            self.writer = cv2.VideoWriter(str(self.path), cv2.VideoWriter.fourcc(*"mp4v"), self.fps, (w, h))
             if not self.writer.isOpened():
                 raise OSError(f"OpenCV cannot write {self.path}")
         if (w, h) != self.size:

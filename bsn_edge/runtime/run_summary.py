@@ -80,6 +80,6 @@ class RunSummary:
             if k == "fps":
                 out.update(latency)
         out["faults"] = {f.value: n for f, n in self.faults.items()}
-        if out["model"] is not None:
+        if self.model is not None:
             out["model"]["size"] = list(self.model.size)
         return out

@@ -20,5 +20,5 @@ resume=()
 if [ -f "$RUN/state.pt" ]; then resume=(--resume); elif [ -d "$RUN" ]; then resume=(--force); fi
 "$BIN/bsn-train" --config "$REPO/configs/campaign.toml" --data data --out "$RUN" "${resume[@]}" \
   --set 'model.name="shared-light"' --set "train.init=\"$REPO/models/default\"" \
-  --set "teacher.checkpoint=\"$REPO/models/$TEACHER\"" --set train.lr=0.00025 --set train.seed=6 \
+  --set "teacher.checkpoint=\"$REPO/models/$TEACHER\"" --set "train.lr=${LR:-0.00025}" --set train.seed=6 \
   --set "train.steps=$STEPS" --set train.eval_every=500 --set "data.real_share=$REAL"

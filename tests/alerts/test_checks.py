@@ -41,7 +41,7 @@ def frames(n: int) -> list[tuple[int, bytes]]:
     none = SectorAlert(0.0, Level.NONE, None)
     out = []
     for k in range(n):
-        out += enc.encode(AlertFrame(k * 0.1, none, none, none, SystemState.OK, 10.0, {}))
+        out += enc.encode(AlertFrame(k * 0.1, (none,) * 3, SystemState.OK, 10.0, {}))
     return out
 
 
@@ -143,8 +143,8 @@ def test_can_frames_are_the_dbc_layout_to_the_bit_with_the_data_id_in_the_crc():
     """Golden frames: the payload packed by hand from the DBC's start bits and scales, the CRC-8
     (catalogue-checked above) over the data ID's two bytes and the payload."""
     enc = CanEncoder()
-    f = AlertFrame(0.0, SectorAlert(1.0, Level.WARNING, 4.5), SectorAlert(0.0, Level.NONE, None),
-                   SectorAlert(0.3, Level.CAUTION, 20.0), SystemState.DEGRADED, 23.5,
+    f = AlertFrame(0.0, (SectorAlert(1.0, Level.WARNING, 4.5), SectorAlert(0.0, Level.NONE, None),
+                        SectorAlert(0.3, Level.CAUTION, 20.0)), SystemState.DEGRADED, 23.5,
                    {"dropped_frames": 3, "decode_errors": 1, "nan_outputs": 2, "tx_errors": 4, "sink_errors": 5})
     (hid, hz), (sid, st) = enc.encode(f)
     assert (hid, sid) == (0x500, 0x501)
@@ -160,7 +160,7 @@ def test_can_frames_are_the_dbc_layout_to_the_bit_with_the_data_id_in_the_crc():
 def test_a_hazard_payload_under_the_status_id_fails_its_crc():
     from bsn_edge.alerts.can_codec import decode
     none = SectorAlert(0.0, Level.NONE, None)
-    (hid, hz), (sid, _) = CanEncoder().encode(AlertFrame(0.0, none, none, none, SystemState.OK, 10.0, {}))
+    (hid, hz), (sid, _) = CanEncoder().encode(AlertFrame(0.0, (none,) * 3, SystemState.OK, 10.0, {}))
     assert decode(hid, hz).crc_ok
     assert not decode(sid, hz).crc_ok, "the data ID is in the CRC: a frame cannot pass for another message"
 
@@ -249,10 +249,10 @@ def test_every_decode_fault_reaches_the_bus_frames_of_another_size_included():
     """Decode_Errors carries every frame that gave the model nothing to read: 2 that would not decode
     and 3 of another size make 5 in byte 2, packed by hand; the other counters are their own."""
     none = SectorAlert(0.0, Level.NONE, None)
-    f = AlertFrame(0.0, none, none, none, SystemState.OK, 10.0,
+    f = AlertFrame(0.0, (none,) * 3, SystemState.OK, 10.0,
                    {"decode_errors": 2, "size_changes": 3, "dropped_frames": 7})
     _, (_, st) = CanEncoder().encode(f)
     want = pack([(0, 0, 2), (0, 2, 6), (20, 8, 8), (5, 16, 8), (7, 24, 8), (0, 32, 8), (0, 40, 8), (0, 52, 4)])
     assert st[:7] == want and st[7] == crc8_sae_j1850(bytes([0x01, 0x05]) + want)
-    many = AlertFrame(0.0, none, none, none, SystemState.OK, 10.0, {"decode_errors": 200, "size_changes": 100})
+    many = AlertFrame(0.0, (none,) * 3, SystemState.OK, 10.0, {"decode_errors": 200, "size_changes": 100})
     assert CanEncoder().encode(many)[1][1][2] == 255, "the sum saturates at 255"

@@ -19,8 +19,8 @@ from tests.fakes import FullBus, GonePort
 
 
 def frame(t=0.0, state=SystemState.OK):
-    return AlertFrame(t, SectorAlert(0.8, Level.WARNING, 4.5), SectorAlert(0.0, Level.NONE, None),
-                      SectorAlert(0.3, Level.CAUTION, 12.0), state, 23.5, {"dropped_frames": 3, "nan_outputs": 1})
+    return AlertFrame(t, (SectorAlert(0.8, Level.WARNING, 4.5), SectorAlert(0.0, Level.NONE, None),
+                          SectorAlert(0.3, Level.CAUTION, 12.0)), state, 23.5, {"dropped_frames": 3, "nan_outputs": 1})
 
 
 def test_can_round_trip_on_a_virtual_bus(tmp_path):

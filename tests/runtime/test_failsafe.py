@@ -434,7 +434,7 @@ def test_beside_every_unavailable_status_the_hazard_says_nothing_is_known():
     with can.Bus(interface="virtual", channel="bsn-fs-unav") as rx, CanSender("virtual", "bsn-fs-unav") as tx:
         emitter = CycleEmitter([tx], h, cycle_s=0.1)
         h.valid(0.0)
-        emitter.publish(AlertFrame(0.0, warn, warn, warn, SystemState.OK, 20.0, {}))
+        emitter.publish(AlertFrame(0.0, (warn,) * 3, SystemState.OK, 20.0, {}))
         emitter.emit(0.0)
         emitter.emit(1.5)                    # deadline 0.5 s: cycles 0.0 .. 0.5 OK, 0.6 .. 1.5 UNAVAILABLE
         h.unavailable()

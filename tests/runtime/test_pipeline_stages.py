@@ -111,8 +111,9 @@ def test_sectors_turn_a_near_blind_spot_on_the_left_into_a_left_warning(pipeline
     alert = None
     for k in range(20):                             # smoothing: levels rise over frames, not at once
         alert, mask = p.sectors(Captured(0.1 * k, frame, k), mf, prob, depth)
-    assert alert.left.level is Level.WARNING and alert.centre.level is Level.NONE and alert.right.level is Level.NONE
-    assert alert.left.distance_m is not None and alert.left.distance_m < 8.0
+    left, centre, right = alert.sectors
+    assert left.level is Level.WARNING and centre.level is Level.NONE and right.level is Level.NONE
+    assert left.distance_m is not None and left.distance_m < 8.0
     assert mask[int(0.8 * h), 2] and p.emitter.latest is alert, "published to the send cycle"
 
 

@@ -376,7 +376,7 @@ def test_the_overlay_tints_the_blind_spots_and_nothing_else():
     mask[60:90, 30:120] = True
     none = SectorAlert(0.0, Level.NONE, None)
     geometry = SectorGeometry(cam, RuntimeConfig().sectors)
-    img = draw(frame, mf, mask, AlertFrame(0.0, none, none, none, SystemState.OK, 25.0), geometry)
+    img = draw(frame, mf, mask, AlertFrame(0.0, (none,) * 3, SystemState.OK, 25.0), geometry)
     # the picture between the bars on top and the text below, off the sector edges' lines
     away = np.zeros_like(mask)
     away[24:110] = True

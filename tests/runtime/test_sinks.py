@@ -106,6 +106,8 @@ def test_an_overlay_that_cannot_be_finished_is_reported(setup, tmp_path, capsys,
     real = cv2.VideoWriter
 
     class FillingWriter:
+        fourcc = staticmethod(real.fourcc)
+
         def __init__(self, path, *a):
             self.path, self.w = path, real(path, *a)
 
