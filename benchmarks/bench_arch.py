@@ -50,8 +50,8 @@ from bsn_edge.export import to_onnx
 from bsn_edge.modelfile.read import session
 from bsn_edge.models import create_model, describe
 from bsn_edge.train.config import load_config
+from bsn_edge.train.device import autocast_dtype, precision_name
 from bsn_edge.train.run import Run
-from bsn_edge.train.trainer import autocast_dtype, precision_name
 
 ARCHS = ("unet", "small", "small-light", "shared-light", "medium", "large")
 

@@ -41,16 +41,11 @@ from bsn_edge.cli.common import parse_size
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.data.cache import SampleCache
 from bsn_edge.models import create_model, create_teacher, get_spec
+from bsn_edge.train.batches import training_batches
 from bsn_edge.train.config import load_config
+from bsn_edge.train.device import autocast_dtype, cpu_has_native_bf16, layout, scaled
 from bsn_edge.train.optim import Optimizer
-from bsn_edge.train.trainer import (
-    _layout,
-    autocast_dtype,
-    cpu_has_native_bf16,
-    losses,
-    scaled,
-    training_batches,
-)
+from bsn_edge.train.trainer import losses
 
 _BEFORE = {"cache": False, "teacher_grid": False, "channels_last": False, "precision": "fp32", "fused": False}
 LEVERS = [
@@ -138,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     grid_cache = SampleCache(cache.arrays, cache.items, cache.key)
     teacher = create_teacher("resnet18", 128)
     t0 = time.perf_counter()
-    grid_cache.attach_teacher(teacher.eval(), 0.5, (8, 16), resize=lambda x, s: _layout(scaled(x, s), True))
+    grid_cache.attach_teacher(teacher.eval(), 0.5, (8, 16), resize=lambda x, s: layout(scaled(x, s), True))
     teacher_s = (time.perf_counter() - t0) / len(ds)
 
     levers = [(n, lv) for n, lv in LEVERS if lv["precision"] != "bf16" or cpu_has_native_bf16()]

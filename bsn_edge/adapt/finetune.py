@@ -10,10 +10,11 @@ from bsn_edge.adapt.config import AdaptConfig
 from bsn_edge.metrics import ThresholdSweep
 from bsn_edge.models import BlindSpotNet
 from bsn_edge.progress import progress_bar
+from bsn_edge.train.batches import batch_stream
 from bsn_edge.train.config import TrainConfig
+from bsn_edge.train.device import scaled
 from bsn_edge.train.losses import distillation_loss, masked_bce
 from bsn_edge.train.optim import Optimizer
-from bsn_edge.train.trainer import batch_stream, scaled
 
 
 @torch.no_grad()

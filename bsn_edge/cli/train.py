@@ -8,7 +8,8 @@ import sys
 
 from bsn_edge.cli.common import fail
 from bsn_edge.train.config import load_config
-from bsn_edge.train.trainer import train, train_teacher_alone
+from bsn_edge.train.teacher_training import train_teacher_alone
+from bsn_edge.train.trainer import train
 
 PROG = "bsn-train"
 

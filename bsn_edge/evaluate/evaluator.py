@@ -16,7 +16,8 @@ from bsn_edge.metrics import Counts, ScoreHistogram, ThresholdSweep
 from bsn_edge.sequence import read_kitti_poses
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth.sheet import tint
-from bsn_edge.train.trainer import outputs, scaled
+from bsn_edge.train.device import scaled
+from bsn_edge.train.validation import outputs
 
 METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
 

@@ -38,3 +38,14 @@ class Optimizer:
         self.opt.load_state_dict(state["optimizer"])
         if "scheduler" in state:
             self.sched.load_state_dict(state["scheduler"])
+
+
+def param_groups(model: torch.nn.Module, encoder: torch.nn.Module | None, lr: float,
+                 encoder_share: float) -> list[dict]:
+    """Adam's parameter groups: ``model``'s ``encoder`` at ``encoder_share`` of ``lr`` (a pretrained
+    encoder keeps more of what it learnt on real photographs), the rest at ``lr``."""
+    if encoder is None or encoder_share == 1.0:
+        return [{"params": list(model.parameters())}]
+    own = {id(p) for p in encoder.parameters()}
+    return [{"params": list(encoder.parameters()), "lr": lr * encoder_share},
+            {"params": [p for p in model.parameters() if id(p) not in own]}]

@@ -19,9 +19,11 @@ import torch
 
 from bsn_edge.config_toml import build
 from bsn_edge.models import ModelSpec
+from bsn_edge.train.batches import datasets
+from bsn_edge.train.checkpoints import save_checkpoint
 from bsn_edge.train.config import SECTIONS, Config
 from bsn_edge.train.run import Run
-from bsn_edge.train.trainer import _save, choose_threshold, datasets
+from bsn_edge.train.validation import choose_threshold
 
 
 def mixed_state(start: dict[str, torch.Tensor], leg: dict[str, torch.Tensor], alpha: float) -> dict[str, torch.Tensor]:
@@ -53,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     threshold, val = choose_threshold(leg_model, data.val_ds)
     with tempfile.TemporaryDirectory() as tmp:
         work = leg_run.ship(Path(tmp) / "soup")
-        _save(work, leg_model, cfg, data, cfg.train.steps, threshold=threshold, val=val)
+        save_checkpoint(work, leg_model, cfg, data, cfg.train.steps, threshold=threshold, val=val)
         record = json.loads(work.checkpoint_path.read_text())
         record["soup"] = {"start": Path(a.start).name, "leg": Path(a.leg).name, "alpha": a.alpha}
         work.checkpoint_path.write_text(json.dumps(record, indent=2) + "\n")

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-import bsn_edge.train.trainer as trainer
+import bsn_edge.train.device as train_device
 from benchmarks import bench_arch
 from benchmarks.bench_arch import arithmetic_clash, trained_in
 from benchmarks.ledger import Ledger
@@ -47,7 +47,7 @@ def refuse_to_train(*_args, **_kwargs):
 
 @pytest.fixture
 def fp32_cpu(monkeypatch):
-    monkeypatch.setattr(trainer, "cpu_has_native_bf16", lambda: False)
+    monkeypatch.setattr(train_device, "cpu_has_native_bf16", lambda: False)
     monkeypatch.setattr(bench_arch, "train_seeds", refuse_to_train)
 
 

@@ -9,7 +9,7 @@ from bsn_edge.cli import export as export_cli
 from bsn_edge.models import MAX_DEPTH_M, create_model, depth_feature
 from bsn_edge.models.bsn import given_depth_feature
 from bsn_edge.train import Run
-from bsn_edge.train.trainer import given_depth
+from bsn_edge.train.validation import given_depth
 from tests.cards import card_for
 
 PAIRS = [("small-light", "small-light-oracle"), ("shared-light", "shared-light-oracle")]

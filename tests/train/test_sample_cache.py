@@ -12,8 +12,8 @@ from bsn_edge.data.cache import SampleCache, dataset_key
 from bsn_edge.data.repaint import SeeThrough
 from bsn_edge.models import create_teacher
 from bsn_edge.sequence.images import DEPTH_SCALE
+from bsn_edge.train.device import scaled
 from bsn_edge.train.losses import pairwise_similarity
-from bsn_edge.train.trainer import scaled
 
 
 @pytest.fixture(scope="module")

@@ -22,8 +22,8 @@ from bsn_edge.export import read_card
 from bsn_edge.metrics import THRESHOLDS
 from bsn_edge.models import BlindSpotNet
 from bsn_edge.train import Run, RunError, load_config
+from bsn_edge.train.device import cpu_has_native_bf16
 from bsn_edge.train.losses import masked_bce
-from bsn_edge.train.trainer import cpu_has_native_bf16
 from tests.fakes import SMOKE
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -239,7 +239,7 @@ def test_bce_beyond_v_takes_rendered_clips_and_refuses_a_users(data, tmp_path, c
 def test_the_ranks_share_out_one_process_s_global_batch():
     """Two ranks of batch 4 see, step by step across epochs, the samples one process sees at batch 8,
     each sample once, every augmentation seed of a step distinct."""
-    from bsn_edge.train.trainer import BatchStream
+    from bsn_edge.train.batches import BatchStream
     one = iter(BatchStream(40, 8, seed=3))
     ranks = [iter(BatchStream(40, 4, seed=3, world=2, rank=r)) for r in (0, 1)]
     for _ in range(12):                                   # 5 steps an epoch: past two epochs
@@ -254,7 +254,7 @@ def test_a_set_share_of_each_batch_comes_from_the_real_pictures_and_resumes_alik
     and 6 of the others; each group is visited whole before any sample repeats (the real ones every 3
     steps, the others every 32); batch k is the same whether the stream starts at 0 or resumes at k;
     augmentation seeds are distinct; the plain stream is unchanged when no share is asked."""
-    from bsn_edge.train.trainer import BatchStream
+    from bsn_edge.train.batches import BatchStream
     real = (5, 17, 60, 61, 120, 199)
     stream = iter(BatchStream(200, 8, seed=3, real=real, real_per_batch=2))
     batches = [next(stream) for _ in range(40)]
@@ -278,16 +278,16 @@ def _two_ranks_in_one_process(cfg, data_dir, init: Path) -> dict:
     half of the global batch through the model (BatchNorm on the rank's own samples), the gradients
     averaged, one optimizer step; the buffers are rank 0's (DDP broadcasts them from rank 0)."""
     from bsn_edge.models import create_model
-    from bsn_edge.train import trainer
+    from bsn_edge.train import batches, device, trainer
     from bsn_edge.train.optim import Optimizer
-    data_ = trainer.datasets(cfg, data_dir)
-    cache = trainer.sample_cache(cfg, data_.train_ds)
+    data_ = batches.datasets(cfg, data_dir)
+    cache = batches.sample_cache(cfg, data_.train_ds)
     model = create_model(cfg.model.name)
     model.load_state_dict(Run(init).load_model()[0].state_dict())
     model.to(memory_format=torch.channels_last if cfg.train.channels_last else torch.contiguous_format)
     optim = Optimizer(model.parameters(), cfg.train.lr, cfg.train.steps, cfg.train)
-    dtype = trainer.autocast_dtype(cfg, torch.device("cpu"))
-    streams = [trainer.training_batches(data_.train_ds, cache, cfg.train.batch_size, 2, r, cfg.train.seed, 0)
+    dtype = device.autocast_dtype(cfg, torch.device("cpu"))
+    streams = [batches.training_batches(data_.train_ds, cache, cfg.train.batch_size, 2, r, cfg.train.seed, 0)
                for r in (0, 1)]
     model.train()
     for _ in range(cfg.train.steps):
@@ -511,8 +511,8 @@ def test_every_history_record_names_the_arithmetic_it_trained_in(data, tmp_path,
                                                                    named):
     """``train.precision=auto`` trains in bf16 only on a CPU with native bf16, so the same command
     trains differently on different machines: the teacher's and B's records say which."""
-    from bsn_edge.train import trainer
-    monkeypatch.setattr(trainer, "cpu_has_native_bf16", lambda: native)
+    from bsn_edge.train import device, trainer
+    monkeypatch.setattr(device, "cpu_has_native_bf16", lambda: native)
     cfg = load_config(SMOKE, ["data.label=\"T2s\"", f"train.precision=\"{precision}\"", "train.steps=2",
                               "train.eval_every=1", "teacher.steps=2", "teacher.eval_every=1",
                               "data.val_fraction=0.34"])
@@ -527,9 +527,9 @@ def test_the_card_names_every_arithmetic_its_pieces_trained_in(data, tmp_path, m
     """A run's card gives the kinds of arithmetic its training pieces ran in, its start's included;
     a run from before the trainer recorded them keeps a card without the key (its digest is what it
     was), and a run started from it says its start's is unrecorded."""
-    from bsn_edge.train import trainer
+    from bsn_edge.train import device
     from bsn_edge.train.trainer import train
-    monkeypatch.setattr(trainer, "cpu_has_native_bf16", lambda: True)     # fp32 when asked, bf16 or not
+    monkeypatch.setattr(device, "cpu_has_native_bf16", lambda: True)     # fp32 when asked, bf16 or not
     sets = ["data.label=\"T2s\"", "data.val_fraction=0.34", "train.steps=2", "train.checkpoint_every=1",
             "teacher.steps=2"]
     first, second = tmp_path / "a", tmp_path / "b"

@@ -5,7 +5,7 @@ import math
 import torch
 
 from bsn_edge import semantics as sm
-from bsn_edge.train.trainer import validate
+from bsn_edge.train.validation import validate
 
 
 class ConstantNet(torch.nn.Module):
