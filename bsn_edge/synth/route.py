@@ -92,15 +92,7 @@ def build_route(layout: RoadLayout, length: float, rng: np.random.Generator,
             break  # ran off the generated network; callers size the network generously
         c = cand[np.argmin(ahead[cand])]
         crossings_seen += 1
-        r = rng.random()
-        if not turned and crossings_seen >= 2:
-            action = "right" if r < 0.5 else "left"
-        elif r < turn_prob / 2:
-            action = "right"
-        elif r < turn_prob:
-            action = "left"
-        else:
-            action = "straight"
+        action = _choose_action(rng.random(), turned, crossings_seen, turn_prob)
         if action == "straight":
             # run through the intersection to just past its far side
             target = pos.copy()
@@ -113,22 +105,41 @@ def build_route(layout: RoadLayout, length: float, rng: np.random.Generator,
         o_b = layout.lane_offset(int(cross_lanes[c]))
         f_new = _right(f) if action == "right" else -_right(f)
         radius = RIGHT_RADIUS if action == "right" else o_a + o_b + LEFT_EXTRA
-        # corner where the current lane line meets the new lane line
-        lane_line_new = np.zeros(2)
-        lane_line_new[along_axis] = cross_pos[c]
-        lane_line_new = lane_line_new + _right(f_new) * o_b
-        q = pos.copy()
-        q[along_axis] = lane_line_new[along_axis]
-        a = q - f * radius
-        b = q + f_new * radius
-        centre = a + f_new * radius
+        a, b = _corner(pos, f, f_new, along_axis, float(cross_pos[c]), o_b, radius)
         pieces.append(_line(pos, a))
-        pieces.append(_arc(a, b, centre, radius))
+        pieces.append(_arc(a, b, a + f_new * radius, radius))
         total += float(np.linalg.norm(a - pos)) + 0.5 * np.pi * radius
         turns.append({"at_m": round(total - 0.25 * np.pi * radius, 2), "direction": action})
         pos, f, fam, lanes_here, turned = b, f_new, 1 - fam, int(cross_lanes[c]), True
     pieces.append(pos[None])
-    xy = np.concatenate(pieces)
+    return _route(np.concatenate(pieces), turns, length)
+
+
+def _choose_action(r: float, turned: bool, crossings_seen: int, turn_prob: float) -> str:
+    """What the car does at a crossing, from the uniform draw ``r``: it turns at the second crossing at
+    the latest, else turns left or right with ``turn_prob`` in all."""
+    if not turned and crossings_seen >= 2:
+        return "right" if r < 0.5 else "left"
+    if r < turn_prob / 2:
+        return "right"
+    if r < turn_prob:
+        return "left"
+    return "straight"
+
+
+def _corner(pos: np.ndarray, f: np.ndarray, f_new: np.ndarray, along_axis: int, cross_at: float, o_b: float,
+            radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where a turn's arc begins and ends: around the corner where the current lane line meets the new one."""
+    lane_line_new = np.zeros(2)
+    lane_line_new[along_axis] = cross_at
+    lane_line_new = lane_line_new + _right(f_new) * o_b
+    q = pos.copy()
+    q[along_axis] = lane_line_new[along_axis]
+    return q - f * radius, q + f_new * radius
+
+
+def _route(xy: np.ndarray, turns: list[dict], length: float) -> Route:
+    """The route through points ``xy`` (repeats dropped), its heading and arc length."""
     seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     keep = np.concatenate([[True], seg > 1e-9])
     xy = xy[keep]

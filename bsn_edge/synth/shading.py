@@ -216,6 +216,26 @@ class Shader:
         glow = np.zeros_like(col) if look.night else None
         spec = np.zeros(len(oi), np.float32)          # share of mirror reflection
         tex = _sample(self.fine, u * 20.0, z * 20.0)
+        self._paint(look, boxes, bi, kind, track, on_x, on_y, side_face, nx, ny, u, ulen, z, height, tex, col, glow,
+                    spec)
+
+        shade = 1.0 + 0.04 * tex
+        lit = maps.object_lit(px, py, pz, track) if look.sun_strength > 0.15 else np.float32(1.0)
+        sky_part = np.float32(look.ambient) * (0.7 + 0.3 * nz)
+        direct = np.float32(look.sun_strength) * np.maximum(ndotl, 0.0) * lit
+        light = (sky_part * shade)[:, None] + (direct * shade)[:, None] * np.asarray(look.sun_color, np.float32)
+        if look.night:
+            light += (0.8 * maps.object_light(px, py) * (z < 3.0))[:, None] * SODIUM
+        rad = col * light
+        k = np.flatnonzero(spec)
+        if len(k):
+            rad[k] += _mirror(look, sun, [d[a][k] for a in range(3)], nx[k], ny[k], nz[k], spec[k],
+                              lit[k] if np.ndim(lit) else lit)
+        return rad if glow is None else rad + glow
+
+    def _paint(self, look, boxes: Boxes, bi, kind, track, on_x, on_y, side_face, nx, ny, u, ulen, z, height, tex,
+               col, glow, spec) -> None:
+        """Each kind's colour pattern, into ``col`` (and the night's ``glow``, the mirror share ``spec``)."""
         kind_of = np.bincount(kind, minlength=16)
 
         if kind_of[KIND_BUILDING]:
@@ -249,36 +269,6 @@ class Shader:
             col[k] *= (1.0 - 0.2 * (np.mod(u[k], 2.5) < 0.03) + 0.06 * tex[k])[:, None]
         if look.night and kind_of[KIND_POLE]:
             glow[(kind == KIND_POLE) & (z > height - 0.35)] = SODIUM * 3.0
-
-        shade = 1.0 + 0.04 * tex
-        lit = maps.object_lit(px, py, pz, track) if look.sun_strength > 0.15 else np.float32(1.0)
-        sky_part = np.float32(look.ambient) * (0.7 + 0.3 * nz)
-        direct = np.float32(look.sun_strength) * np.maximum(ndotl, 0.0) * lit
-        light = (sky_part * shade)[:, None] + (direct * shade)[:, None] * np.asarray(look.sun_color, np.float32)
-        if look.night:
-            light += (0.8 * maps.object_light(px, py) * (z < 3.0))[:, None] * SODIUM
-        rad = col * light
-        k = np.flatnonzero(spec)
-        if len(k):
-            dk = [d[a][k] for a in range(3)]
-            n_ = np.sqrt(dk[0] ** 2 + dk[1] ** 2 + dk[2] ** 2)
-            nxk, nyk, nzk = nx[k], ny[k], nz[k]
-            dn = (nxk * dk[0] + nyk * dk[1] + nzk * dk[2]) / n_
-            fres = spec[k] * (0.06 + 0.94 * (1.0 - np.abs(dn)) ** 5)
-            env = np.asarray(look.sky_horizon, np.float32) * np.float32(0.6 + 0.4 * (look.ambient > 0.3))
-            add = (fres + 0.08 * spec[k])[:, None] * env
-            if look.sun_strength > 0.15:
-                # sun glint: the mirror direction of the view ray about the face normal
-                refl = ((dk[0] / n_ - 2 * dn * nxk) * sun[0] + (dk[1] / n_ - 2 * dn * nyk) * sun[1] +
-                        (dk[2] / n_ - 2 * dn * nzk) * sun[2])
-                glint = np.maximum(refl, np.float32(0.0))
-                for _ in range(6):          # ** 64, a tight highlight
-                    glint *= glint
-                glint *= lit[k] if np.ndim(lit) else lit
-                add += (spec[k] * glint * np.float32(2.0 * look.sun_strength))[:, None] * \
-                    np.asarray(look.sun_color, np.float32)
-            rad[k] += add
-        return rad if glow is None else rad + glow
 
     def _building(self, look, k, track, hsh, u, z, side_face, tex, col, glow, spec) -> None:
         """Facades, windows, shop fronts and roofs of the building pixels ``k`` (in place)."""
@@ -350,3 +340,23 @@ class Shader:
             if look.night:
                 glow[k[lamp & front]] = LAMP_GLOW
                 glow[k[lamp & rear]] = TAIL_GLOW
+
+
+def _mirror(look, sun, dk, nxk, nyk, nzk, spec, lit) -> np.ndarray:
+    """The light a mirror-like face (share ``spec``) adds: the sky by Fresnel, and the sun's glint when it
+    shines (``lit``: how much of it reaches the face)."""
+    n_ = np.sqrt(dk[0] ** 2 + dk[1] ** 2 + dk[2] ** 2)
+    dn = (nxk * dk[0] + nyk * dk[1] + nzk * dk[2]) / n_
+    fres = spec * (0.06 + 0.94 * (1.0 - np.abs(dn)) ** 5)
+    env = np.asarray(look.sky_horizon, np.float32) * np.float32(0.6 + 0.4 * (look.ambient > 0.3))
+    add = (fres + 0.08 * spec)[:, None] * env
+    if look.sun_strength > 0.15:
+        # sun glint: the mirror direction of the view ray about the face normal
+        refl = ((dk[0] / n_ - 2 * dn * nxk) * sun[0] + (dk[1] / n_ - 2 * dn * nyk) * sun[1] +
+                (dk[2] / n_ - 2 * dn * nzk) * sun[2])
+        glint = np.maximum(refl, np.float32(0.0))
+        for _ in range(6):          # ** 64, a tight highlight
+            glint *= glint
+        glint *= lit
+        add += (spec * glint * np.float32(2.0 * look.sun_strength))[:, None] * np.asarray(look.sun_color, np.float32)
+    return add

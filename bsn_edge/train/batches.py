@@ -192,3 +192,9 @@ def datasets(cfg: Config, data_dir: str | Path) -> Datasets:
     guessed = cfg.data.guessed_camera > 0
     return Datasets(split, train, val, skipped, train_ds(ClipCamera.OWN), val_ds(ClipCamera.OWN),
                     train_ds(ClipCamera.GUESSED) if guessed else None, val_ds(ClipCamera.GUESSED) if guessed else None)
+
+
+def skipped_and_torn(data: Datasets, torn: list[Path]) -> dict[str, list[str]]:
+    """What a training's summary says it left out: clips without usable labels, torn writes removed."""
+    return {"skipped_clips": [f"{name}: {why}" for name, why in data.skipped],
+            "removed_torn_writes": [str(t) for t in torn]}

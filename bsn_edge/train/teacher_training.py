@@ -16,7 +16,7 @@ from bsn_edge import semantics as sm
 from bsn_edge.data.cache import SampleCache
 from bsn_edge.models import create_teacher
 from bsn_edge.progress import progress_bar
-from bsn_edge.train.batches import datasets, sample_cache, training_batches
+from bsn_edge.train.batches import datasets, sample_cache, skipped_and_torn, training_batches
 from bsn_edge.train.checkpoints import open_run
 from bsn_edge.train.config import Config
 from bsn_edge.train.device import autocast, autocast_dtype, distributed, layout, precision_name, scaled, train_device
@@ -90,9 +90,12 @@ def _teacher_to_start(cfg: Config, run: Run) -> tuple[torch.nn.Module, bool]:
     return teacher, False
 
 
-def _teacher_val(teacher: torch.nn.Module, cfg: Config, val_cache, dtype: torch.dtype | None) -> dict[str, float]:
-    return {f"val_{k}": v for k, v in teacher_miou(teacher, val_cache, cfg.teacher.scale, cfg.train.eval_frames,
-                                                   dtype).items()}
+def _teacher_record(teacher: torch.nn.Module, cfg: Config, val_cache, dtype: torch.dtype | None, step: int,
+                    samples: int, seconds: float) -> dict[str, Any]:
+    """The teacher's history line at ``step``: its held-out IoU by class group."""
+    miou = teacher_miou(teacher, val_cache, cfg.teacher.scale, cfg.train.eval_frames, dtype)
+    return {"phase": "teacher", "step": step, "samples": samples, "seconds": round(seconds, 1),
+            "precision": precision_name(dtype), **{f"val_{k}": v for k, v in miou.items()}}
 
 
 def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool,
@@ -130,8 +133,7 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         run.trim_history("teacher", start)
         if start == 0 and t.init and val_cache is not None and t.eval_every:
             # where a teacher trained on from another begins
-            run.append_history({"phase": "teacher", "step": 0, "samples": 0, "seconds": 0.0,
-                                "precision": precision_name(dtype), **_teacher_val(teacher, cfg, val_cache, dtype)})
+            run.append_history(_teacher_record(teacher, cfg, val_cache, dtype, 0, 0, 0.0))
     model.train()
     losses, t0 = [], time.perf_counter()
     for step in bar:
@@ -146,9 +148,8 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
         done = step + 1
         seconds = seconds_before + time.perf_counter() - t0
         if rank == 0 and val_cache is not None and t.eval_every and (done % t.eval_every == 0 or done == t.steps):
-            run.append_history({"phase": "teacher", "step": done, "samples": done * t.batch_size * world,
-                                "seconds": round(seconds, 1), "ce": float(np.mean(losses)),
-                                "precision": precision_name(dtype), **_teacher_val(teacher, cfg, val_cache, dtype)})
+            run.append_history({**_teacher_record(teacher, cfg, val_cache, dtype, done, done * t.batch_size * world,
+                                                  seconds), "ce": float(np.mean(losses))})
             losses = []
         if rank == 0 and done < t.steps and done % t.checkpoint_every == 0:
             run.save_teacher_progress(teacher.state_dict(), {**optim.state_dict(), "step": done,
@@ -176,6 +177,4 @@ def train_teacher_alone(cfg: Config, data_dir: str | Path, out: str | Path, resu
     val = sample_cache(cfg, data.val_ds, show, "caching validation samples") \
         if data.val_ds is not None and cfg.data.cache != "off" else None
     train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val, resume=resume)
-    return {"teacher_steps": cfg.teacher.steps, "teacher": str(run.teacher_path),
-            "skipped_clips": [f"{name}: {why}" for name, why in data.skipped],
-            "removed_torn_writes": [str(t) for t in torn]}
+    return {"teacher_steps": cfg.teacher.steps, "teacher": str(run.teacher_path), **skipped_and_torn(data, torn)}

@@ -24,7 +24,7 @@ from bsn_edge.data.camera_mix import CameraMix
 from bsn_edge.data.guessed_camera import GuessedDepth
 from bsn_edge.models import BlindSpotNet, create_model, get_spec, start_from
 from bsn_edge.progress import progress_bar
-from bsn_edge.train.batches import datasets, sample_cache, training_batches
+from bsn_edge.train.batches import datasets, sample_cache, skipped_and_torn, training_batches
 from bsn_edge.train.checkpoints import carried, checkpoint, finish, open_run
 from bsn_edge.train.config import Config
 from bsn_edge.train.device import autocast, autocast_dtype, distributed, layout, precision_name, scaled, train_device
@@ -142,8 +142,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
             break
     summary: dict[str, Any] = {"steps": cfg.train.steps, "resumed_from": start, "steps_run": done - start,
                                "seconds": round(time.perf_counter() - t0, 1), "final_loss": last,
-                               "skipped_clips": [f"{name}: {why}" for name, why in data.skipped],
-                               "removed_torn_writes": [str(t) for t in torn]}
+                               **skipped_and_torn(data, torn)}
     if done < cfg.train.steps:
         summary["stopped_at"] = done
     elif rank == 0:
