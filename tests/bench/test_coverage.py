@@ -1,6 +1,6 @@
 """The coverage check's report: every arm per clip, in clip order, and pooled per test set."""
 
-from benchmarks.bench_coverage import ARMS, markdown
+from benchmarks.archive.bench_coverage import ARMS, markdown
 
 
 def test_report_has_every_arm_per_clip_in_clip_order():

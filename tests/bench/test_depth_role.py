@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from benchmarks import bench_depth_role as role
+from benchmarks.archive import bench_depth_role as role
 from benchmarks.ledger import Ledger
 from bsn_edge.train import Run
 

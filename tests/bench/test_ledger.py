@@ -109,8 +109,8 @@ def test_read_opens_any_experiment_and_trained_keys_skip_the_shared_records(tmp_
 
 
 def test_the_rescore_report_lists_runs_whose_weights_are_gone_and_averages_the_rest(tmp_path):
-    from benchmarks.bench_bsn_rescore import markdown as rescore_md
-    from benchmarks.bench_bsn_rescore import score_runs
+    from benchmarks.archive.bench_bsn_rescore import markdown as rescore_md
+    from benchmarks.archive.bench_bsn_rescore import score_runs
     led = Ledger(tmp_path / "l.json", EXPERIMENT)
     led.put("BSN/town/seed0", {})
     scores = score_runs(led, tmp_path / "work", {"table": tmp_path / "work" / "test"})  # no runs: none scored
@@ -142,7 +142,7 @@ def test_the_rescore_report_lists_runs_whose_weights_are_gone_and_averages_the_r
 
 
 def test_the_rescore_reads_the_baselines_through_bsns_first_kept_run(tmp_path, monkeypatch):
-    from benchmarks import bench_bsn_rescore as rescore
+    from benchmarks.archive import bench_bsn_rescore as rescore
     read = []
     monkeypatch.setattr(rescore, "score_baselines", lambda run, data, out, style: read.append((run, out)) or {})
     scores = {"BSN-D/suburb/seed0": {"model": "BSN-D", "name": "small-light-d", "source": "suburb", "seed": 0},
@@ -157,7 +157,7 @@ def test_the_rescore_reads_the_baselines_through_bsns_first_kept_run(tmp_path, m
 
 
 def test_a_baseline_score_is_read_back_only_through_the_same_run_after_its_weights(tmp_path, monkeypatch):
-    from benchmarks import bench_bsn_rescore as rescore
+    from benchmarks.archive import bench_bsn_rescore as rescore
     made = []
 
     def fake_eval(run, data, out, *extra):

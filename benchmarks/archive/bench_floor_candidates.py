@@ -1,6 +1,6 @@
 """Speed only: what the int8 floor multiple of the light model becomes with layers int8 may run better.
 
-    python -m benchmarks.bench_floor_candidates
+    python -m benchmarks.archive.bench_floor_candidates
 
 Each candidate is the light model with one change, untrained (weights at their initialisation,
 calibrated on random frames: latency does not depend on what was learnt), exported and quantized

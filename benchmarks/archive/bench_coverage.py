@@ -1,9 +1,9 @@
 """Does one clip of the missing kind close the gap? A controlled check of Table 2's suburb collapse.
 
-    python -m benchmarks.bench_coverage --family shared-light --out benchmarks/results \
+    python -m benchmarks.archive.bench_coverage --family shared-light --out benchmarks/results \
         --work ~/.cache/bsn-edge/accuracy [--key BSN/suburb/seed1] [--steps 600]
 
-:mod:`benchmarks.bench_bsn_rescore` found the suburb-trained runs of Table 2 failing on wide-angle
+:mod:`benchmarks.archive.bench_bsn_rescore` found the suburb-trained runs of Table 2 failing on wide-angle
 night clips, which suburb's training clips do not include. If that gap is the cause, training on one
 such clip should close it, and training on another clip of a kind suburb already has should not.
 
@@ -21,6 +21,14 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from benchmarks.archive.bench_bsn_rescore import (
+    add_table_arguments,
+    arms_by_clip,
+    describe_clips,
+    read_table,
+    score,
+    score_path,
+)
 from benchmarks.bench_bsn_accuracy import (
     FINETUNE_LR,
     report_name,
@@ -28,14 +36,6 @@ from benchmarks.bench_bsn_accuracy import (
     source_run,
     teacher_settings,
     trained_keys,
-)
-from benchmarks.bench_bsn_rescore import (
-    add_table_arguments,
-    arms_by_clip,
-    describe_clips,
-    read_table,
-    score,
-    score_path,
 )
 from benchmarks.common import records, train_run, write_result
 from bsn_edge.cli import label as label_cli

@@ -1,7 +1,7 @@
 """bsn-run end to end with the model camera's remap, against a reference build that resized.
 
-    python -m benchmarks.bench_remap --out benchmarks/results --ref-python OLD/bin/python
-    python -m benchmarks.bench_remap --ref-python OLD/bin/python --ref-camera --name remap_mirror
+    python -m benchmarks.archive.bench_remap --out benchmarks/results --ref-python OLD/bin/python
+    python -m benchmarks.archive.bench_remap --ref-python OLD/bin/python --ref-camera --name remap_mirror
 
 ``--ref-camera``: the reference is a build with the model camera too (a change to the warp), so it
 reads the same camera files and calibrates online the same way; ``--name`` names the report.

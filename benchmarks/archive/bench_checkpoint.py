@@ -1,6 +1,6 @@
 """A training checkpoint's state file: written and read as bsn-train does, against its earlier form.
 
-    python -m benchmarks.bench_checkpoint --out benchmarks/results [--model shared-light]
+    python -m benchmarks.archive.bench_checkpoint --out benchmarks/results [--model shared-light]
 
 A run's ``state.pt`` holds the weights (``model.pt``'s exact bytes, with their sha256) next to the
 optimizer's state, so a kill between the two files never leaves them disagreeing. It used to hold

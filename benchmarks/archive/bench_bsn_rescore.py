@@ -1,6 +1,6 @@
 """Table 2's kept runs scored again: without a decision threshold, and on more test clips.
 
-    python -m benchmarks.bench_bsn_rescore --family shared-light --out benchmarks/results \
+    python -m benchmarks.archive.bench_bsn_rescore --family shared-light --out benchmarks/results \
         --work ~/.cache/bsn-edge/accuracy [--more-test-clips 6]
 
 Each source-style run of :mod:`benchmarks.bench_bsn_accuracy` picks its threshold on its own style's

@@ -1,6 +1,6 @@
 """Label depth on real frames against LiDAR: the road plane (``--depth ground``) vs the depth head.
 
-    python -m benchmarks.bench_label_depth --run RUN --out benchmarks/results
+    python -m benchmarks.archive.bench_label_depth --run RUN --out benchmarks/results
 
 ``bsn-adapt`` labels a user's clips with the run's depth head, or, where that does not fit the
 landmarks, with depth from the road plane of the camera's mounting and the run's teacher

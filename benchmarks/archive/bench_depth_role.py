@@ -1,6 +1,6 @@
 """Where does depth reach B? A controlled check of why BSN-D is not below BSN in Table 2.
 
-    python -m benchmarks.bench_depth_role --family shared-light --out benchmarks/results \
+    python -m benchmarks.archive.bench_depth_role --family shared-light --out benchmarks/results \
         --work ~/.cache/bsn-edge/accuracy [--seeds 1 2] [--style town]
 
 In the paper D and B are two networks, and BSN-D's B has no depth at all. In a shared-encoder
@@ -38,6 +38,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from benchmarks.archive.bench_bsn_rescore import (
+    add_table_arguments,
+    arms_by_clip,
+    describe_clips,
+    read_table,
+    score,
+    score_path,
+)
 from benchmarks.bench_bsn_accuracy import (
     STYLES,
     prepare,
@@ -46,14 +54,6 @@ from benchmarks.bench_bsn_accuracy import (
     source_run,
     source_settings,
     teacher_run,
-)
-from benchmarks.bench_bsn_rescore import (
-    add_table_arguments,
-    arms_by_clip,
-    describe_clips,
-    read_table,
-    score,
-    score_path,
 )
 from benchmarks.bench_campaign import run_curve
 from benchmarks.common import train_run, write_result

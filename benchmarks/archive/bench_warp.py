@@ -1,6 +1,6 @@
 """The warp into the model camera, stage by stage, on the real clips with their cameras.
 
-    python -m benchmarks.bench_warp [--frames 300] [--rounds 5] [--out benchmarks/results]
+    python -m benchmarks.archive.bench_warp [--frames 300] [--rounds 5] [--out benchmarks/results]
 
 For each clip (the 1280x720 Udacity clip with its camera file; the same clip and the 960x540
 highway clip as ``bsn-run`` takes them without one: the model camera, rescaled), OpenCV on one
