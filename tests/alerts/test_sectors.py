@@ -89,3 +89,20 @@ def test_a_score_never_passes_one_however_much_of_a_sector_is_blind():
     few[0, np.nonzero(g.column_sector == 0)[0][:3]] = True     # 3 pixels at 15 m: 3 * 0.5 / (0.02 * N)
     part = g.read(few, np.full((100, 200), 15.0, np.float32))[0]
     assert part.score == pytest.approx(1.5 / (0.02 * g.sector_pixels[0])) and part.score < 1
+
+
+def test_the_number_of_sectors_comes_from_one_list():
+    """SECTORS sizes the geometry, the alert frame and the bus's signals; a frame of another count is refused."""
+    import cantools
+
+    from bsn_edge.alerts import SECTORS, AlertFrame, Level, SectorAlert, SystemState
+    from bsn_edge.alerts.can_codec import DBC_PATH, SIDES
+
+    g = SectorGeometry(Intrinsics(300.0, 300.0, 256.0, 128.0, 512, 256))
+    assert len(g.sector_columns) == len(SECTORS) == len(g.read(np.zeros((256, 512), bool), np.ones((256, 512))))
+    assert sorted(set(g.column_sector.tolist())) == list(range(len(SECTORS)))
+    signals = {s.name for m in cantools.database.load_file(str(DBC_PATH)).messages for s in m.signals}
+    assert all(f"{side}_Level" in signals for side in SIDES) and len(SIDES) == len(SECTORS)
+    none = SectorAlert(0.0, Level.NONE, None)
+    with pytest.raises(ValueError, match="one reading per sector"):
+        AlertFrame(0.0, (none,) * (len(SECTORS) - 1), SystemState.OK, 10.0)
