@@ -7,6 +7,7 @@
 #   cd ~/.cache/bsn-edge/campaign && REPO=/path/to/bsn-edge /path/to/bsn-edge/models/campaign/real_leg.sh
 # Its control, the same leg without real pictures: RUN=real0 REAL=0 .../real_leg.sh
 # R3, the same with the default's synthetic-only teacher: RUN=real3 TEACHER=default .../real_leg.sh
+# R4, R2 at 1e-4 (a leg that moves less from the default): RUN=real4 LR=0.0001 .../real_leg.sh
 set -euo pipefail
 REPO=${REPO:?set REPO to the checkout}
 RUN=${RUN:-real1}
