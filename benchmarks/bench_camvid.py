@@ -15,7 +15,7 @@ part, at least :data:`CLEAR_PX` pixels from anything but road or pavement, that 
 
 from __future__ import annotations
 
-from pathlib import Path
+import argparse
 from typing import Any
 
 import cv2
@@ -23,7 +23,8 @@ import numpy as np
 
 from benchmarks.bench_realboxes import frac
 from benchmarks.bench_realcam import REAL, licence
-from benchmarks.common import engines, models_parser, write_result
+from benchmarks.common import engines, models_parser
+from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration
 from bsn_edge.labels import camvid
 from bsn_edge.runtime.camera_state import CameraState
@@ -101,18 +102,21 @@ def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool 
             "camera": state.summary().get("first_guess")}
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = models_parser(__doc__, "camvid")
     p.add_argument("--drive", default=camvid.HELD_OUT, help=f"the drive scored (default {camvid.HELD_OUT})")
     p.add_argument("--assumed-camera", action="store_true",
                    help="also score each model with a camera file that says only what bsn-run assumes (the model "
                         "camera's field of view and mounting): what the first guess and online calibration win "
                         "or cost")
-    args = p.parse_args(argv)
+    return p
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     root = REAL / "camvid"
     if not root.is_dir():
         print(f"no CamVid frames at {root}: nothing to score")
-        return 0
+        return None
     models = engines(p, args.model)
     frames = list(camvid.frames_of(root, args.drive, "train"))
     result: dict[str, Any] = {"drive": args.drive, "frames": len(frames), "marked_share": MARKED_SHARE,
@@ -138,9 +142,11 @@ def main(argv: list[str] | None = None) -> int:
           f"{100 * LOWER_SHARE:.0f} % of the 480x360 frame; open road: road pixels in that lower part at least "
           f"{CLEAR_PX} px from anything but road or pavement.", "", *table, "",
           f"Frames and labels: {licence('camvid')}."]
-    write_result(Path(args.out), args.name, result, "\n".join(md))
-    print("\n".join(table))
-    return 0
+    return Report(result, md, table)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ where it is at least as good as the assumed camera on every source.
 
 from __future__ import annotations
 
+import argparse
 import json
 import tempfile
 from pathlib import Path
@@ -31,7 +32,8 @@ import numpy as np
 from benchmarks import bench_camvid, bench_realboxes
 from benchmarks.bench_realboxes import frac
 from benchmarks.bench_realcam import REAL
-from benchmarks.common import engines, models_parser, write_result
+from benchmarks.common import engines, models_parser
+from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration
 from bsn_edge.labels import camvid
 from bsn_edge.runtime.camera_state import CameraState
@@ -97,9 +99,7 @@ def rendered(engine: Engine, work: Path) -> dict[str, Any]:
             **{m: round(float(c[0] / max(c[1], 1)), 4) for m, c in counts.items()}}
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = models_parser(__doc__, "first_guess")
-    args = p.parse_args(argv)
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
     models = engines(p, args.model)
     result: dict[str, Any] = {"models": {}}
     table = ["| model | source | guess (no camera file) | assumed camera file | true camera file |",
@@ -128,9 +128,11 @@ def main(argv: list[str] | None = None) -> int:
           "its own camera file where it has one. Rendered clips: blind-spot IoU against the renderer's true blind "
           f"spots on the raw frames, frames {SETTLE}-{FRAMES - 1} of each. Real sources: the rules of "
           "[realboxes](realboxes.md) and [camvid](camvid.md).", "", *table]
-    write_result(Path(args.out), args.name, result, "\n".join(md))
-    print("\n".join(table))
-    return 0
+    return Report(result, md, table)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, models_parser(__doc__, "first_guess"), argv)
 
 
 if __name__ == "__main__":

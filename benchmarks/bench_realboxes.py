@@ -21,6 +21,7 @@ file loses.
 
 from __future__ import annotations
 
+import argparse
 import json
 from collections import defaultdict
 from pathlib import Path
@@ -31,7 +32,8 @@ import numpy as np
 
 from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_camera
 from benchmarks.bench_realview import city_pair_camera
-from benchmarks.common import engines, models_parser, write_result
+from benchmarks.common import engines, models_parser
+from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.exif import from_exif
 from bsn_edge.card import ModelCard
@@ -178,15 +180,18 @@ def frac(pair: list[int]) -> str:
     return f"{pair[0]} of {pair[1]}" + (f" ({100 * pair[0] / pair[1]:.0f} %)" if pair[1] else "")
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = models_parser(__doc__, "realboxes")
     p.add_argument("--withhold-camera", action="store_true",
                    help="score only the frames that have a camera file, each model twice: with it, and as bsn-run "
                         "sees them without one")
-    args = p.parse_args(argv)
+    return p
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to score")
-        return 0
+        return None
     models = engines(p, args.model)
     frames = load_frames(json.loads(BOXES.read_text()))
     runs = [(name, engine, False) for name, engine in models.items()]
@@ -233,9 +238,11 @@ def main(argv: list[str] | None = None) -> int:
           "blind spot at the model's threshold; open road flagged is the share of open-road box pixels that are. "
           "Boxes in the pictures: green marked, orange missed, blue open road; blind spots in red." + withheld, "",
           *table, "", "## Frames", "", *lines]
-    write_result(out, args.name, result, "\n".join(md))
-    print("\n".join(table))
-    return 0
+    return Report(result, md, table)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

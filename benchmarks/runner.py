@@ -1,0 +1,36 @@
+"""The one way a benchmark runs: its options parsed, what it measured returned as a :class:`Report`, and the
+report written beside the machine it ran on (``<name>.json`` and ``<name>.md`` in ``--out``)."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from benchmarks.common import write_result
+
+
+@dataclass(frozen=True)
+class Report:
+    """What one benchmark measured: the figures (``result``, the JSON), the report's lines (Markdown) and
+    what the terminal is shown (default: the report's path)."""
+
+    result: dict[str, Any]
+    markdown: list[str]
+    printed: list[str] = field(default_factory=list)
+
+
+Measure = Callable[[argparse.Namespace, argparse.ArgumentParser], "Report | None"]
+
+
+def run(measure: Measure, parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
+    """Parse ``argv`` with ``parser`` (which has ``--out`` and ``--name``), measure, write the report.
+    ``measure`` returns None when there is nothing to measure here (its data is absent: it says so)."""
+    args = parser.parse_args(argv)
+    report = measure(args, parser)
+    if report is None:
+        return 0
+    path = write_result(args.out, args.name, report.result, "\n".join(report.markdown))
+    print("\n".join(report.printed) if report.printed else f"wrote {path}")
+    return 0
