@@ -40,7 +40,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.common import named, write_result
+from benchmarks.common import named
+from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.calibration.mounting_step import calibrate_mounting
@@ -371,13 +372,79 @@ def picture(sample: Sample, depth: np.ndarray, prob: np.ndarray, threshold: floa
     return np.hstack([tint(img, mask), col])
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
                    help="exported models to compare, named in the report by NAME (default: its file's stem); the "
                         "first is the one the others' differences are taken from (default: the shipped one)")
-    args = p.parse_args(argv)
+    p.add_argument("--name", default="realcam", help="the report's name in --out")
+    return p
+
+
+def _sets() -> tuple[list[tuple[str, str, list, tuple[str, ...]]], dict[str, Any]]:
+    """(key, title, samples, readings) of each real set, and the Udacity camera as the product found it. The
+    other DDAD cameras show the car's own body low in the picture, where the roof LiDAR sees road the camera
+    cannot, so only objects are read there."""
+    uda, uda_info = udacity_samples()
+    bands = tuple(OBJECT_BANDS)
+    return [("ddad", "DDAD front (LiDAR)", ddad_samples("front"), ("road", "object", *bands, "car distance")),
+            ("ddad_other", "DDAD other cameras (LiDAR)", ddad_samples("other"), ("object", *bands, "car distance")),
+            ("udacity", "Udacity (lane geometry)", uda, ("road",))], uda_info
+
+
+def _readings(engine: Engine, samples: list, readings: tuple[str, ...], way: str, picture_to: Path | None):
+    """Predicted and true depth of each reading over ``samples`` read ``way``; the first sample's picture
+    written to ``picture_to`` when given."""
+    got: dict[str, tuple[list[np.ndarray], list[np.ndarray]]] = {r: ([], []) for r in readings}
+    for s in samples:
+        pr, raw_depth, raw_prob = predict(engine, s, way)
+        for r in readings:
+            if r == "car distance":
+                pd, td = object_distances(pr, s)
+            else:
+                m = s.points(r)
+                pd, td = pr[m], s.z[m]
+            got[r][0].append(pd)
+            got[r][1].append(td)
+        if picture_to is not None and s is samples[0]:
+            cv2.imwrite(str(picture_to), picture(s, raw_depth, raw_prob, engine.card.threshold))
+    return got
+
+
+def _model_section(name: str, engine: Engine, sets: list, out: Path,
+                   errors: dict[str, dict[str, FrameErrors]]) -> tuple[dict[str, Any], list[str]]:
+    """One model's figures on every set, both ways, and its report section; its per-frame errors in the model
+    camera added to ``errors`` ("data / reading" -> model)."""
+    res: dict[str, Any] = {}
+    lines = [f"## {name}", "", "| data | reading | way | " + " | ".join(f"{lo}-{hi} m AbsRel / median / d1"
+                                                                      for lo, hi in BINS) + " |",
+             "|---|---|---|" + "---|" * len(BINS)]
+    for key, title, samples, readings in sets:
+        for way in ("resize", "model camera"):
+            shown = out / f"realcam_{name}_{key}.png" if way == "model camera" else None
+            got = _readings(engine, samples, readings, way, shown)
+            for r in readings:
+                if not got[r][0]:
+                    continue
+                if way == "model camera":
+                    errors.setdefault(f"{title} / {r}", {})[name] = FrameErrors.of(*got[r])
+                m = metrics(np.concatenate(got[r][0]), np.concatenate(got[r][1]))
+                res[f"{title} / {r} / {way}"] = m
+                cells = [f"{m[b]['abs_rel']:.3f} / {m[b]['median_ratio']:.2f} / {m[b]['delta_1.25']:.2f}"
+                         + (f" ({m[b]['n']})" if r == "car distance" else "")
+                         if (b := f"{lo}-{hi}") in m else "-" for lo, hi in BINS]
+                lines.append(f"| {title} | {r} | {way} | " + " | ".join(cells) + " |")
+    lines += ["", "Car distance cells give the number of objects in brackets (an object seen in three "
+              "frames counts three times).", "",
+              " ".join(f"![{name} {title}](realcam_{name}_{key}.png)" for key, title, samples, _ in sets
+                       if samples), "",
+              "Frames: " + "; ".join(sorted({licence("ddad" if key.startswith("ddad") else key)
+                                             for key, _, samples, _ in sets if samples})).rstrip(".") + ".", ""]
+    return res, lines
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     try:
         models = named(args.model or [str(DEFAULT_MODEL)])
     except ValueError as e:
@@ -385,14 +452,8 @@ def main(argv: list[str] | None = None) -> int:
     names = list(models)
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to measure")
-        return 0
-    uda, uda_info = udacity_samples()
-    # (key, title, samples, readings): the other DDAD cameras show the car's own body low in the
-    # picture, where the roof LiDAR sees road the camera cannot, so only objects are read there
-    bands = tuple(OBJECT_BANDS)
-    sets = [("ddad", "DDAD front (LiDAR)", ddad_samples("front"), ("road", "object", *bands, "car distance")),
-            ("ddad_other", "DDAD other cameras (LiDAR)", ddad_samples("other"), ("object", *bands, "car distance")),
-            ("udacity", "Udacity (lane geometry)", uda, ("road",))]
+        return None
+    sets, uda_info = _sets()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {"models": {}, "udacity_camera": uda_info,
@@ -410,45 +471,8 @@ def main(argv: list[str] | None = None) -> int:
              "the bus carries. Frames: " + ", ".join(f"{t} {len(s)}" for _, t, s, _ in sets) + ".", ""]
     errors: dict[str, dict[str, FrameErrors]] = {}       # "data / reading" -> model -> its frames' errors
     for name, mp in models.items():
-        engine = Engine(mp)
-        res: dict[str, Any] = {}
-        lines += [f"## {name}", "", "| data | reading | way | " + " | ".join(f"{lo}-{hi} m AbsRel / median / d1"
-                                                                          for lo, hi in BINS) + " |",
-                  "|---|---|---|" + "---|" * len(BINS)]
-        for key, title, samples, readings in sets:
-            for way in ("resize", "model camera"):
-                got: dict[str, tuple[list[np.ndarray], list[np.ndarray]]] = {r: ([], []) for r in readings}
-                for s in samples:
-                    pr, raw_depth, raw_prob = predict(engine, s, way)
-                    for r in readings:
-                        if r == "car distance":
-                            pd, td = object_distances(pr, s)
-                        else:
-                            m = s.points(r)
-                            pd, td = pr[m], s.z[m]
-                        got[r][0].append(pd)
-                        got[r][1].append(td)
-                    if way == "model camera" and s is samples[0]:
-                        cv2.imwrite(str(out / f"realcam_{name}_{key}.png"),
-                                    picture(s, raw_depth, raw_prob, engine.card.threshold))
-                for r in readings:
-                    if not got[r][0]:
-                        continue
-                    if way == "model camera":
-                        errors.setdefault(f"{title} / {r}", {})[name] = FrameErrors.of(*got[r])
-                    m = metrics(np.concatenate(got[r][0]), np.concatenate(got[r][1]))
-                    res[f"{title} / {r} / {way}"] = m
-                    cells = [f"{m[b]['abs_rel']:.3f} / {m[b]['median_ratio']:.2f} / {m[b]['delta_1.25']:.2f}"
-                             + (f" ({m[b]['n']})" if r == "car distance" else "")
-                             if (b := f"{lo}-{hi}") in m else "-" for lo, hi in BINS]
-                    lines.append(f"| {title} | {r} | {way} | " + " | ".join(cells) + " |")
-        results["models"][name] = res
-        lines += ["", "Car distance cells give the number of objects in brackets (an object seen in three "
-                  "frames counts three times).", "",
-                  " ".join(f"![{name} {title}](realcam_{name}_{key}.png)" for key, title, samples, _ in sets
-                           if samples), "",
-                  "Frames: " + "; ".join(sorted({licence("ddad" if key.startswith("ddad") else key)
-                                                 for key, _, samples, _ in sets if samples})).rstrip(".") + ".", ""]
+        results["models"][name], section = _model_section(name, Engine(mp), sets, out, errors)
+        lines += section
     table, results["intervals"] = interval_table(errors, names)
     lo, hi = SPAN_M
     lines += [f"## Model camera, {lo}-{hi} m: AbsRel and its 90 % interval over the frames", "",
@@ -457,9 +481,11 @@ def main(argv: list[str] | None = None) -> int:
               "resamples (`*`: the interval leaves out 0). A difference without `*` is within what these "
               "frames' own spread gives; one with it holds on these frames, not necessarily on other cars "
               "and scenes (the resampling draws only the frames there are).", "", *table, ""]
-    write_result(out, "realcam", results, "\n".join(lines))
-    print("\n".join(lines))
-    return 0
+    return Report(results, lines, lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":
