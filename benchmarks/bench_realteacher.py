@@ -38,7 +38,8 @@ from benchmarks.bench_realboxes import (
     model_frame,
 )
 from benchmarks.bench_realcam import REAL
-from benchmarks.common import named, write_result
+from benchmarks.common import named
+from benchmarks.runner import Report, run
 from bsn_edge import semantics as sm
 from bsn_edge.card import ModelCard
 from bsn_edge.cli.common import CHECKOUT
@@ -158,33 +159,36 @@ def panel(image: np.ndarray, colour: np.ndarray, rows: list[dict[str, Any]], tit
     return boxed(cv2.addWeighted(image, 0.5, colour, 0.5, 0.0), rows, "seen", title)
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--teacher", action="append", metavar="[NAME=]RUN",
                    help="runs whose teachers are scored side by side (a run, a teacher-only run or a shipped run; "
                         "default: the shipped default's, models/default)")
     p.add_argument("--name", default="realteacher", help="the report's name in --out")
-    args = p.parse_args(argv)
-    if not REAL.is_dir():
-        print(f"no real data at {REAL}: nothing to score")
-        return 0
+    return p
+
+
+def _teachers(p: argparse.ArgumentParser, specs: list[str] | None) -> dict[str, tuple[Any, float, str, bool]]:
+    """Each teacher ``--teacher`` names: (network, input scale, encoder, pretrained)."""
     teachers = {}
     try:
-        specs = named(args.teacher or [f"default={CHECKOUT / 'models' / 'default'}"])
+        named_specs = named(specs or [f"default={CHECKOUT / 'models' / 'default'}"])
     except ValueError as e:
         p.error(str(e))
-    for name, path in specs.items():
+    for name, path in named_specs.items():
         run = Run(path)
         teacher = run.load_teacher()
         if teacher is None:
             raise SystemExit(f"{path}: no teacher there")
         built = run.teacher_holder().teacher_config()
         teachers[name or Path(path).name] = (teacher, built.scale, built.encoder, built.pretrained)
-    card = read_card(DEFAULT_MODEL)
-    frames = load_frames(json.loads(BOXES.read_text()))
-    out = Path(args.out)
-    result: dict[str, Any] = {"seen_share": MARKED_SHARE, "teachers": {}, "frames": {}}
+    return teachers
+
+
+def _frames(card, frames: list, teachers: dict, out: Path, report: str, result: dict[str, Any]):
+    """Every frame labelled by every teacher and scored on its boxes, its picture written; the rows by
+    teacher, the labels outside the boxes by teacher, and the report's frame section."""
     per: dict[str, list[dict[str, Any]]] = defaultdict(list)
     elsewhere: dict[str, list[tuple[int, int]]] = defaultdict(list)
     lines = []
@@ -198,11 +202,15 @@ def main(argv: list[str] | None = None) -> int:
             result["frames"].setdefault(fr.name, {})[name] = rows
             cells.append(panel(fr.image, colour, rows, name))
         gap = np.full((cells[0].shape[0], 6, 3), 255, np.uint8)
-        fname = f"{args.name}_{k:02d}.jpg"
+        fname = f"{report}_{k:02d}.jpg"
         out.mkdir(parents=True, exist_ok=True)
         cv2.imwrite(str(out / fname), np.hstack([c for cell in cells for c in (cell, gap)][:-1]),
                     [cv2.IMWRITE_JPEG_QUALITY, 85])
         lines += [f"### {fr.name}", "", f"![{fr.name}]({fname})", "", f"Frames: {fr.credit.rstrip('.')}.", ""]
+    return per, elsewhere, lines
+
+
+def _box_table(teachers: dict, per: dict, elsewhere: dict, result: dict[str, Any]) -> list[str]:
     table = ["| teacher (encoder) | near occluders seen | all occluders seen | mean share of the box, near / all | "
              "vehicles near / all | people near / all | cyclists near / all | open road labelled road | "
              "vehicle or person outside the boxes |",
@@ -217,6 +225,11 @@ def main(argv: list[str] | None = None) -> int:
                      f"{frac(g['people']['near'])} / {frac(g['people']['all'])} | "
                      f"{frac(g['cyclists']['near'])} / {frac(g['cyclists']['all'])} | "
                      f"{100 * s['open_road_labelled_road']:.1f} % | {100 * s['objects_outside_boxes']:.1f} % |")
+    return table
+
+
+def _camvid_section(card, teachers: dict, result: dict[str, Any]) -> list[str]:
+    """Each teacher's per-class IoU on CamVid's held-out drive (nothing when CamVid is not at hand)."""
     cv_table = ["| teacher (encoder) | " + " | ".join(IOU_CLASSES) + " |", "|---|" + "---|" * len(IOU_CLASSES)]
     cv_frames = 0
     if (REAL / "camvid").is_dir():
@@ -226,12 +239,26 @@ def main(argv: list[str] | None = None) -> int:
             result["teachers"][name]["camvid_iou"] = r["iou"]
             cv_table.append(f"| {name} ({encoder}{', ImageNet' if pretrained else ''}) | "
                             + " | ".join(f"{r['iou'][k]:.3f}" for k in IOU_CLASSES) + " |")
-    camvid_md = ["## CamVid's held-out drive, per class", "",
-                 f"IoU on CamVid's held-out drive, {cv_frames} labelled frames (kept out of every training "
-                 "run), each warped as `bsn-run` warps a folder with no camera file and compared on the raw pixels "
-                 "the model camera sees that CamVid labels. Vehicle: car, truck, bus, train, motorcycle; person and "
-                 "cyclist: person, rider, bicycle (CamVid's pedestrian and bicyclist).", "", *cv_table, ""] \
-        if cv_frames else []
+    if not cv_frames:
+        return []
+    return ["## CamVid's held-out drive, per class", "",
+            f"IoU on CamVid's held-out drive, {cv_frames} labelled frames (kept out of every training "
+            "run), each warped as `bsn-run` warps a folder with no camera file and compared on the raw pixels "
+            "the model camera sees that CamVid labels. Vehicle: car, truck, bus, train, motorcycle; person and "
+            "cyclist: person, rider, bicycle (CamVid's pedestrian and bicyclist).", "", *cv_table, ""]
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
+    if not REAL.is_dir():
+        print(f"no real data at {REAL}: nothing to score")
+        return None
+    teachers = _teachers(p, args.teacher)
+    card = read_card(DEFAULT_MODEL)
+    frames = load_frames(json.loads(BOXES.read_text()))
+    result: dict[str, Any] = {"seen_share": MARKED_SHARE, "teachers": {}, "frames": {}}
+    per, elsewhere, lines = _frames(card, frames, teachers, Path(args.out), args.name, result)
+    table = _box_table(teachers, per, elsewhere, result)
+    camvid_md = _camvid_section(card, teachers, result)
     md = ["# Real occluders and road as the segmentation teachers label them", "",
           f"{len(frames)} real frames, the boxes of `realboxes` (`benchmarks/realboxes/boxes.json`). Each frame is "
           "warped into the shipped model's camera as `bsn-run` warps it and labelled by each teacher at its own "
@@ -243,9 +270,11 @@ def main(argv: list[str] | None = None) -> int:
           "people; a parked car that hides no road counts there too). In the pictures, the labels in "
           "Cityscapes colours over the frame; boxes green seen, orange missed, blue open road.", "",
           *table, "", *camvid_md, "## Frames", "", *lines]
-    write_result(out, args.name, result, "\n".join(md))
-    print("\n".join(table))
-    return 0
+    return Report(result, md, table)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":
