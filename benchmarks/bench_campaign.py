@@ -20,7 +20,7 @@ import matplotlib
 matplotlib.use("Agg")  # headless: before pyplot is imported
 import matplotlib.pyplot as plt
 
-from benchmarks.common import write_result
+from benchmarks.runner import Report, run
 from bsn_edge.train import Run
 from bsn_edge.train.run import trained_precision
 
@@ -93,18 +93,58 @@ def plot(teacher: list[dict], student: list[dict], path: Path, title: str) -> No
     plt.close(fig)
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--run", required=True, help="a bsn-train run folder with history.jsonl")
-    p.add_argument("--name", default="default")
+    p.add_argument("--name", default="default", help="the campaign's name: the report is campaign_NAME in --out")
     p.add_argument("--out", default="benchmarks/results")
-    args = p.parse_args(argv)
-    run = Run(args.run)
-    hist = run.history()
+    return p
+
+
+def _teacher_lines(teacher: list[dict[str, Any]], t_flat: dict[str, Any] | None) -> list[str]:
+    lines = ["| teacher step | samples | road | sidewalk | vehicle | person | mIoU |", "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['step']} | {r['samples']} | {r['val_road']:.3f} | {r['val_sidewalk']:.3f} | "
+              f"{r['val_vehicle']:.3f} | {r['val_person']:.3f} | {r['val_miou']:.3f} |" for r in teacher]
+    if t_flat:
+        lines.append(f"\nTeacher over its last fifth (steps {t_flat['from_step']}-{t_flat['to_step']}): mIoU "
+                     f"{t_flat['gain']:+.3f}: {'flat' if t_flat['flat'] else 'still rising'}.")
+    return [*lines, ""]
+
+
+def _student_lines(student: list[dict[str, Any]], flat: dict[str, Any] | None) -> list[str]:
+    road = any("val_road_abs_rel" in r for r in student)
+    lines = ["| step | samples | hours | loss | BCE | KD | depth loss | val IoU | threshold | val AbsRel |"
+             + (" val road AbsRel 5-40 m |" if road else ""),
+             "|---|---|---|---|---|---|---|---|---|---|" + ("---|" if road else "")]
+    nan = float("nan")
+
+    def f(r: dict[str, Any], k: str, spec: str) -> str:    # a run's starting point has no losses
+        return format(r[k], spec) if k in r else "-"
+
+    lines += [f"| {r['step']} | {r['samples']} | {r['seconds'] / 3600:.2f} | {f(r, 'loss', '.3f')} | "
+              f"{f(r, 'bce', '.3f')} | {f(r, 'kd', '.4f')} | {f(r, 'depth', '.3f')} | "
+              f"{r.get('val_iou', nan):.3f} | "
+              f"{r.get('val_threshold', nan):.2f} | {r.get('val_abs_rel', nan):.3f} |"
+              + (f" {r.get('val_road_abs_rel', nan):.3f} |" if road else "")
+              for r in student]
+    if flat:
+        lines.append(f"\nOver the last fifth (steps {flat['from_step']}-{flat['to_step']}) the validation IoU "
+                     f"gained {flat['gain']:+.3f}: {'flattened' if flat['flat'] else 'still rising'} "
+                     f"(flat: under {FLAT_IOU}).")
+    start = next((r for r in student if r["step"] == 0 and "val_iou" in r), None)
+    if start is not None and "val_iou" in student[-1]:
+        lines.append(f"From where the run began (step 0, the weights it started from) to its last record the "
+                     f"validation IoU moved {student[-1]['val_iou'] - start['val_iou']:+.3f}.")
+    return lines
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
+    trained = Run(args.run)
+    hist = trained.history()
     if not hist:
-        print(f"{run.path}: no history.jsonl records (train with train.eval_every > 0)")
-        return 2
-    cfg = run.config()
+        print(f"{trained.path}: no history.jsonl records (train with train.eval_every > 0)")
+        raise SystemExit(2)
+    cfg = trained.config()
     teacher = [r for r in hist if r.get("phase") == "teacher"]
     student = [r for r in hist if r.get("phase") == "train"]
     out = Path(args.out)
@@ -118,48 +158,21 @@ def main(argv: list[str] | None = None) -> int:
     hours = (student[-1]["seconds"] if student else 0.0) / 3600
     t_hours = (teacher[-1]["seconds"] if teacher else 0.0) / 3600
     lines = [f"# Training campaign: {args.name}", "",
-             f"Run `{run.path.name}`: `{cfg.get('model', {}).get('name', '?')}`, {total} steps of batch "
+             f"Run `{trained.path.name}`: `{cfg.get('model', {}).get('name', '?')}`, {total} steps of batch "
              f"{cfg.get('train', {}).get('batch_size')} planned; teacher {len(teacher)} records "
              f"({t_hours:.2f} h), student {len(student)} records ({hours:.2f} h of training so far).", "",
              f"![curves]({png})", ""]
     if teacher:
-        lines += ["| teacher step | samples | road | sidewalk | vehicle | person | mIoU |",
-                  "|---|---|---|---|---|---|---|"]
-        lines += [f"| {r['step']} | {r['samples']} | {r['val_road']:.3f} | {r['val_sidewalk']:.3f} | "
-                  f"{r['val_vehicle']:.3f} | {r['val_person']:.3f} | {r['val_miou']:.3f} |" for r in teacher]
-        if t_flat:
-            lines.append(f"\nTeacher over its last fifth (steps {t_flat['from_step']}-{t_flat['to_step']}): mIoU "
-                         f"{t_flat['gain']:+.3f}: {'flat' if t_flat['flat'] else 'still rising'}.")
-        lines.append("")
+        lines += _teacher_lines(teacher, t_flat)
     if student:
-        road = any("val_road_abs_rel" in r for r in student)
-        lines += ["| step | samples | hours | loss | BCE | KD | depth loss | val IoU | threshold | val AbsRel |"
-                  + (" val road AbsRel 5-40 m |" if road else ""),
-                  "|---|---|---|---|---|---|---|---|---|---|" + ("---|" if road else "")]
-        nan = float("nan")
-
-        def f(r: dict[str, Any], k: str, spec: str) -> str:    # a run's starting point has no losses
-            return format(r[k], spec) if k in r else "-"
-
-        lines += [f"| {r['step']} | {r['samples']} | {r['seconds'] / 3600:.2f} | {f(r, 'loss', '.3f')} | "
-                  f"{f(r, 'bce', '.3f')} | {f(r, 'kd', '.4f')} | {f(r, 'depth', '.3f')} | "
-                  f"{r.get('val_iou', nan):.3f} | "
-                  f"{r.get('val_threshold', float('nan')):.2f} | {r.get('val_abs_rel', float('nan')):.3f} |"
-                  + (f" {r.get('val_road_abs_rel', float('nan')):.3f} |" if road else "")
-                  for r in student]
-        if flat:
-            lines.append(f"\nOver the last fifth (steps {flat['from_step']}-{flat['to_step']}) the validation IoU "
-                         f"gained {flat['gain']:+.3f}: {'flattened' if flat['flat'] else 'still rising'} "
-                         f"(flat: under {FLAT_IOU}).")
-        start = next((r for r in student if r["step"] == 0 and "val_iou" in r), None)
-        if start is not None and "val_iou" in student[-1]:
-            lines.append(f"From where the run began (step 0, the weights it started from) to its last record the "
-                         f"validation IoU moved {student[-1]['val_iou'] - start['val_iou']:+.3f}.")
-    result = {"run": run.path.name, "config": cfg, "teacher": teacher, "student": student, "flattened": flat,
+        lines += _student_lines(student, flat)
+    result = {"run": trained.path.name, "config": cfg, "teacher": teacher, "student": student, "flattened": flat,
               "teacher_flattened": t_flat, "figure": png}
-    write_result(out, f"campaign_{args.name}", result, "\n".join(lines))
-    print("\n".join(lines))
-    return 0
+    return Report(result, lines, lines, name=f"campaign_{args.name}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

@@ -13,12 +13,14 @@ from benchmarks.common import write_result
 
 @dataclass(frozen=True)
 class Report:
-    """What one benchmark measured: the figures (``result``, the JSON), the report's lines (Markdown) and
-    what the terminal is shown (default: the report's path)."""
+    """What one benchmark measured: the figures (``result``, the JSON), the report's lines (Markdown),
+    what the terminal is shown (default: the report's path) and, for a benchmark whose reports are named
+    after what they measured, the report's name (default: ``--name``)."""
 
     result: dict[str, Any]
     markdown: list[str]
     printed: list[str] = field(default_factory=list)
+    name: str = ""
 
 
 Measure = Callable[[argparse.Namespace, argparse.ArgumentParser], "Report | None"]
@@ -31,6 +33,6 @@ def run(measure: Measure, parser: argparse.ArgumentParser, argv: list[str] | Non
     report = measure(args, parser)
     if report is None:
         return 0
-    path = write_result(args.out, args.name, report.result, "\n".join(report.markdown))
+    path = write_result(args.out, report.name or args.name, report.result, "\n".join(report.markdown))
     print("\n".join(report.printed) if report.printed else f"wrote {path}")
     return 0
