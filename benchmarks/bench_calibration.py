@@ -29,7 +29,7 @@ from typing import Any
 
 import cv2
 
-from benchmarks.common import write_result
+from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.default_model import DEFAULT_MODEL
@@ -98,7 +98,7 @@ def _median(values: list[float]) -> float:
     return statistics.median(values) if values else float("nan")
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", default=str(DEFAULT_MODEL),
                    help="whose card gives the model camera (default: the shipped one)")
@@ -113,31 +113,34 @@ def main(argv: list[str] | None = None) -> int:
                                          "essential matrix's earlier fit)")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--name", default="calibration", help="the report's name in --out")
-    args = p.parse_args(argv)
-    chosen = tuple(s[1:] for s in SETTINGS if not args.setting or s[0] in args.setting)
-    card = Engine(args.model).card
-    rows: list[dict[str, Any]] = []
-    with tempfile.TemporaryDirectory() as tmp:
-        clips: list[tuple[str, Path, Calibration | None]] = [(Path(c).name, Path(c), None) for c in args.clip]
-        for seed in SYNTH_SEEDS[:args.synthetic]:
-            seq = Path(args.cache or tmp) / f"synthetic_{seed}"
-            if not (seq / SequenceFolder.CALIBRATION).is_file() or not (seq / SequenceFolder.VIDEO).is_file():
-                # an incomplete clip in the cache (an interrupted run) is rendered again
-                write_clip(SynthConfig(frames=SYNTH_FRAMES, fps=SYNTH_FPS, seed=seed, style="suburb"), seq, force=True)
-            clips.append((seq.name, seq / SequenceFolder.VIDEO, Calibration.read(seq / SequenceFolder.CALIBRATION)))
-        for name, video, truth in clips:
-            for setting, estimator, hz in chosen:
-                res = converge(card, video, estimator, hz, truth)
-                res.update(clip=name, setting=setting)
-                if truth is not None and truth.mounting is not None:
-                    t = truth.mounting
-                    res["truth"] = {"pitch_deg": round(t.pitch_deg, 3), "yaw_deg": round(t.yaw_deg, 3),
-                                    "roll_deg": round(t.roll_deg, 3)}
-                    if "pitch_deg" in res:
-                        res["error_deg"] = {"pitch": round(res["pitch_deg"] - t.pitch_deg, 3),
-                                            "yaw": round(res["yaw_deg"] - t.yaw_deg, 3)}
-                rows.append(res)
-                print(res)
+    return p
+
+
+def _clips(args: argparse.Namespace, tmp: str) -> list[tuple[str, Path, Calibration | None]]:
+    """The videos asked for (no truth) and the synthetic drives with their true mountings."""
+    clips: list[tuple[str, Path, Calibration | None]] = [(Path(c).name, Path(c), None) for c in args.clip]
+    for seed in SYNTH_SEEDS[:args.synthetic]:
+        seq = Path(args.cache or tmp) / f"synthetic_{seed}"
+        if not (seq / SequenceFolder.CALIBRATION).is_file() or not (seq / SequenceFolder.VIDEO).is_file():
+            # an incomplete clip in the cache (an interrupted run) is rendered again
+            write_clip(SynthConfig(frames=SYNTH_FRAMES, fps=SYNTH_FPS, seed=seed, style="suburb"), seq, force=True)
+        clips.append((seq.name, seq / SequenceFolder.VIDEO, Calibration.read(seq / SequenceFolder.CALIBRATION)))
+    return clips
+
+
+def _against_truth(res: dict[str, Any], truth: Calibration | None) -> None:
+    """The true mounting and the estimate's error beside it, when the clip has one."""
+    if truth is None or truth.mounting is None:
+        return
+    t = truth.mounting
+    res["truth"] = {"pitch_deg": round(t.pitch_deg, 3), "yaw_deg": round(t.yaw_deg, 3),
+                    "roll_deg": round(t.roll_deg, 3)}
+    if "pitch_deg" in res:
+        res["error_deg"] = {"pitch": round(res["pitch_deg"] - t.pitch_deg, 3),
+                            "yaw": round(res["yaw_deg"] - t.yaw_deg, 3)}
+
+
+def _tables(rows: list[dict[str, Any]], chosen: tuple) -> list[str]:
     lines = ["| clip | estimator | frames to it | converged at | pitch / yaw (deg) | error vs truth (deg) "
              "| CPU share of one core |", "|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -159,9 +162,27 @@ def main(argv: list[str] | None = None) -> int:
         share = _median([r["estimator_cpu_share"] for r in syn])
         lines.append(f"| {setting} | {len(done)} of {len(syn)} | {frames:.0f} | {pitch:.2f} / {yaw:.2f} "
                      f"| {100 * share:.0f} % |")
-    md = "# Online calibration: frames to convergence, and the estimator's cost\n\n" + "\n".join(lines)
-    write_result(Path(args.out), args.name, {"rows": rows}, md)
-    return 0
+    return lines
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
+    chosen = tuple(s[1:] for s in SETTINGS if not args.setting or s[0] in args.setting)
+    card = Engine(args.model).card
+    rows: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, video, truth in _clips(args, tmp):
+            for setting, estimator, hz in chosen:
+                res = converge(card, video, estimator, hz, truth)
+                res.update(clip=name, setting=setting)
+                _against_truth(res, truth)
+                rows.append(res)
+                print(res)
+    md = ["# Online calibration: frames to convergence, and the estimator's cost", "", *_tables(rows, chosen)]
+    return Report({"rows": rows}, md)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":
