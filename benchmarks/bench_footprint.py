@@ -26,8 +26,9 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
-from benchmarks.common import write_result
+from benchmarks.runner import Report, run
 from bsn_edge.cli.common import CHECKOUT
 from bsn_edge.default_model import DEFAULT_MODEL
 
@@ -57,38 +58,71 @@ def import_s(python: str, modules: str, repeats: int = 7) -> float:
     return statistics.median(once(f"import {modules}") for _ in range(repeats)) - empty
 
 
-def run_rss_mb(python: str, clip: Path, out: Path) -> float:
-    """Peak RSS of bsn-run after one frame, MB (its own process)."""
+def run_rss_mb(python: str, clip: Path, summary: Path) -> float:
+    """Peak RSS of bsn-run after one frame, MB (its own process); its summary written to ``summary`` (a new file:
+    bsn-run overwrites nothing)."""
     code = ("import resource, sys; from bsn_edge.cli import run; "
             f"rc = run.main(['--model', {str(MODEL)!r}, '--source', {str(clip)!r}, '--max-frames', '1', "
-            f"'--summary', {str(out / 'rss.json')!r}]); "
+            f"'--summary', {str(summary)!r}]); "
             "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024); sys.exit(rc)")
     res = subprocess.run([python, "-c", code], capture_output=True, text=True, check=True, cwd="/")
     return float(res.stdout.strip().splitlines()[-1])
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--full-python", default=sys.executable, help="python of the full install (default: this one)")
-    args = p.parse_args(argv)
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        venv = tmp / "base"
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
-        base_py = str(venv / "bin" / "python")
-        subprocess.run([base_py, "-m", "pip", "install", "--quiet", str(CHECKOUT)], check=True)
-        install_s = time.perf_counter() - t0
-        torch_missing = subprocess.run([base_py, "-c", "import torch"], capture_output=True).returncode != 0
+    p.add_argument("--name", default="footprint", help="the report's name in --out")
+    return p
+
+
+def _base_install(tmp: Path) -> tuple[str, float, bool]:
+    """A fresh venv with ``pip install .`` only: its python, the install's seconds, whether torch is missing."""
+    venv = tmp / "base"
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+    base_py = str(venv / "bin" / "python")
+    subprocess.run([base_py, "-m", "pip", "install", "--quiet", str(CHECKOUT)], check=True)
+    install_s = time.perf_counter() - t0
+    torch_missing = subprocess.run([base_py, "-c", "import torch"], capture_output=True).returncode != 0
+    return base_py, install_s, torch_missing
+
+
+def _markdown(res: dict[str, Any]) -> list[str]:
+    b, f = res["rows"]["base"], res["rows"]["full"]
+    ran = res["bsn_run_in_base"]
+    return ["# The car's footprint: base install vs full install", "",
+            "A fresh virtual environment with `pip install .` only, beside the development environment "
+            "(`.[full,dev]`), measured in one run.", "",
+            "| | base install | full install |", "|---|---|---|",
+            f"| site-packages, MB | {b['site_packages_mb']:.0f} | {f['site_packages_mb']:.0f} |",
+            f"| import `bsn-run`, s | {b['import_bsn_run_s']:.2f} | {f['import_bsn_run_s']:.2f} "
+            f"(old path with torch, onnx, quantization: {f['import_old_path_s']:.2f}) |",
+            f"| import numpy, OpenCV, onnxruntime, python-can, cantools, pyserial, tqdm alone, s | "
+            f"{b['import_base_deps_s']:.2f} | {f['import_base_deps_s']:.2f} |",
+            f"| peak RSS of `bsn-run` after its first frame, MB | {b['rss_after_first_frame_mb']:.0f} | "
+            f"{f['rss_after_first_frame_mb']:.0f} |", "",
+            f"In the base install `import torch` {'fails' if res['torch_missing_in_base'] else 'WORKS (it must not)'}; "
+            f"`bsn-run` on a 30-frame clip exited {ran['rc']} and wrote "
+            f"{', '.join(k for k, v in ran['written'].items() if v) or 'nothing'}. bsn-run's import is "
+            f"{res['import_ratio']:.2f}x the base dependencies' (goal <= {GOAL_IMPORT}); RSS goal < "
+            f"{GOAL_RSS_MB:.0f} MB ({'met' if res['passes'] else 'NOT met'})."]
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        base_py, install_s, torch_missing = _base_install(tmp)
         clip = tmp / "clip"
-        subprocess.run([str(venv / "bin" / "bsn-synth"), str(clip), "--frames", "30", "--seed", "3"], check=True,
-                       capture_output=True)
+        subprocess.run([str(Path(base_py).parent / "bsn-synth"), str(clip), "--frames", "30", "--seed", "3"],
+                       check=True, capture_output=True)
         outs = tmp / "run"
         outs.mkdir()
-        rc = subprocess.run([str(venv / "bin" / "bsn-run"), "--model", str(MODEL), "--source", str(clip / "video.mp4"),
-                             "--overlay", str(outs / "overlay.mp4"), "--log", str(outs / "alerts.jsonl"),
-                             "--can-log", str(outs / "alerts.log")], capture_output=True, text=True)
+        rc = subprocess.run([str(Path(base_py).parent / "bsn-run"), "--model", str(MODEL), "--source",
+                             str(clip / "video.mp4"), "--overlay", str(outs / "overlay.mp4"), "--log",
+                             str(outs / "alerts.jsonl"), "--can-log", str(outs / "alerts.log")],
+                            capture_output=True, text=True)
         written = {n: (outs / n).is_file() and (outs / n).stat().st_size > 0
                    for n in ("overlay.mp4", "alerts.jsonl", "alerts.log")}
         rows = {}
@@ -97,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
                 "site_packages_mb": round(site_mb(py), 1),
                 "import_bsn_run_s": round(import_s(py, RUN_MODULES), 3),
                 "import_base_deps_s": round(import_s(py, BASE_MODULES), 3),
-                "rss_after_first_frame_mb": round(run_rss_mb(py, clip / "video.mp4", outs), 1),
+                "rss_after_first_frame_mb": round(run_rss_mb(py, clip / "video.mp4", outs / f"rss_{name}.json"), 1),
             }
         rows["full"]["import_old_path_s"] = round(import_s(args.full_python, f"{OLD_PATH}, {RUN_MODULES}"), 3)
     b = rows["base"]
@@ -107,27 +141,12 @@ def main(argv: list[str] | None = None) -> int:
            "goal_import_ratio": GOAL_IMPORT, "goal_rss_mb": GOAL_RSS_MB}
     res["passes"] = (torch_missing and rc.returncode == 0 and all(written.values())
                      and res["import_ratio"] <= GOAL_IMPORT and b["rss_after_first_frame_mb"] < GOAL_RSS_MB)
-    f = rows["full"]
-    md = ["# The car's footprint: base install vs full install", "",
-          "A fresh virtual environment with `pip install .` only, beside the development environment "
-          "(`.[full,dev]`), measured in one run.", "",
-          "| | base install | full install |", "|---|---|---|",
-          f"| site-packages, MB | {b['site_packages_mb']:.0f} | {f['site_packages_mb']:.0f} |",
-          f"| import `bsn-run`, s | {b['import_bsn_run_s']:.2f} | {f['import_bsn_run_s']:.2f} "
-          f"(old path with torch, onnx, quantization: {f['import_old_path_s']:.2f}) |",
-          f"| import numpy, OpenCV, onnxruntime, python-can, cantools, pyserial, tqdm alone, s | "
-          f"{b['import_base_deps_s']:.2f} | {f['import_base_deps_s']:.2f} |",
-          f"| peak RSS of `bsn-run` after its first frame, MB | {b['rss_after_first_frame_mb']:.0f} | "
-          f"{f['rss_after_first_frame_mb']:.0f} |", "",
-          f"In the base install `import torch` {'fails' if torch_missing else 'WORKS (it must not)'}; `bsn-run` "
-          f"on a 30-frame clip exited {rc.returncode} and wrote "
-          f"{', '.join(k for k, v in written.items() if v) or 'nothing'}. bsn-run's import is "
-          f"{res['import_ratio']:.2f}x the base dependencies' (goal <= {GOAL_IMPORT}); RSS goal < {GOAL_RSS_MB:.0f} MB "
-          f"({'met' if res['passes'] else 'NOT met'})."]
-    path = write_result(args.out, "footprint", res, "\n".join(md))
-    print("\n".join(md))
-    print(f"wrote {path}")
-    return 0
+    md = _markdown(res)
+    return Report(res, md, md)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":
