@@ -14,11 +14,13 @@ import argparse
 import json
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 
-from benchmarks.common import summary, time_calls, write_result
+from benchmarks.common import summary, time_calls
+from benchmarks.runner import Report, run
 from bsn_edge.data import find_clips
 from bsn_edge.export import QuantConfig, quantize, to_onnx
 from bsn_edge.export.calib_frames import load_frames
@@ -94,17 +96,61 @@ def accuracy(paths: dict[str, Path], clips, size, threshold: float, label: str) 
     return {"metrics": {k: c.metrics() for k, c in counts.items()}, "pixel_agreement": float(np.mean(agree))}
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--run", required=True)
     p.add_argument("--data", required=True, help="held-out labelled clips")
     p.add_argument("--calib", required=True, help="calibration frames (training clips)")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--runs", type=int, default=60)
-    args = p.parse_args(argv)
-    run = Run(args.run)
-    model, card = run.load_model()
-    info = run.info()
+    p.add_argument("--name", default="quant", help="the report's name in --out")
+    return p
+
+
+def _variants(fp32: Path, t_fp32: float, frames, frame, runs: int,
+              tmp: Path) -> tuple[list[dict[str, Any]], dict[tuple, Path]]:
+    """Each int8 variant of ``fp32`` (activations, weights, per channel) quantized and timed against its
+    ``t_fp32`` seconds."""
+    rows, variants = [], {}
+    for acts, wts, per_channel in (("uint8", "int8", True), ("uint8", "int8", False), ("int8", "int8", True)):
+        q = tmp / f"int8_{acts}_{wts}_{per_channel}.onnx"
+        quantize(fp32, q, frames, QuantConfig(activations=acts, weights=wts, per_channel=per_channel))
+        variants[(acts, wts, per_channel)] = q
+        t = latency(q, frame, runs)
+        rows.append({"activations": acts, "weights": wts, "per_channel": per_channel, "median_ms": 1e3 * t,
+                     "fps": 1 / t, "speedup": t_fp32 / t})
+    return rows, variants
+
+
+def _markdown(res: dict[str, Any], card, n_clips: int) -> list[str]:
+    m, rows, best, size = res, res["speed"], res["int8"], res["size"]
+    md = ["# int8 quantization: accuracy and speed", "",
+          f"Model `{card.variant}` at {size[0]}x{size[1]}, threshold {res['threshold']:.2f}, {n_clips} held-out "
+          "clips, inside V.", "",
+          "| model | IoU | recall | precision | ms | frames/s |", "|---|---|---|---|---|---|",
+          f"| fp32 | {m['fp32']['iou']:.4f} | {m['fp32']['recall']:.4f} | {m['fp32']['precision']:.4f} | "
+          f"{m['fp32']['median_ms']:.1f} | {m['fp32']['fps']:.1f} |",
+          f"| int8 (uint8 act., int8 weights) | {m['int8']['iou']:.4f} | {m['int8']['recall']:.4f} | "
+          f"{m['int8']['precision']:.4f} | {best['median_ms']:.1f} | {best['fps']:.1f} |", "",
+          f"Pixel agreement {100 * res['pixel_agreement']:.2f} %, IoU drop {res['iou_drop']:+.4f} "
+          f"(bar <= {BAR_IOU_DROP}).", "",
+          "| activations | weights | ms | frames/s | speed-up over fp32 |", "|---|---|---|---|---|"]
+    md += [f"| {r['activations']} | {r['weights']} {'per-channel' if r['per_channel'] else 'per-tensor'} | "
+           f"{r['median_ms']:.2f} | {r['fps']:.1f} | {r['speedup']:.2f}x |" for r in rows]
+    md += ["", "Where the time goes (onnxruntime's profiler, which adds overhead: compare shares and ratios):", "",
+           "| block | fp32 ms | int8 ms | int8 speed-up |", "|---|---|---|---|"]
+    md += [f"| {r['block']} | {r['fp32']:.2f} | {r['int8']:.2f} | {r['fp32'] / max(r['int8'], 1e-9):.2f}x |"
+           for r in res["blocks_ms_profiled"]]
+    md += ["", f"Bars: int8 >= {BAR_SPEEDUP}x fp32 ({'passes' if res['passes']['speedup'] else 'FAILS'}), "
+           f">= {BAR_FPS:g} frames/s ({'passes' if res['passes']['fps'] else 'FAILS'}), IoU drop <= {BAR_IOU_DROP} "
+           f"({'passes' if res['passes']['iou_drop'] else 'FAILS'})."]
+    return md
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
+    trained = Run(args.run)
+    model, card = trained.load_model()
+    info = trained.info()
     size = (256, 512)
     card = card.at_size(*size)
     label = info.get("label", "T5s")
@@ -112,22 +158,14 @@ def main(argv: list[str] | None = None) -> int:
     clips = [c for c in find_clips(args.data, label) if c.path.name not in seen]
     frames = load_frames(args.calib, size, 64)
     threshold = card.threshold
-    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         fp32 = Path(tmp) / "fp32.onnx"
         to_onnx(model, fp32, card)
         frame = frames[:1]
         t_fp32 = latency(fp32, frame, args.runs)
-        variants = {}
-        for acts, wts, per_channel in (("uint8", "int8", True), ("uint8", "int8", False), ("int8", "int8", True)):
-            q = Path(tmp) / f"int8_{acts}_{wts}_{per_channel}.onnx"
-            quantize(fp32, q, frames, QuantConfig(activations=acts, weights=wts, per_channel=per_channel))
-            variants[(acts, wts, per_channel)] = q
-            t = latency(q, frame, args.runs)
-            rows.append({"activations": acts, "weights": wts, "per_channel": per_channel, "median_ms": 1e3 * t,
-                         "fps": 1 / t, "speedup": t_fp32 / t})
+        rows, variants = _variants(fp32, t_fp32, frames, frame, args.runs, Path(tmp))
         default = variants[("uint8", "int8", True)]
-        prof = {k: profile_blocks(p, frame, args.runs) for k, p in (("fp32", fp32), ("int8", default))}
+        prof = {k: profile_blocks(q, frame, args.runs) for k, q in (("fp32", fp32), ("int8", default))}
         acc = accuracy({"fp32": fp32, "int8": default}, clips, size, threshold, label)
     m = acc["metrics"]
     drop = m["fp32"]["iou"] - m["int8"]["iou"]
@@ -141,29 +179,12 @@ def main(argv: list[str] | None = None) -> int:
            "bars": {"iou_drop_max": BAR_IOU_DROP, "speedup_min": BAR_SPEEDUP, "fps_min": BAR_FPS, "fps_goal": GOAL_FPS},
            "passes": {"iou_drop": drop <= BAR_IOU_DROP, "speedup": best["speedup"] >= BAR_SPEEDUP,
                       "fps": best["fps"] >= BAR_FPS}}
-    md = ["# int8 quantization: accuracy and speed", "",
-          f"Model `{card.variant}` at {size[0]}x{size[1]}, threshold {threshold:.2f}, {len(clips)} held-out clips, "
-          "inside V.", "",
-          "| model | IoU | recall | precision | ms | frames/s |", "|---|---|---|---|---|---|",
-          f"| fp32 | {m['fp32']['iou']:.4f} | {m['fp32']['recall']:.4f} | {m['fp32']['precision']:.4f} | "
-          f"{1e3 * t_fp32:.1f} | {1 / t_fp32:.1f} |",
-          f"| int8 (uint8 act., int8 weights) | {m['int8']['iou']:.4f} | {m['int8']['recall']:.4f} | "
-          f"{m['int8']['precision']:.4f} | {best['median_ms']:.1f} | {best['fps']:.1f} |", "",
-          f"Pixel agreement {100 * acc['pixel_agreement']:.2f} %, IoU drop {drop:+.4f} (bar <= {BAR_IOU_DROP}).", "",
-          "| activations | weights | ms | frames/s | speed-up over fp32 |", "|---|---|---|---|---|"]
-    md += [f"| {r['activations']} | {r['weights']} {'per-channel' if r['per_channel'] else 'per-tensor'} | "
-           f"{r['median_ms']:.2f} | {r['fps']:.1f} | {r['speedup']:.2f}x |" for r in rows]
-    md += ["", "Where the time goes (onnxruntime's profiler, which adds overhead: compare shares and ratios):", "",
-           "| block | fp32 ms | int8 ms | int8 speed-up |", "|---|---|---|---|"]
-    md += [f"| {r['block']} | {r['fp32']:.2f} | {r['int8']:.2f} | {r['fp32'] / max(r['int8'], 1e-9):.2f}x |"
-           for r in res["blocks_ms_profiled"]]
-    md += ["", f"Bars: int8 >= {BAR_SPEEDUP}x fp32 ({'passes' if res['passes']['speedup'] else 'FAILS'}), "
-           f">= {BAR_FPS:g} frames/s ({'passes' if res['passes']['fps'] else 'FAILS'}), IoU drop <= {BAR_IOU_DROP} "
-           f"({'passes' if res['passes']['iou_drop'] else 'FAILS'})."]
-    path = write_result(args.out, "quant", res, "\n".join(md))
-    print("\n".join(md))
-    print(f"wrote {path}")
-    return 0
+    md = _markdown(res, card, len(clips))
+    return Report(res, md, md)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":
