@@ -30,6 +30,7 @@ import re
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import onnx
@@ -39,7 +40,8 @@ from onnxruntime.quantization.shape_inference import quant_pre_process
 
 from benchmarks.bench_arch import count_gmacs
 from benchmarks.bench_quant import kernel_times, latency
-from benchmarks.common import class_name, machine, write_result
+from benchmarks.common import class_name, machine
+from benchmarks.runner import Report, run
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
 from bsn_edge.export.seal import read_card
@@ -156,7 +158,7 @@ def op_shares(path: Path, frame: np.ndarray, runs: int) -> tuple[dict[str, float
     return dict(sorted(ms.items(), key=lambda kv: -kv[1])), dict(sorted(conv.items(), key=lambda kv: -kv[1]["ms"]))
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", default=str(DEFAULT_MODEL), help="an int8 model exported by bsn-export")
     p.add_argument("--out", default="benchmarks/results")
@@ -165,19 +167,12 @@ def main(argv: list[str] | None = None) -> int:
                    "the multiple is their median")
     p.add_argument("--baseline", help="another int8 model of the same variant and size, timed in the same rounds")
     p.add_argument("--name", help="the report's name in --out (default: floor with VNNI, floor_avx2 without)")
-    args = p.parse_args(argv)
-    card = read_card(args.model)
-    h, w = card.input_size
-    if args.baseline:
-        other = read_card(args.baseline)
-        if (other.variant, tuple(other.input_size)) != (card.variant, (h, w)):
-            p.error(f"--baseline {args.baseline} is {other.variant} at {other.input_size[0]}x{other.input_size[1]}; "
-                    f"the model is {card.variant} at {h}x{w}: the floor is the same only for the same network")
-    cfg = QuantConfig(reduce_range=card.seven_bit_weights)
-    kernels = kernel_class(machine()["isa"], card.seven_bit_weights)
-    torch.manual_seed(0)
-    gmacs = count_gmacs(create_model(card.variant).eval(), (h, w))
-    frame = np.random.default_rng(0).integers(0, 256, (1, h, w, 3), dtype=np.uint8)
+    return p
+
+
+def _rounds(args: argparse.Namespace, cfg: QuantConfig, frame: np.ndarray, h: int, w: int):
+    """The dense stacks' rates, the fastest of them, and the rounds that time the model (and the baseline)
+    in alternation with it: ``(stacks, best, timed, rounds)``."""
     with tempfile.TemporaryDirectory() as tmp:
         stacks = [stack_rate(c, (h // s, w // s), cfg, args.runs, Path(tmp)) for c, s in STACKS]
         best = max(stacks, key=lambda r: r["tmacs_per_s"])
@@ -188,25 +183,16 @@ def main(argv: list[str] | None = None) -> int:
                   for _ in range(max(1, args.repeats))]
         for r in stacks:
             del r["path"], r["input"]
-    peaks = [best["gmacs"] * 1e9 / r[-1] / 1e12 for r in rounds]
-    multiples = [[r[i] * peak * 1e12 / (gmacs * 1e9) for r, peak in zip(rounds, peaks, strict=True)]
-                 for i in range(len(timed))]
-    pick = int(np.argsort(multiples[0])[len(rounds) // 2])        # the repeat with the median multiple
-    peak, t_model = peaks[pick], rounds[pick][0]
-    floor_s = gmacs * 1e9 / (peak * 1e12)
-    multiple = multiples[0][pick]
-    ops, convs = op_shares(Path(args.model), frame, 20)
+    return stacks, best, timed, rounds
+
+
+def _markdown(args: argparse.Namespace, card, cfg: QuantConfig, kernels: str, result: dict[str, Any],
+              best: dict[str, Any], rounds: list, multiples: list) -> list[str]:
+    h, w = card.input_size
+    stacks, peak, gmacs = result["stacks"], result["peak_tmacs_per_s"], result["model_gmacs"]
+    t_model, floor_s, multiple = result["model_median_ms"] / 1e3, result["floor_ms"] / 1e3, result["multiple"]
+    ops, convs = result["op_ms"], result["conv_kinds"]
     total = sum(ops.values())
-    model = Path(args.model).resolve()
-    shown = model.relative_to(CHECKOUT) if model.is_relative_to(CHECKOUT) else model.name
-    result = {"model": str(shown), "variant": card.variant, "size": [h, w], "scheme": cfg.scheme(), "kernels": kernels,
-              "stacks": stacks, "peak_tmacs_per_s": peak, "model_gmacs": gmacs, "model_median_ms": 1e3 * t_model,
-              "floor_ms": 1e3 * floor_s, "multiple": multiple, "share_of_peak": 1 / multiple,
-              "goal_multiple": GOAL_MULTIPLE, "repeats": len(rounds), "multiples": multiples[0],
-              "op_ms": ops, "conv_kinds": convs}
-    if args.baseline:
-        result["baseline"] = {"model": Path(args.baseline).name, "multiples": multiples[1],
-                              "median_ms": [1e3 * r[1] for r in rounds]}
     lines = ["# The shipped model against this machine's int8 floor", "",
              f"Kernels on this CPU for this model: **{kernels}**.", "",
              f"Dense 3x3 stacks ({DEPTH} convolutions + ReLU each), quantized as the model was "
@@ -235,9 +221,47 @@ def main(argv: list[str] | None = None) -> int:
               "| kind | ms per run | GMACs | TMAC/s | share of peak |", "|---|---|---|---|---|"]
     lines += [f"| {k} | {c['ms']:.2f} | {c['gmacs']:.3f} | {c['tmacs_per_s']:.3f} | "
               f"{100 * c['tmacs_per_s'] / peak:.0f} % |" for k, c in convs.items()]
-    write_result(args.out, args.name or class_name("floor"), result, "\n".join(lines))
-    print("\n".join(lines))
-    return 0
+    return lines
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
+    card = read_card(args.model)
+    h, w = card.input_size
+    if args.baseline:
+        other = read_card(args.baseline)
+        if (other.variant, tuple(other.input_size)) != (card.variant, (h, w)):
+            p.error(f"--baseline {args.baseline} is {other.variant} at {other.input_size[0]}x{other.input_size[1]}; "
+                    f"the model is {card.variant} at {h}x{w}: the floor is the same only for the same network")
+    cfg = QuantConfig(reduce_range=card.seven_bit_weights)
+    kernels = kernel_class(machine()["isa"], card.seven_bit_weights)
+    torch.manual_seed(0)
+    gmacs = count_gmacs(create_model(card.variant).eval(), (h, w))
+    frame = np.random.default_rng(0).integers(0, 256, (1, h, w, 3), dtype=np.uint8)
+    stacks, best, timed, rounds = _rounds(args, cfg, frame, h, w)
+    peaks = [best["gmacs"] * 1e9 / r[-1] / 1e12 for r in rounds]
+    multiples = [[r[i] * peak * 1e12 / (gmacs * 1e9) for r, peak in zip(rounds, peaks, strict=True)]
+                 for i in range(len(timed))]
+    pick = int(np.argsort(multiples[0])[len(rounds) // 2])        # the repeat with the median multiple
+    peak, t_model = peaks[pick], rounds[pick][0]
+    floor_s = gmacs * 1e9 / (peak * 1e12)
+    multiple = multiples[0][pick]
+    ops, convs = op_shares(Path(args.model), frame, 20)
+    model = Path(args.model).resolve()
+    shown = model.relative_to(CHECKOUT) if model.is_relative_to(CHECKOUT) else model.name
+    result = {"model": str(shown), "variant": card.variant, "size": [h, w], "scheme": cfg.scheme(), "kernels": kernels,
+              "stacks": stacks, "peak_tmacs_per_s": peak, "model_gmacs": gmacs, "model_median_ms": 1e3 * t_model,
+              "floor_ms": 1e3 * floor_s, "multiple": multiple, "share_of_peak": 1 / multiple,
+              "goal_multiple": GOAL_MULTIPLE, "repeats": len(rounds), "multiples": multiples[0],
+              "op_ms": ops, "conv_kinds": convs}
+    if args.baseline:
+        result["baseline"] = {"model": Path(args.baseline).name, "multiples": multiples[1],
+                              "median_ms": [1e3 * r[1] for r in rounds]}
+    lines = _markdown(args, card, cfg, kernels, result, best, rounds, multiples)
+    return Report(result, lines, lines, name=args.name or class_name("floor"))
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":
