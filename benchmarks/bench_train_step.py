@@ -36,7 +36,7 @@ from typing import Any
 
 import torch
 
-from benchmarks.common import write_result
+from benchmarks.runner import Report, run
 from bsn_edge.cli.common import parse_size
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.data.cache import SampleCache
@@ -94,7 +94,7 @@ class Setup:
             self.times.append(time.perf_counter() - t0)
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="folder of labelled sequence folders (256x512 or any size)")
     p.add_argument("--clips", type=int, default=8, help="clips used (the first N found)")
@@ -109,24 +109,11 @@ def main(argv: list[str] | None = None) -> int:
                    help="only the configurations bsn-train runs on this CPU (channels-last; bf16 where native)")
     p.add_argument("--budget", type=int, default=12_000, help="steps of a run, for the hours column")
     p.add_argument("--name", default="train_step", help="report name in --out")
-    args = p.parse_args(argv)
-    if args.steps < 1 or args.rounds < 1 or args.budget < 1:
-        p.error("--steps, --rounds and --budget must be at least 1")
-    for m in args.model:
-        try:
-            get_spec(m)
-        except ValueError as e:
-            p.error(f"--model: {e}")
-    torch.set_num_threads(2)
-    try:
-        clips = find_clips(args.data)[: args.clips]
-    except (FileNotFoundError, ValueError) as e:
-        p.error(f"--data: {e}")
-    size = args.size
-    cam_cfg = load_config(None, [f"data.size=[{size[0]}, {size[1]}]"]).data
-    camera, mounting = cam_cfg.model_camera()
-    ds = BlindSpotDataset(clips, size, augment=True, camera=camera, mounting=mounting, seed=0)
+    return p
 
+
+def _caches(ds: BlindSpotDataset) -> tuple[SampleCache, SampleCache, float, float]:
+    """The sample cache and a copy with the teacher's features, and what each cost per frame (seconds)."""
     t0 = time.perf_counter()
     cache = SampleCache.for_dataset(ds, None)
     build_s = (time.perf_counter() - t0) / len(ds)
@@ -134,8 +121,11 @@ def main(argv: list[str] | None = None) -> int:
     teacher = create_teacher("resnet18", 128)
     t0 = time.perf_counter()
     grid_cache.attach_teacher(teacher.eval(), 0.5, (8, 16), resize=lambda x, s: layout(scaled(x, s), True))
-    teacher_s = (time.perf_counter() - t0) / len(ds)
+    return cache, grid_cache, build_s, (time.perf_counter() - t0) / len(ds)
 
+
+def _timed(args: argparse.Namespace, ds, cache, grid_cache) -> list[dict[str, Any]]:
+    """Each architecture's configurations stepped in turn, round by round; their median steps."""
     levers = [(n, lv) for n, lv in LEVERS if lv["precision"] != "bf16" or cpu_has_native_bf16()]
     if args.as_trained:
         # bf16 is already gone where the CPU has no native bf16: the last one left is what bsn-train runs
@@ -158,6 +148,28 @@ def main(argv: list[str] | None = None) -> int:
             rows.append({"model": m, "config": s.name, "seconds_per_step": med,
                          "samples_per_second": args.batch / med, "speedup": base / med,
                          "budget_hours": med * args.budget / 3600, "n": len(s.times)})
+    return rows
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
+    if args.steps < 1 or args.rounds < 1 or args.budget < 1:
+        p.error("--steps, --rounds and --budget must be at least 1")
+    for m in args.model:
+        try:
+            get_spec(m)
+        except ValueError as e:
+            p.error(f"--model: {e}")
+    torch.set_num_threads(2)
+    try:
+        clips = find_clips(args.data)[: args.clips]
+    except (FileNotFoundError, ValueError) as e:
+        p.error(f"--data: {e}")
+    size = args.size
+    cam_cfg = load_config(None, [f"data.size=[{size[0]}, {size[1]}]"]).data
+    camera, mounting = cam_cfg.model_camera()
+    ds = BlindSpotDataset(clips, size, augment=True, camera=camera, mounting=mounting, seed=0)
+    cache, grid_cache, build_s, teacher_s = _caches(ds)
+    rows = _timed(args, ds, cache, grid_cache)
     res = {"models": args.model, "batch": args.batch, "size": list(size), "threads": 2, "frames": len(ds),
            "clips": [c.path.name for c in clips], "cache_build_ms_per_frame": 1e3 * build_s,
            "teacher_features_ms_per_frame": 1e3 * teacher_s, "native_bf16": cpu_has_native_bf16(),
@@ -176,10 +188,11 @@ def main(argv: list[str] | None = None) -> int:
                  "without the run's validation records.")
     if not cpu_has_native_bf16():
         lines.append("\nThis CPU has no native bf16 (AMX or AVX-512 BF16): `train.precision=auto` trains in fp32 here.")
-    md = "\n".join(lines)
-    write_result(args.out, args.name, res, md)
-    print(md)
-    return 0
+    return Report(res, lines, lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":
