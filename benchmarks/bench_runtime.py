@@ -53,8 +53,10 @@ from typing import Any
 import cv2
 import numpy as np
 
+from benchmarks import runner
 from benchmarks.bench_realcam import REAL, udacity_camera
-from benchmarks.common import class_name, machine, summary, time_calls, write_result
+from benchmarks.common import class_name, machine, summary, time_calls
+from benchmarks.runner import Report
 from bsn_edge.alerts.senders import CanSender
 from bsn_edge.calibration import Calibration
 from bsn_edge.default_model import DEFAULT_MODEL
@@ -298,7 +300,7 @@ def median_table(rows: list[dict[str, Any]], repeats: int, fps_bar: float) -> li
     return [*out, "", "## Every run", ""]
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", action="append", help="models side by side (default: the shipped one)")
     p.add_argument("--source", action="append", metavar="VIDEO[=CALIB.json]",
@@ -312,66 +314,71 @@ def main(argv: list[str] | None = None) -> int:
                    help="every way of setting the loop side by side, the ways of reading (no spin), FFmpeg's "
                         "decoding threads against one (decode), two frames in flight against one (flight), or "
                         "only bsn-run's default (default: all)")
-    args = p.parse_args(argv)
-    if args.repeats < 1:
-        p.error(f"--repeats must be at least 1, got {args.repeats}")
-    if args.frames < 20:
-        p.error(f"--frames must be at least 20, got {args.frames}")
-    models = args.model or [str(DEFAULT_MODEL)]
-    vnni = "VNNI" in machine()["isa"]
-    fps_bar = FPS_BAR_VNNI if vnni else FPS_BAR
-    rows: list[dict[str, Any]] = []
-    live_rows: list[dict[str, Any]] = []
-    budget_rows: list[dict[str, Any]] = []
-    with tempfile.TemporaryDirectory() as tmp_name:
-        tmp = Path(tmp_name)
-        clips: list[tuple[str, Path, Calibration | None]] = []
-        for spec in args.source or []:
-            video, _, cal = spec.partition("=")
-            own = Path(video).parent / SequenceFolder.CALIBRATION
-            cal_path = Path(cal) if cal else (own if own.is_file() else None)
-            clips.append((Path(video).name, Path(video), Calibration.read(cal_path) if cal_path else None))
-        if not args.source:
-            if not (REAL / "udacity_test_video.mp4").is_file():
-                raise SystemExit(f"no real clips in {REAL}: pass --source")
-            clips = [("udacity 1280x720", REAL / "udacity_test_video.mp4", udacity_camera()[1]),
-                     ("highway 960x540", REAL / "dashcam_highway.mp4", None)]
-        longs = {name: lengthen(video, args.frames, tmp) for name, video, _ in clips}
-        for repeat, (name, _, cal) in ((k, c) for k in range(args.repeats) for c in clips):
-            long = longs[name]
-            for model in models:
-                for spin in sorted({lp.spin for lp in LOOPS[args.loops]}, reverse=True):
-                    engine = Engine(model, threads=2, spinning=spin)
-                    mo = model_only(engine, str(long), min(args.frames, 200), CameraState(engine.card, cal))
-                    engines = {2: engine}
-                    for loop in (lp for lp in LOOPS[args.loops] if lp.spin == spin):
-                        threads = loop.config().engine_threads        # as bsn-run chooses them
-                        if threads not in engines:
-                            engines[threads] = Engine(model, threads=threads, spinning=spin)
-                        for calibration in ([cal, None] if cal is not None else [None]):
-                            r = profile(engines[threads], long, args.frames, calibration, loop)
-                            share, tail = r["e2e_fps"] / mo, r["p99_ms"] / r["p50_ms"]
-                            r.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
-                                     repeat=repeat, model_only_fps=mo, e2e_over_model=share, p99_over_p50=tail,
-                                     passes={"fps": r["e2e_fps"] >= fps_bar, "share": share >= SHARE_BAR,
-                                             "tail": tail <= TAIL_BAR})
-                            rows.append(r)
-                            print({k: r[k] for k in ("clip", "model_file", "camera_file", "loop", "e2e_fps",
-                                                     "model_only_fps", "p50_ms", "p99_ms")}, flush=True)
-                engine = Engine(model, threads=2)
-                for calibration in ([cal, None] if cal is not None else [None]):
-                    r = live(engine, long, calibration)
-                    r.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
-                             repeat=repeat)
-                    live_rows.append(r)
-                    print({k: r[k] for k in ("clip", "camera_file", "frames", "dropped", "camera_fps", "p50_ms",
-                                             "p99_ms", "calibrated")}, flush=True)
-                for calibration in ([cal, None] if cal is not None else [None]):
-                    b = cpu_budget(model, long, min(args.frames - 5, 200), calibration)
-                    b.update(clip=name, model_file=Path(model).name, camera_file=calibration is not None,
-                             repeat=repeat)
-                    budget_rows.append(b)
-                    print(b, flush=True)
+    return p
+
+
+def _clips(args: argparse.Namespace) -> list[tuple[str, Path, Calibration | None]]:
+    """The videos asked for with their camera files (beside them when not named), else the real clips."""
+    clips: list[tuple[str, Path, Calibration | None]] = []
+    for spec in args.source or []:
+        video, _, cal = spec.partition("=")
+        own = Path(video).parent / SequenceFolder.CALIBRATION
+        cal_path = Path(cal) if cal else (own if own.is_file() else None)
+        clips.append((Path(video).name, Path(video), Calibration.read(cal_path) if cal_path else None))
+    if not args.source:
+        if not (REAL / "udacity_test_video.mp4").is_file():
+            raise SystemExit(f"no real clips in {REAL}: pass --source")
+        clips = [("udacity 1280x720", REAL / "udacity_test_video.mp4", udacity_camera()[1]),
+                 ("highway 960x540", REAL / "dashcam_highway.mp4", None)]
+    return clips
+
+
+def _loop_rows(args: argparse.Namespace, model: str, long: Path, cal: Calibration | None,
+               fps_bar: float) -> list[dict[str, Any]]:
+    """``model`` on ``long`` in every loop asked for, with its camera file and calibrating, against model only."""
+    rows = []
+    for spin in sorted({lp.spin for lp in LOOPS[args.loops]}, reverse=True):
+        engine = Engine(model, threads=2, spinning=spin)
+        mo = model_only(engine, str(long), min(args.frames, 200), CameraState(engine.card, cal))
+        engines = {2: engine}
+        for loop in (lp for lp in LOOPS[args.loops] if lp.spin == spin):
+            threads = loop.config().engine_threads        # as bsn-run chooses them
+            if threads not in engines:
+                engines[threads] = Engine(model, threads=threads, spinning=spin)
+            for calibration in ([cal, None] if cal is not None else [None]):
+                r = profile(engines[threads], long, args.frames, calibration, loop)
+                share, tail = r["e2e_fps"] / mo, r["p99_ms"] / r["p50_ms"]
+                r.update(model_file=Path(model).name, camera_file=calibration is not None, model_only_fps=mo,
+                         e2e_over_model=share, p99_over_p50=tail,
+                         passes={"fps": r["e2e_fps"] >= fps_bar, "share": share >= SHARE_BAR,
+                                 "tail": tail <= TAIL_BAR})
+                rows.append(r)
+                print({k: r.get(k) for k in ("model_file", "camera_file", "loop", "e2e_fps", "model_only_fps",
+                                             "p50_ms", "p99_ms")}, flush=True)
+    return rows
+
+
+def _live_and_budget(args: argparse.Namespace, model: str, long: Path,
+                     cal: Calibration | None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """``model`` fed ``long`` as a camera delivers it, and its CPU budget, each with and without the camera file."""
+    live_rows, budget_rows = [], []
+    engine = Engine(model, threads=2)
+    for calibration in ([cal, None] if cal is not None else [None]):
+        r = live(engine, long, calibration)
+        r.update(model_file=Path(model).name, camera_file=calibration is not None)
+        live_rows.append(r)
+        print({k: r[k] for k in ("camera_file", "frames", "dropped", "camera_fps", "p50_ms", "p99_ms",
+                                 "calibrated")}, flush=True)
+    for calibration in ([cal, None] if cal is not None else [None]):
+        b = cpu_budget(model, long, min(args.frames - 5, 200), calibration)
+        b.update(model_file=Path(model).name, camera_file=calibration is not None)
+        budget_rows.append(b)
+        print(b, flush=True)
+    return live_rows, budget_rows
+
+
+def _markdown(args: argparse.Namespace, rows: list, live_rows: list, budget_rows: list, fps_bar: float,
+              vnni: bool) -> list[str]:
     stages = sorted({k for r in rows for k in r["stage_ms"]}, key=lambda k: list(rows[0]["stage_ms"]).index(k)
                     if k in rows[0]["stage_ms"] else 99)
     md = ["# Edge runtime latency profile", "", *median_table(rows, args.repeats, fps_bar),
@@ -402,14 +409,39 @@ def main(argv: list[str] | None = None) -> int:
                   f"{r['camera_fps']:.1f} | {r['frames']} | {r['dropped']} | {r['before_start']} | "
                   f"{r['p50_ms']:.1f} | {r['p99_ms']:.1f} | "
                   f"{r['wait_ms']['p50']:.1f} | {cal} |")
-    md += ["", *budget_table(budget_rows)]
-    path = write_result(args.out, args.name or class_name("runtime"), {"frames": args.frames, "repeats": args.repeats,
-                                              "fps_bar": fps_bar, "share_bar": SHARE_BAR,
-                                              "tail_bar": TAIL_BAR, "rows": rows, "live": live_rows,
-                                              "cpu_budget": budget_rows}, "\n".join(md))
-    print("\n".join(md))
-    print(f"wrote {path}")
-    return 0
+    return [*md, "", *budget_table(budget_rows)]
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
+    if args.repeats < 1:
+        p.error(f"--repeats must be at least 1, got {args.repeats}")
+    if args.frames < 20:
+        p.error(f"--frames must be at least 20, got {args.frames}")
+    models = args.model or [str(DEFAULT_MODEL)]
+    vnni = "VNNI" in machine()["isa"]
+    fps_bar = FPS_BAR_VNNI if vnni else FPS_BAR
+    rows: list[dict[str, Any]] = []
+    live_rows: list[dict[str, Any]] = []
+    budget_rows: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as tmp_name:
+        clips = _clips(args)
+        longs = {name: lengthen(video, args.frames, Path(tmp_name)) for name, video, _ in clips}
+        for repeat, (name, _, cal) in ((k, c) for k in range(args.repeats) for c in clips):
+            for model in models:
+                print(f"{name}, {Path(model).name}, repeat {repeat}", flush=True)
+                rows += [{**r, "clip": name, "repeat": repeat} for r in _loop_rows(args, model, longs[name], cal,
+                                                                                    fps_bar)]
+                lv, bd = _live_and_budget(args, model, longs[name], cal)
+                live_rows += [{**r, "clip": name, "repeat": repeat} for r in lv]
+                budget_rows += [{**r, "clip": name, "repeat": repeat} for r in bd]
+    md = _markdown(args, rows, live_rows, budget_rows, fps_bar, vnni)
+    return Report({"frames": args.frames, "repeats": args.repeats, "fps_bar": fps_bar, "share_bar": SHARE_BAR,
+                   "tail_bar": TAIL_BAR, "rows": rows, "live": live_rows, "cpu_budget": budget_rows}, md, md,
+                  name=args.name or class_name("runtime"))
+
+
+def main(argv: list[str] | None = None) -> int:
+    return runner.run(measure, parser(), argv)
 
 
 if __name__ == "__main__":
