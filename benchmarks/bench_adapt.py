@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import write_result
+from benchmarks.runner import Report, run
 from bsn_edge.adapt.config import LABEL_DEPTHS, AdaptConfig
 from bsn_edge.adapt.finetune import agreement, at_threshold
 from bsn_edge.adapt.pipeline import label_clips, tune
@@ -47,7 +47,7 @@ def evaluate(run: Path, clips: list, label: str) -> dict[str, float]:
     return at_threshold(agreement(model, ds), card.threshold)
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True)
     p.add_argument("--eval", required=True)
@@ -61,38 +61,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--adapt-steps", type=int, default=300)
     p.add_argument("--label-depth", default=AdaptConfig.label_depth, choices=LABEL_DEPTHS,
                    help="depth bsn-adapt labels with (default: %(default)s)")
-    args = p.parse_args(argv)
-    work = Path(args.work)
-    h, w = (int(v) for v in args.size.split(","))
-    label = "T5s"
-    t0 = time.perf_counter()
-    src = work / f"run_{args.source}"
+    p.add_argument("--name", default="adapt", help="the report's name in --out")
+    return p
+
+
+def _source_model(args: argparse.Namespace, src: Path, h: int, w: int) -> None:
+    """The source-style model, trained into ``src`` unless it is there already."""
     if not Run(src).checkpoint_path.is_file():
         cfg = load_config(CHECKOUT / "configs" / "quick.toml",
                           [f"data.size=[{h},{w}]", f"data.train_styles=[\"{args.source}\"]", "data.test_fraction=0.0",
                            f"train.steps={args.train_steps}", "teacher.scale=1.0"])
         train(cfg, args.data, src, force=True)
-    timing = {"source_training_s": round(time.perf_counter() - t0, 1)}
 
-    target = [c for c in find_clips(args.data, label) if c.style == args.target]
-    held = [c for c in find_clips(args.eval, label) if c.style == args.target]
-    if not target or not held:
-        raise SystemExit(f"no {args.target} clips in {args.data} or {args.eval}")
-    t1 = time.perf_counter()
-    folder = AdaptFolder(work / "adapt_labels")
-    report: dict[str, Any] = {"clips": {}, "rejected": {}}
-    pseudo = label_clips(Run(src), [c.path for c in target], folder, AdaptConfig(label_depth=args.label_depth), None,
-                         None, report)
-    timing["bsn_adapt_labelling_s"] = round(time.perf_counter() - t1, 1)
-    if not pseudo:
-        why = "; ".join(f"{n}: {r}" for n, r in report["rejected"].items())
-        lines = [f"# bsn-adapt across styles: {args.source} -> {args.target}", "",
-                 f"bsn-adapt refused every {args.target} clip for the `{args.source}` model: {why}."]
-        write_result(args.out, "adapt", {"source": args.source, "target": args.target, "refused": report,
-                                         "timing": timing}, "\n".join(lines))
-        print("\n".join(lines))
-        return 0          # a refusal with its reasons is the measured result
 
+def _tuned(args: argparse.Namespace, src: Path, pseudo: list, target: list, held: list,
+           label: str) -> dict[str, list[dict[str, float]]]:
+    """The source model before, adapted on bsn-adapt's labels and fine-tuned on the exact ones, per seed."""
+    work = Path(args.work)
     rows: dict[str, list[dict[str, float]]] = {"before": [], "bsn-adapt": [], "exact labels": []}
     rows["before"].append(evaluate(src, held, label))
     for seed in args.seeds:
@@ -102,18 +87,12 @@ def main(argv: list[str] | None = None) -> int:
         tune(Run(src), target, work / f"exact_s{seed}", cfg, {}, progress=False)
         rows["exact labels"].append(evaluate(work / f"exact_s{seed}", held, label))
         print(seed, {k: round(v[-1]["iou"], 3) for k, v in rows.items()}, flush=True)
-    timing["total_s"] = round(time.perf_counter() - t0, 1)
+    return rows
 
-    b = rows["before"][0]["iou"]
-    gaps = [(a["iou"] - b) / (e["iou"] - b) if e["iou"] > b else float("nan")
-            for a, e in zip(rows["bsn-adapt"], rows["exact labels"], strict=True)]
-    stats = {k: {"mean": float(np.mean([r["iou"] for r in v])), "std": float(np.std([r["iou"] for r in v])),
-                 "runs": v} for k, v in rows.items()}
-    result = {"source": args.source, "target": args.target, "seeds": args.seeds, "size": [h, w],
-              "train_steps": args.train_steps, "adapt_steps": args.adapt_steps, "rows": stats,
-              "adapt_config": AdaptConfig(label_depth=args.label_depth).to_dict(),
-              "gap_closed": gaps, "labelling": report, "timing": timing,
-              "target_clips": [c.path.name for c in target], "held_out_clips": [c.path.name for c in held]}
+
+def _markdown(args: argparse.Namespace, result: dict[str, Any], target: list, held: list) -> list[str]:
+    stats, gaps, report, timing = result["rows"], result["gap_closed"], result["labelling"], result["timing"]
+    h, w = result["size"]
     lines = [f"# bsn-adapt across styles: {args.source} -> {args.target}", "",
              f"Source model: trained on `{args.source}` only ({args.train_steps} steps at {h}x{w}, teacher included). "
              f"Adaptation clips: {len(target)} `{args.target}` clips ({', '.join(c.path.name for c in target)}); "
@@ -135,9 +114,51 @@ def main(argv: list[str] | None = None) -> int:
               + ("; rejected: " + "; ".join(f"{n}: {r}" for n, r in report["rejected"].items())
                  if report["rejected"] else "") + ".",
               "", f"Time: {json.dumps(timing)}."]
-    write_result(args.out, "adapt", result, "\n".join(lines))
-    print("\n".join(lines))
-    return 0
+    return lines
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
+    work = Path(args.work)
+    h, w = (int(v) for v in args.size.split(","))
+    label = "T5s"
+    t0 = time.perf_counter()
+    src = work / f"run_{args.source}"
+    _source_model(args, src, h, w)
+    timing = {"source_training_s": round(time.perf_counter() - t0, 1)}
+    target = [c for c in find_clips(args.data, label) if c.style == args.target]
+    held = [c for c in find_clips(args.eval, label) if c.style == args.target]
+    if not target or not held:
+        raise SystemExit(f"no {args.target} clips in {args.data} or {args.eval}")
+    t1 = time.perf_counter()
+    folder = AdaptFolder(work / "adapt_labels")
+    report: dict[str, Any] = {"clips": {}, "rejected": {}}
+    pseudo = label_clips(Run(src), [c.path for c in target], folder, AdaptConfig(label_depth=args.label_depth), None,
+                         None, report)
+    timing["bsn_adapt_labelling_s"] = round(time.perf_counter() - t1, 1)
+    if not pseudo:          # a refusal with its reasons is the measured result
+        why = "; ".join(f"{n}: {r}" for n, r in report["rejected"].items())
+        lines = [f"# bsn-adapt across styles: {args.source} -> {args.target}", "",
+                 f"bsn-adapt refused every {args.target} clip for the `{args.source}` model: {why}."]
+        return Report({"source": args.source, "target": args.target, "refused": report, "timing": timing}, lines,
+                      lines)
+    rows = _tuned(args, src, pseudo, target, held, label)
+    timing["total_s"] = round(time.perf_counter() - t0, 1)
+    b = rows["before"][0]["iou"]
+    gaps = [(a["iou"] - b) / (e["iou"] - b) if e["iou"] > b else float("nan")
+            for a, e in zip(rows["bsn-adapt"], rows["exact labels"], strict=True)]
+    stats = {k: {"mean": float(np.mean([r["iou"] for r in v])), "std": float(np.std([r["iou"] for r in v])),
+                 "runs": v} for k, v in rows.items()}
+    result = {"source": args.source, "target": args.target, "seeds": args.seeds, "size": [h, w],
+              "train_steps": args.train_steps, "adapt_steps": args.adapt_steps, "rows": stats,
+              "adapt_config": AdaptConfig(label_depth=args.label_depth).to_dict(),
+              "gap_closed": gaps, "labelling": report, "timing": timing,
+              "target_clips": [c.path.name for c in target], "held_out_clips": [c.path.name for c in held]}
+    lines = _markdown(args, result, target, held)
+    return Report(result, lines, lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":
