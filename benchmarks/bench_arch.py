@@ -35,14 +35,16 @@ import tempfile
 import time
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from benchmarks.bench_campaign import run_curve
-from benchmarks.common import cpu_named, eval_run, machine, records, summary, time_calls, train_run, write_result
+from benchmarks.common import cpu_named, eval_run, machine, records, summary, time_calls, train_run
 from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
+from benchmarks.runner import RefusedError, Report, run
 from bsn_edge.camera import Intrinsics
 from bsn_edge.card import UNRECORDED
 from bsn_edge.cli.common import parse_size
@@ -63,7 +65,7 @@ def count_gmacs(model: torch.nn.Module, size: tuple[int, int]) -> float:
     return fc.get_total_flops() / 2e9
 
 
-def measure(name: str, size: tuple[int, int], repeats: int, workdir: Path, timed: dict | None = None) -> dict:
+def measure_arch(name: str, size: tuple[int, int], repeats: int, workdir: Path, timed: dict | None = None) -> dict:
     """Parameters and GMACs of ``name``, and its fp32 ONNX model's median time at ``size``; with ``timed``
     (a row of an earlier report) its time is taken from there instead of measured."""
     torch.manual_seed(0)
@@ -255,7 +257,7 @@ def plot_curves(ledger: Ledger, names: list[str], path: Path) -> bool:
     return True
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--repeats", type=int, default=30)
@@ -284,69 +286,58 @@ def main(argv: list[str] | None = None) -> int:
                    help="take every row's ms and frames/s from an earlier report of this benchmark (e.g. the one "
                         "being refreshed) instead of timing: a report refreshed from its ledger while the machine "
                         "trains; parameters and GMACs are counted again")
-    args = p.parse_args(argv)
-    if (args.train_steps or args.runs) and not args.data:
-        p.error("--train-steps and --runs need --data")
-    if args.stop_after is not None and not (args.stop_after > 0 and args.train_steps):
-        p.error(f"--stop-after needs --train-steps and a positive number of minutes, got {args.stop_after:g}")
-    torch.set_num_threads(2)
-    size = (256, 512)
-    runs = dict(r.split("=", 1) for r in args.runs)
-    timed, timing_from = {}, None
-    if args.timing_from:
-        try:
-            timed, timing_from = earlier_timing(Path(args.timing_from), size)
-        except (OSError, ValueError, KeyError) as e:
-            print(f"bench_arch: --timing-from: {e}")
-            return 2
-    ledger = None
-    if args.train_steps:
-        clips = sorted(d.name for d in Path(args.data).iterdir() if (d / "meta.json").is_file())
-        experiment = {"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size), "clips": clips,
-                      "teacher": args.teacher or f"trained first, {args.teacher_steps} steps"}
-        try:
-            ledger = Ledger(Path(args.out) / f"{args.report}_ledger.json", experiment, fresh=args.fresh)
-        except ValueError as e:
-            print(f"bench_arch: {e}")
-            return 2
+    return p
+
+
+def _ledger(args: argparse.Namespace) -> Ledger | None:
+    """The ledger of the runs this table trains (None when it trains none)."""
+    if not args.train_steps:
+        return None
+    clips = sorted(d.name for d in Path(args.data).iterdir() if (d / "meta.json").is_file())
+    experiment = {"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size), "clips": clips,
+                  "teacher": args.teacher or f"trained first, {args.teacher_steps} steps"}
+    try:
+        return Ledger(Path(args.out) / f"{args.report}_ledger.json", experiment, fresh=args.fresh)
+    except ValueError as e:
+        raise RefusedError(str(e)) from None
+
+
+def _refusals(args: argparse.Namespace, ledger: Ledger | None, timed: dict, timing_from: dict | None) -> None:
+    """``RefusedError`` for a sitting that cannot give its rows a time, or would train in other arithmetic than
+    the ledger's runs."""
     if timing_from is not None and (untimed := [a for a in table_rows(args.only, ledger) if a not in timed]):
-        print(f"bench_arch: --timing-from {args.timing_from} has no timed row for {', '.join(untimed)}: time them "
-              "(without --timing-from) or leave them out of --only")
-        return 2
+        raise RefusedError(f"--timing-from {args.timing_from} has no timed row for {', '.join(untimed)}: time them "
+                           "(without --timing-from) or leave them out of --only")
     missing = [] if ledger is None else runs_left(args, ledger)
     if missing and not args.mixed_arithmetic:
         why = arithmetic_clash(ledger, precision_name(autocast_dtype(load_config(), torch.device("cpu"))))
         if why:
-            print(f"bench_arch: {why} ({', '.join(missing)} left to train)")
-            return 2
-    rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        teacher, stopped = train_seeds(args, ledger, Path(tmp)) if ledger is not None else (None, None)
-        names = table_rows(args.only, ledger)
-        for name in names:
-            row = measure(name, size, args.repeats, Path(tmp), timed.get(name))
-            if ledger is not None:
-                keys = sorted((split_key(k), k) for k in ledger.runs)
-                recs = {f"seed{seed}": ledger.runs[k] for (arch, seed), k in keys if arch == name}
-                row["seeds"] = list(recs)
-                row["iou_seeds"] = [r["iou"] for r in recs.values()]
-                row["iou"] = fmt(row["iou_seeds"])
-                row["last_fifth_gain"] = {sd: r["curve"]["flattened"]["gain"] for sd, r in recs.items()
-                                          if r["curve"].get("flattened")}
-                gains = row["last_fifth_gain"].values()
-                row["flat"] = f"{sum(g < 0.01 for g in gains)} of {len(gains)}"
-                row["precision"] = trained_in(recs.values())
-            if name in runs:
-                row["iou_run"] = held_out_iou(Path(runs[name]), Path(args.data), Path(tmp) / f"{name}.json")
-            rows.append(row)
-            print(row, flush=True)
-    budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size),
-               "seeds": sorted({split_key(key)[1] for key in ledger.runs}),
-               "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
-    diffs = differences(rows)
-    res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget, "differences": diffs,
-           "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()},
-           **({"timing_from": timing_from} if timing_from else {})}
+            raise RefusedError(f"{why} ({', '.join(missing)} left to train)")
+
+
+def _row(name: str, args: argparse.Namespace, ledger: Ledger | None, runs: dict[str, str], size, timed: dict,
+         tmp: Path) -> dict[str, Any]:
+    """One architecture's row: counted and timed (or its earlier time), its seeds' IoU from the ledger, its
+    own run's IoU."""
+    row = measure_arch(name, size, args.repeats, tmp, timed.get(name))
+    if ledger is not None:
+        keys = sorted((split_key(k), k) for k in ledger.runs)
+        recs = {f"seed{seed}": ledger.runs[k] for (arch, seed), k in keys if arch == name}
+        row["seeds"] = list(recs)
+        row["iou_seeds"] = [r["iou"] for r in recs.values()]
+        row["iou"] = fmt(row["iou_seeds"])
+        row["last_fifth_gain"] = {sd: r["curve"]["flattened"]["gain"] for sd, r in recs.items()
+                                  if r["curve"].get("flattened")}
+        gains = row["last_fifth_gain"].values()
+        row["flat"] = f"{sum(g < 0.01 for g in gains)} of {len(gains)}"
+        row["precision"] = trained_in(recs.values())
+    if name in runs:
+        row["iou_run"] = held_out_iou(Path(runs[name]), Path(args.data), tmp / f"{name}.json")
+    return row
+
+
+def _markdown(args: argparse.Namespace, rows: list, ledger: Ledger | None, budget: dict | None, diffs: list,
+              runs: dict[str, str], size, timing_from: dict | None, names: list[str]) -> list[str]:
     title = "# Architectures (the paper's Table 3)" + (f", {budget['steps']:,} steps" if budget else "")
     lines = [title, "",
              f"Fused D + B at {size[0]}x{size[1]}; frames/s of the fp32 ONNX model in onnxruntime with 2 threads"
@@ -386,12 +377,47 @@ def main(argv: list[str] | None = None) -> int:
     if runs:
         lines += ["", "IoU (own run): " + "; ".join(f"`{k}` {run_budget(Path(v))}" for k, v in runs.items())
                   + "; evaluated at its own training size."]
-    path = write_result(args.out, args.report, res, "\n".join(lines))
-    print(f"wrote {path}")
-    if stopped is not None:
-        print(f"bench_arch: --stop-after {args.stop_after:g} reached with {stopped} unfinished; the same command "
-              "goes on from where it stopped", flush=True)
-    return 0
+    return lines
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
+    if (args.train_steps or args.runs) and not args.data:
+        p.error("--train-steps and --runs need --data")
+    if args.stop_after is not None and not (args.stop_after > 0 and args.train_steps):
+        p.error(f"--stop-after needs --train-steps and a positive number of minutes, got {args.stop_after:g}")
+    torch.set_num_threads(2)
+    size = (256, 512)
+    runs = dict(r.split("=", 1) for r in args.runs)
+    timed, timing_from = {}, None
+    if args.timing_from:
+        try:
+            timed, timing_from = earlier_timing(Path(args.timing_from), size)
+        except (OSError, ValueError, KeyError) as e:
+            raise RefusedError(f"--timing-from: {e}") from None
+    ledger = _ledger(args)
+    _refusals(args, ledger, timed, timing_from)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        teacher, stopped = train_seeds(args, ledger, Path(tmp)) if ledger is not None else (None, None)
+        names = table_rows(args.only, ledger)
+        for name in names:
+            rows.append(_row(name, args, ledger, runs, size, timed, Path(tmp)))
+            print(rows[-1], flush=True)
+    budget = ({"steps": args.train_steps, "batch_size": 8, "size": list(args.train_size),
+               "seeds": sorted({split_key(key)[1] for key in ledger.runs}),
+               "teacher": str(teacher), "ledger": ledger.path.name} if ledger is not None else None)
+    diffs = differences(rows)
+    res = {"rows": rows, "size": list(size), "threads": 2, "iou_training": budget, "differences": diffs,
+           "iou_run": {k: run_budget(Path(v)) for k, v in runs.items()},
+           **({"timing_from": timing_from} if timing_from else {})}
+    lines = _markdown(args, rows, ledger, budget, diffs, runs, size, timing_from, names)
+    stop = [f"bench_arch: --stop-after {args.stop_after:g} reached with {stopped} unfinished; the same command "
+            "goes on from where it stopped"] if stopped is not None else []
+    return Report(res, lines, [f"wrote {Path(args.out) / args.report}.json", *stop], name=args.report)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

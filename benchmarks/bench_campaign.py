@@ -20,7 +20,7 @@ import matplotlib
 matplotlib.use("Agg")  # headless: before pyplot is imported
 import matplotlib.pyplot as plt
 
-from benchmarks.runner import Report, run
+from benchmarks.runner import RefusedError, Report, run
 from bsn_edge.train import Run
 from bsn_edge.train.run import trained_precision
 
@@ -142,8 +142,7 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
     trained = Run(args.run)
     hist = trained.history()
     if not hist:
-        print(f"{trained.path}: no history.jsonl records (train with train.eval_every > 0)")
-        raise SystemExit(2)
+        raise RefusedError(f"{trained.path}: no history.jsonl records (train with train.eval_every > 0)")
     cfg = trained.config()
     teacher = [r for r in hist if r.get("phase") == "teacher"]
     student = [r for r in hist if r.get("phase") == "train"]

@@ -23,14 +23,23 @@ class Report:
     name: str = ""
 
 
+class RefusedError(Exception):
+    """A sitting the benchmark will not run as asked (its message says why and what to do); exit status 2."""
+
+
 Measure = Callable[[argparse.Namespace, argparse.ArgumentParser], "Report | None"]
 
 
 def run(measure: Measure, parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
     """Parse ``argv`` with ``parser`` (which has ``--out`` and ``--name``), measure, write the report.
-    ``measure`` returns None when there is nothing to measure here (its data is absent: it says so)."""
+    ``measure`` returns None when there is nothing to measure here (its data is absent: it says so), and
+    raises :class:`RefusedError` for a sitting it will not run (status 2)."""
     args = parser.parse_args(argv)
-    report = measure(args, parser)
+    try:
+        report = measure(args, parser)
+    except RefusedError as e:
+        print(f"{parser.prog}: {e}")
+        return 2
     if report is None:
         return 0
     path = write_result(args.out, report.name or args.name, report.result, "\n".join(report.markdown))

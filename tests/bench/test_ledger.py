@@ -206,7 +206,7 @@ def test_an_architecture_table_trained_one_run_per_sitting_reports_every_row_its
     led.put("small/seed2", {"iou": 0.43, "curve": {**curve, "precision": ["fp32"]}})
     led.put("unet/seed1", {"iou": 0.30, "curve": {**curve, "precision": ["bf16"]}})
     measured = []
-    monkeypatch.setattr(arch, "measure", lambda name, *a: measured.append(name) or {
+    monkeypatch.setattr(arch, "measure_arch", lambda name, *a: measured.append(name) or {
         "model": name, "params_m": 1.0, "gmacs": 2.0, "median_ms": 10.0, "fps": 100.0, "repeats": 1})
     rc = arch.main(["--out", str(out), "--data", str(data), "--train-steps", "12000", "--teacher", "teacher",
                     "--only", "small", "--seeds", "0", "--report", "heavy"])
@@ -235,7 +235,7 @@ def test_a_run_trained_here_names_the_machine_that_finished_it_and_older_runs_sa
     monkeypatch.setattr(arch, "train_uniform", lambda name, *a: trained.append(name) or tmp_path / name)
     monkeypatch.setattr(arch, "held_out_iou", lambda run, data, report: 0.45)
     monkeypatch.setattr(arch, "run_curve", lambda run: curve)
-    monkeypatch.setattr(arch, "measure", lambda name, *a: {
+    monkeypatch.setattr(arch, "measure_arch", lambda name, *a: {
         "model": name, "params_m": 1.0, "gmacs": 2.0, "median_ms": 10.0, "fps": 100.0, "repeats": 1})
     rc = arch.main(["--out", str(out), "--data", str(data), "--train-steps", "12000", "--teacher", "teacher",
                     "--only", "unet", "--seeds", "1", "--report", "heavy"])
@@ -270,7 +270,7 @@ def test_a_sitting_of_known_length_ends_inside_a_run_with_its_state_saved_and_th
     monkeypatch.setattr(arch, "train_run", train_run)
     monkeypatch.setattr(arch, "held_out_iou", lambda run, data, report: 0.4)
     monkeypatch.setattr(arch, "run_curve", lambda run: {"steps": [10], "val_iou": [0.4]})
-    monkeypatch.setattr(arch, "measure", lambda name, *a: {
+    monkeypatch.setattr(arch, "measure_arch", lambda name, *a: {
         "model": name, "params_m": 1.0, "gmacs": 2.0, "median_ms": 10.0, "fps": 100.0, "repeats": 1})
     argv = ["--out", str(out), "--data", str(data), "--train-steps", "100", "--teacher", "teacher",
             "--only", "small", "unet", "--seeds", "0", "--report", "r", "--work", str(tmp_path / "work")]
