@@ -22,9 +22,11 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import runner
 from benchmarks.bench_realboxes import MARKED_SHARE, frac, score, summary
-from benchmarks.common import named, write_result
+from benchmarks.common import named
 from benchmarks.road_users import NEAR_M, road_users
+from benchmarks.runner import RefusedError, Report
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.metrics import Counts, DepthBins
 from bsn_edge.runtime.engine import Engine
@@ -113,7 +115,7 @@ def kept_models(path: Path, sets: dict[str, list[str]], measured: list[str]) -> 
     return {k: v for k, v in old.get("models", {}).items() if k not in measured}
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--set", action="append", required=True, metavar="NAME=DIR[:CLIP,CLIP]",
                    help="a named set of labelled clips: a folder, optionally only the named clips")
@@ -124,7 +126,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--keep", action="store_true",
                    help="keep the rows of models the existing report measured on the same sets (models whose "
                         "files are gone), first; a model named again is measured again")
-    args = p.parse_args(argv)
+    return p
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     sets = []
     for text in args.set:
         name, folder, names = parse_set(text)
@@ -140,8 +145,7 @@ def main(argv: list[str] | None = None) -> int:
             result["models"] = kept_models(Path(args.out) / f"{args.name}.json", result["sets"],
                                            [lb for lb, _ in labels])
         except ValueError as e:
-            print(f"bench_cameras: {e}")
-            return 2
+            raise RefusedError(str(e)) from None
     for label, mp in labels:
         engine = Engine(mp)
         result["models"][label] = {name: evaluate(engine, clips) for name, clips in sets}
@@ -167,9 +171,11 @@ def main(argv: list[str] | None = None) -> int:
                     "| model | clips | clip | label pixels in V (share of the set's) | IoU |", "|---|---|---|---|---|",
                     *[r for label, res in result["models"].items() for name, m in res.items()
                       for r in _clip_rows(label, name, m)]])
-    write_result(args.out, args.name, result, md)
-    print(md)
-    return 0
+    return Report(result, [md], [md])
+
+
+def main(argv: list[str] | None = None) -> int:
+    return runner.run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import summary, time_calls, write_result
+from benchmarks import runner
+from benchmarks.common import summary, time_calls
+from benchmarks.runner import Report
 from bsn_edge.card import ModelCard
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.export import quantize, to_onnx
@@ -45,11 +47,15 @@ def plain_session(path: Path):
     return ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", default=str(SHIPPED), help="an exported int8 model (default: the shipped one)")
     p.add_argument("--out", default="benchmarks/results")
-    args = p.parse_args(argv)
+    p.add_argument("--name", default="int8_cpu", help="the report's name in --out")
+    return p
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     import torch
 
     model_path = Path(args.model)
@@ -91,9 +97,11 @@ def main(argv: list[str] | None = None) -> int:
         f"stored at export (probability, depth), allowed {card.self_test.prob_atol} / "
         f"{100 * card.self_test.depth_rtol:.0f} %.", "",
         "| session | frames/s | median ms | self-test deviation |", "|---|---|---|---|", *rows])
-    write_result(args.out, "int8_cpu", result, md)
-    print(md)
-    return 0
+    return Report(result, [md], [md])
+
+
+def main(argv: list[str] | None = None) -> int:
+    return runner.run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

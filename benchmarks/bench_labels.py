@@ -18,8 +18,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.common import write_result
+from benchmarks import runner
 from benchmarks.oracle import revealed_share
+from benchmarks.runner import Report
 from bsn_edge.labels import LabelConfig, Sources, label_sequence, labels_dir
 from bsn_edge.labels.batch import label_many
 from bsn_edge.sequence import read_mask
@@ -169,14 +170,18 @@ def markdown(res: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--frames", type=int, default=300)
     p.add_argument("--no-realistic", action="store_true", help="only setting (a)")
     p.add_argument("--work", default=None, help="keep the clips here (default: a temporary folder)")
-    args = p.parse_args(argv)
+    p.add_argument("--name", default="labels", help="the report's name in --out")
+    return p
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     work = Path(args.work or tempfile.mkdtemp(prefix="bsn-bench-labels-"))
     try:
         res = run(work, args.seeds, args.frames, realistic=not args.no_realistic)
@@ -184,10 +189,12 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if not args.work:
             shutil.rmtree(work, ignore_errors=True)
-    path = write_result(args.out, "labels", res, markdown(res))
-    print(markdown(res))
-    print(f"wrote {path}")
-    return 0 if res["passes_bar"] and res["throughput"]["passes_bar"] else 1
+    missed = not (res["passes_bar"] and res["throughput"]["passes_bar"])
+    return Report(res, [markdown(res)], [markdown(res)], status=int(missed))
+
+
+def main(argv: list[str] | None = None) -> int:
+    return runner.run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

@@ -23,8 +23,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks import runner
 from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_samples
-from benchmarks.common import named, write_result
+from benchmarks.common import named
+from benchmarks.runner import Report
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import Intrinsics
 from bsn_edge.default_model import DEFAULT_MODEL
@@ -112,15 +114,19 @@ def figure(columns: dict[str, list[np.ndarray]]) -> np.ndarray:
     return np.vstack(rows[:-1])
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
                    help="exported models, one column each (default: the shipped one)")
-    args = p.parse_args(argv)
+    p.add_argument("--name", default="realview", help="the report's name in --out")
+    return p
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     if not REAL.is_dir():
         print(f"no real data at {REAL}: nothing to show")
-        return 0
+        return None
     try:
         models = {name: Engine(path) for name, path in named(args.model or [str(DEFAULT_MODEL)]).items()}
     except ValueError as e:
@@ -140,9 +146,11 @@ def main(argv: list[str] | None = None) -> int:
         shown = ", ".join(map(str, src.shown))
         lines += [f"## {src.name} ({src.what}; frames {shown})", "", f"![{src.name}]({fname})", "",
                   f"Frames: {licence(src.name).rstrip('.')}.", ""]
-    write_result(out, "realview", result, "\n".join(lines))
-    print("\n".join(lines))
-    return 0
+    return Report(result, lines, lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return runner.run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,9 @@ from __future__ import annotations
 import argparse
 import time
 
-from benchmarks.common import summary, time_calls, write_result
+from benchmarks import runner
+from benchmarks.common import summary, time_calls
+from benchmarks.runner import Report
 from bsn_edge.synth import STYLES, Renderer, SynthConfig, make_clip
 from bsn_edge.synth.clip import render_frames
 
@@ -64,16 +66,21 @@ def markdown(res: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--frames", type=int, default=100)
-    args = p.parse_args(argv)
+    p.add_argument("--name", default="synth", help="the report's name in --out")
+    return p
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     res = run(args.frames)
-    path = write_result(args.out, "synth", res, markdown(res))
-    print(markdown(res))
-    print(f"wrote {path}")
-    return 0  # a missed bar is a finding in the report, not a crash of the benchmark run
+    return Report(res, [markdown(res)], [markdown(res)])
+
+
+def main(argv: list[str] | None = None) -> int:
+    return runner.run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

@@ -25,8 +25,10 @@ matplotlib.use("Agg")  # headless: before pyplot is imported
 import matplotlib.pyplot as plt
 import numpy as np
 
+from benchmarks import runner
 from benchmarks.bench_floor import conv_kinds
-from benchmarks.common import class_name, cpu_named, machine, write_result
+from benchmarks.common import class_name, cpu_named, machine
+from benchmarks.runner import Report
 from bsn_edge.runtime.engine import Engine
 
 
@@ -67,7 +69,7 @@ def plot(rows: list[dict[str, Any]], sets: list[str], path: Path, title: str) ->
     plt.close(fig)
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", action="append", required=True, metavar="NAME=MODEL.onnx",
                    help="an exported model, named as in the cameras report")
@@ -75,7 +77,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="bench_cameras' report holding each model's held-out IoU (default: %(default)s)")
     p.add_argument("--runs", type=int, default=200, help="rounds of alternated inferences (default 200)")
     p.add_argument("--out", default="benchmarks/results")
-    args = p.parse_args(argv)
+    return p
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     named = [(spec.partition("=")[0], Path(spec.partition("=")[2])) for spec in args.model]
     if any(not name or not path.name for name, path in named):
         p.error("--model wants NAME=MODEL.onnx")
@@ -107,9 +112,11 @@ def main(argv: list[str] | None = None) -> int:
     base = rows[0]
     lines += ["", *[f"- {r['model']}: {base['median_ms'] / r['median_ms']:.2f}x the frames/s of {base['model']}"
                     for r in rows[1:]]]
-    write_result(args.out, report, {"models": rows, "sets": sets, "runs": args.runs}, "\n".join(lines))
-    print("\n".join(lines))
-    return 0
+    return Report({"models": rows, "sets": sets, "runs": args.runs}, lines, lines, name=report)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return runner.run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

@@ -29,7 +29,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.common import write_result
+from benchmarks import runner
+from benchmarks.runner import Report
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.vanishing_point import find_vanishing_point
 from bsn_edge.cli.common import REAL_DATA
@@ -111,10 +112,14 @@ def _line(name: str, s: dict[str, Any]) -> str:
             f"{s['within_1_deg']}" if med else "- | - | 0") + " |")
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="benchmarks/results")
-    args = p.parse_args(argv)
+    p.add_argument("--name", default="vanishing", help="the report's name in --out")
+    return p
+
+
+def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     with tempfile.TemporaryDirectory() as tmp:
         synth = rendered(Path(tmp))
     have_real = (REAL_DATA / "udacity_test_video.mp4").is_file() and (REAL_DATA / "ddad_dgp").is_dir()
@@ -151,9 +156,11 @@ def main(argv: list[str] | None = None) -> int:
                                               f"{g['frames_looked']}" if g and g["pitch_deg"] is not None
                                               else "none found | -")
                       + " | " + (f"{o['pitch_deg']:+.2f} / {o['yaw_deg']:+.2f}" if o else "not converged") + " |")
-    write_result(args.out, "vanishing", result, "\n".join(md))
-    print("\n".join(md))
-    return 0
+    return Report(result, md, md)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return runner.run(measure, parser(), argv)
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ class Report:
     markdown: list[str]
     printed: list[str] = field(default_factory=list)
     name: str = ""
+    status: int = 0          # the exit status: 1 for a benchmark whose bar failing fails its run
 
 
 class RefusedError(Exception):
@@ -44,4 +45,4 @@ def run(measure: Measure, parser: argparse.ArgumentParser, argv: list[str] | Non
         return 0
     path = write_result(args.out, report.name or args.name, report.result, "\n".join(report.markdown))
     print("\n".join(report.printed) if report.printed else f"wrote {path}")
-    return 0
+    return report.status
