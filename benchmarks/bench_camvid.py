@@ -16,6 +16,7 @@ part, at least :data:`CLEAR_PX` pixels from anything but road or pavement, that 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -75,9 +76,11 @@ def assumed_camera_file(engine: Engine, frame: camvid.CamVidFrame) -> Calibratio
     return Calibration.of(engine.card.camera.scaled(w, h), (), engine.card.mounting, method="assumed")
 
 
-def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool = False) -> dict[str, Any]:
+def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool = False,
+                masks: dict[int, np.ndarray] | None = None) -> dict[str, Any]:
     """Every frame of the drive through ``engine`` as ``bsn-run`` would run the folder (``assumed``: with
-    :func:`assumed_camera_file` instead of none, so no first guess and no online calibration): counts."""
+    :func:`assumed_camera_file` instead of none, so no first guess and no online calibration): counts.
+    ``masks``: filled with the blind-spot mask of each frame (by its index) that has near people or cyclists."""
     cal = assumed_camera_file(engine, frames[0]) if assumed else None
     state = CameraState(engine.card, cal, background=False)
     counts: dict[str, list[int]] = {f"{g}_{r}": [0, 0] for g in GROUPS for r in ("near", "all")}
@@ -88,7 +91,10 @@ def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool 
         mf = state.frame_for(image)
         prob, _ = engine.infer(mf.to_model(image)[None])
         mask = mf.to_raw(prob) >= engine.card.threshold
-        for u in road_users(label):
+        users = road_users(label)
+        if masks is not None and any(u["near"] and u["group"] == "people" for u in users):
+            masks[frames.index(fr)] = mask
+        for u in users:
             marked = int(mask[u["mask"]].mean() >= MARKED_SHARE)
             for r in ("near", "all") if u["near"] else ("all",):
                 counts[f"{u['group']}_{r}"][0] += marked
@@ -102,8 +108,36 @@ def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool 
             "camera": state.summary().get("first_guess")}
 
 
+def people_pictures(frames: list[camvid.CamVidFrame], masks: dict[str, dict[int, np.ndarray]], out: Path,
+                    name: str) -> list[str]:
+    """For the eye: each frame with near people or cyclists, every model's blind spots (red) side by side, the
+    near people and cyclists outlined (green); the pictures' report lines. They stay on the machine, as the
+    real frames do."""
+    lines = []
+    for k in sorted(next(iter(masks.values()), {})):
+        image, label = frames[k].rgb(), frames[k].camvid_label()
+        near = [u for u in road_users(label) if u["near"] and u["group"] == "people"]
+        cells = []
+        for model, by_frame in masks.items():
+            img = image.copy()
+            m = by_frame[k]
+            img[m] = (0.5 * img[m] + 0.5 * np.array([0, 0, 255])).astype(np.uint8)
+            for u in near:
+                cnts, _ = cv2.findContours(u["mask"].astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+                cv2.drawContours(img, cnts, -1, (0, 255, 0), 1)
+            cv2.putText(img, model, (6, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
+            cells.append(img)
+        fname = f"{name}_people_{k:03d}.jpg"
+        cv2.imwrite(str(out / fname), np.hstack(cells), [cv2.IMWRITE_JPEG_QUALITY, 85])
+        lines += [f"![frame {k}]({fname})", ""]
+    return lines
+
+
 def parser() -> argparse.ArgumentParser:
     p = models_parser(__doc__, "camvid")
+    p.add_argument("--pictures", action="store_true",
+                   help="also write, for each frame with near people or cyclists, every model's blind spots side "
+                        "by side with those people outlined (for the eye; the pictures stay on the machine)")
     p.add_argument("--drive", default=camvid.HELD_OUT, help=f"the drive scored (default {camvid.HELD_OUT})")
     p.add_argument("--assumed-camera", action="store_true",
                    help="also score each model with a camera file that says only what bsn-run assumes (the model "
@@ -127,8 +161,9 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
     if args.assumed_camera:
         runs = [(f"{name}{', assumed camera file' if a else ''}", engine, a) for name, engine in models.items()
                 for a in (False, True)]
+    masks: dict[str, dict[int, np.ndarray]] = {}
     for name, engine, assumed in runs:
-        r = score_drive(engine, frames, assumed)
+        r = score_drive(engine, frames, assumed, masks.setdefault(name, {}) if args.pictures else None)
         result["models"][name] = {"threshold": engine.card.threshold, **r}
         c = r["counts"]
         table.append(f"| {name} ({engine.card.threshold:.2f}) | {frac(c['vehicles_near'])} | "
@@ -142,6 +177,12 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
           f"{100 * LOWER_SHARE:.0f} % of the 480x360 frame; open road: road pixels in that lower part at least "
           f"{CLEAR_PX} px from anything but road or pavement.", "", *table, "",
           f"Frames and labels: {licence('camvid')}."]
+    if args.pictures:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        md += ["", "## Near people and cyclists, each model side by side", "",
+               "Blind spots in red, the near people and cyclists outlined in green.", "",
+               *people_pictures(frames, masks, out, args.name)]
     return Report(result, md, table)
 
 
