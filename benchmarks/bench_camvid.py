@@ -85,7 +85,7 @@ def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool 
     state = CameraState(engine.card, cal, background=False)
     counts: dict[str, list[int]] = {f"{g}_{r}": [0, 0] for g in GROUPS for r in ("near", "all")}
     flagged, road_px = 0, 0
-    for fr in frames:
+    for k, fr in enumerate(frames):
         image, label = fr.rgb(), fr.camvid_label()
         state.observe(image)
         mf = state.frame_for(image)
@@ -93,7 +93,7 @@ def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool 
         mask = mf.to_raw(prob) >= engine.card.threshold
         users = road_users(label)
         if masks is not None and any(u["near"] and u["group"] == "people" for u in users):
-            masks[frames.index(fr)] = mask
+            masks[k] = mask
         for u in users:
             marked = int(mask[u["mask"]].mean() >= MARKED_SHARE)
             for r in ("near", "all") if u["near"] else ("all",):

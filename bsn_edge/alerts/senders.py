@@ -205,21 +205,21 @@ class SerialSender(Sender):
             self.port.close()
 
 
-def _can(target: str, encoder: Encoder, log_path: str | None) -> Sender:
+def _can(target: str, encoder: Encoder | None, log_path: str | None) -> Sender:
     iface, _, channel = target.partition(":")
     if not (iface and channel):
         raise ValueError(f"can:{target}: give can:IFACE:CHANNEL, e.g. can:socketcan:can0")
     return CanSender(iface, channel, log_path=log_path, encoder=encoder)
 
 
-def _serial(target: str, encoder: Encoder, log_path: str | None) -> Sender:
+def _serial(target: str, encoder: Encoder | None, log_path: str | None) -> Sender:
     if log_path:
         raise ValueError("a serial output keeps no CAN log")
     return SerialSender(target, encoder=encoder)
 
 
 # the transports, by the scheme an output is named with: a new bus is one Sender subclass and one entry
-SENDERS: dict[str, Callable[[str, Encoder, str | None], Sender]] = {"can": _can, "serial": _serial}
+SENDERS: dict[str, Callable[[str, Encoder | None, str | None], Sender]] = {"can": _can, "serial": _serial}
 
 
 def open_sender(output: str, encoder: Encoder | None = None, log_path: str | None = None) -> Sender:
@@ -228,4 +228,4 @@ def open_sender(output: str, encoder: Encoder | None = None, log_path: str | Non
     scheme, _, target = output.partition(":")
     if scheme not in SENDERS or not target:
         raise ValueError(f"output {output!r}: give SCHEME:TARGET with SCHEME one of {', '.join(sorted(SENDERS))}")
-    return SENDERS[scheme](target, encoder if encoder is not None else CanEncoder(), log_path)
+    return SENDERS[scheme](target, encoder, log_path)

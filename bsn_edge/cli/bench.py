@@ -67,7 +67,7 @@ def _prepare(work: Path) -> tuple[Path, Path, Path]:
     if not Run(run).checkpoint_path.is_file():
         _py("-m", "bsn_edge.cli.train", "--config", "configs/quick.toml", "--data", str(data), "--out", str(run))
     if not model.is_file():
-        _py("-m", "bsn_edge.cli.export", "--checkpoint", str(run), "--out", str(model), "--int8", "--calib",
+        _py("-m", "bsn_edge.cli.export", "--checkpoint", str(run), "--out", str(model), "--int8", "--int8-frames",
             str(data / "town_0"), "--force")
     return data, run, model
 

@@ -196,7 +196,6 @@ def _output_files(args: argparse.Namespace) -> list[tuple[OutputKind, str | None
 def make_senders(args: argparse.Namespace) -> list[Sender]:
     """The configured senders; ``ValueError`` names the bad option (a sender already opened is
     closed again)."""
-    from bsn_edge.alerts.can_codec import CanEncoder
     from bsn_edge.alerts.frame import AlertFrame
     from bsn_edge.alerts.senders import open_sender
 
@@ -215,7 +214,7 @@ def make_senders(args: argparse.Namespace) -> list[Sender]:
     try:
         for output, log_path, what in outputs:
             try:
-                senders.append(open_within(functools.partial(open_sender, output, CanEncoder(), log_path),
+                senders.append(open_within(functools.partial(open_sender, output, log_path=log_path),
                                            OPEN_DEADLINE_S, what))
             except Exception as e:
                 raise ValueError(f"cannot open {what}: {type(e).__name__}: {e}") from None
