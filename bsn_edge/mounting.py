@@ -27,6 +27,7 @@ from bsn_edge.fields import number
 REFERENCE_HEIGHT_M = 1.5       # a car's dashcam: the model camera's height, and the height where none is known
 HEIGHT_RANGE_M = (0.2, 5.0)     # a camera's height above the road: every tool checks against this one range
 ANGLE_LIMIT_DEG = 30.0          # pitch, yaw and roll
+INVERSE_BAND_ROWS = 64
 
 
 def check_height(height_m: float, what: str = "height_m") -> float:
@@ -132,8 +133,16 @@ def inverse_maps(raw: Intrinsics, dist: tuple[float, ...], mounting: Mounting, m
     """``(map_x, map_y)`` float32 ``[H, W]`` of the raw frame's size: for each raw pixel, where to
     sample the model's outputs to bring them back onto the raw frame."""
     r_model_from_raw = model_mounting.rotation() @ mounting.rotation().T
-    u, v = np.meshgrid(np.arange(raw.width, dtype=np.float64), np.arange(raw.height, dtype=np.float64))
-    pts = np.stack([u.ravel(), v.ravel()], -1)[:, None, :]
-    out = cv2.undistortPoints(pts, raw.K, np.asarray(dist, np.float64), R=r_model_from_raw, P=model.K)
-    out = out.reshape(raw.height, raw.width, 2).astype(np.float32)
-    return out[..., 0], out[..., 1]
+    k, d = raw.K, np.asarray(dist, np.float64)
+    map_x = np.empty((raw.height, raw.width), np.float32)
+    map_y = np.empty_like(map_x)
+    u = np.arange(raw.width, dtype=np.float64)
+    # a band of rows at a time: a full HD frame's points in float64 would cost ~50 MB at once
+    for top in range(0, raw.height, INVERSE_BAND_ROWS):
+        rows = np.arange(top, min(top + INVERSE_BAND_ROWS, raw.height), dtype=np.float64)
+        pts = np.empty((rows.size, raw.width, 2), np.float64)
+        pts[..., 0], pts[..., 1] = u, rows[:, None]
+        out = cv2.undistortPoints(pts.reshape(-1, 1, 2), k, d, R=r_model_from_raw, P=model.K)
+        out = out.reshape(rows.size, raw.width, 2)
+        map_x[top:top + rows.size], map_y[top:top + rows.size] = out[..., 0], out[..., 1]
+    return map_x, map_y

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bsn_edge.camera import Intrinsics
-from bsn_edge.mounting import Mounting, inverse_maps, warp_maps
+from bsn_edge.mounting import INVERSE_BAND_ROWS, Mounting, inverse_maps, warp_maps
 
 RAW = Intrinsics(1150.0, 1150.0, 650.0, 370.0, 1280, 720)
 DIST = (-0.24, 0.05, 0.001, -0.0005, 0.0)
@@ -68,7 +68,9 @@ def test_inverse_brings_model_pixels_back_onto_the_raw_frame():
     user, ref = Mounting(1.25, pitch_deg=-1.5, yaw_deg=2.0), Mounting(1.5)
     bx, by = inverse_maps(RAW, DIST, user, MODEL, ref)
     assert bx.shape == (720, 1280)
-    for u, v in ((100, 100), (640, 360), (1200, 650)):
+    # the maps are made a band of rows at a time: rows either side of a band's edge and the last row too
+    edges = [(u, v) for v in (INVERSE_BAND_ROWS - 1, INVERSE_BAND_ROWS, 2 * INVERSE_BAND_ROWS, 719) for u in (0, 1279)]
+    for u, v in ((100, 100), (640, 360), (1200, 650), *edges):
         ray = user.rotation() @ level_ray(MODEL, ref, float(bx[v, u]), float(by[v, u]))
         back, _ = cv2.projectPoints(ray[None], np.zeros(3), np.zeros(3), RAW.K, np.array(DIST))
         assert tuple(back.ravel()) == pytest.approx((u, v), abs=0.05)
