@@ -24,7 +24,7 @@ import numpy as np
 
 from benchmarks import runner
 from benchmarks.bench_realboxes import MARKED_SHARE, frac, score, summary
-from benchmarks.common import named
+from benchmarks.common import load_engine, named
 from benchmarks.road_users import NEAR_M, road_users
 from benchmarks.runner import RefusedError, Report
 from bsn_edge.data import BlindSpotDataset, find_clips
@@ -52,10 +52,10 @@ def evaluate(engine: Engine, clips, label: str = "T5s") -> dict[str, Any]:
             item = ds.load(k)
             prob, depth = engine.infer(item["rgb"][None])
             for c in (counts, own):
-                c.add(prob >= card.threshold, item["blindspot"] > 0, item["visibility"] > 0)
+                c.add(prob >= engine.threshold, item["blindspot"] > 0, item["visibility"] > 0)
             pred, true, sem = np.asarray(depth).reshape(item["depth"].shape), item["depth"], item["semantic"]
             boxes = road_users(sem, true)
-            marked["model"] += score(prob >= card.threshold, boxes)
+            marked["model"] += score(prob >= engine.threshold, boxes)
             marked["labels"] += score(item["blindspot"] > 0, boxes)
             for c, ids in DEPTH_CLASSES.items():
                 on = np.isin(sem, ids)
@@ -119,8 +119,9 @@ def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--set", action="append", required=True, metavar="NAME=DIR[:CLIP,CLIP]",
                    help="a named set of labelled clips: a folder, optionally only the named clips")
-    p.add_argument("--model", action="append", required=True, metavar="[NAME=]MODEL.onnx",
-                   help="a model to evaluate, named in the report by NAME (default: its file's stem)")
+    p.add_argument("--model", action="append", required=True, metavar="[NAME=]MODEL.onnx[@THRESHOLD]",
+                   help="a model to evaluate, named in the report by NAME (default: its file's stem), at its card's "
+                        "threshold or at the one after @")
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--name", default="cameras", help="the report's name in --out")
     p.add_argument("--keep", action="store_true",
@@ -147,7 +148,7 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
         except ValueError as e:
             raise RefusedError(str(e)) from None
     for label, mp in labels:
-        engine = Engine(mp)
+        engine = load_engine(mp)
         result["models"][label] = {name: evaluate(engine, clips) for name, clips in sets}
     rows = [_row(label, name, m) for label, res in result["models"].items() for name, m in res.items()]
     md = "\n".join(["# Held-out synthetic IoU, every clip in the model's own camera", "",

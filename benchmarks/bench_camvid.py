@@ -90,7 +90,7 @@ def score_drive(engine: Engine, frames: list[camvid.CamVidFrame], assumed: bool 
         state.observe(image)
         mf = state.frame_for(image)
         prob, _ = engine.infer(mf.to_model(image)[None])
-        mask = mf.to_raw(prob) >= engine.card.threshold
+        mask = mf.to_raw(prob) >= engine.threshold
         users = road_users(label)
         if masks is not None and any(u["near"] and u["group"] == "people" for u in users):
             masks[k] = mask
@@ -164,9 +164,9 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
     masks: dict[str, dict[int, np.ndarray]] = {}
     for name, engine, assumed in runs:
         r = score_drive(engine, frames, assumed, masks.setdefault(name, {}) if args.pictures else None)
-        result["models"][name] = {"threshold": engine.card.threshold, **r}
+        result["models"][name] = {"threshold": engine.threshold, **r}
         c = r["counts"]
-        table.append(f"| {name} ({engine.card.threshold:.2f}) | {frac(c['vehicles_near'])} | "
+        table.append(f"| {name} ({engine.threshold:.2f}) | {frac(c['vehicles_near'])} | "
                      f"{frac(c['people_near'])} | {frac(c['road_users_all'])} | "
                      f"{100 * r['open_road_flagged']:.1f} % |")
     md = [f"# Real road users marked: CamVid drive {args.drive}, by pixel labels", "",

@@ -120,7 +120,7 @@ def blind_spots(engine: Engine, frame: Frame, withheld: bool = False) -> np.ndar
     (``withheld``: as it sees it when the user gives no camera file)."""
     mf = model_frame(engine.card, frame, withheld)
     prob, _ = engine.infer(mf.to_model(frame.image)[None])
-    return mf.to_raw(prob) >= engine.card.threshold
+    return mf.to_raw(prob) >= engine.threshold
 
 
 def score(mask: np.ndarray, boxes: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -222,9 +222,9 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
              "|---|---|---|---|---|---|---|"]
     for name, engine, _ in runs:
         s = summary(per_model[name])
-        result["models"][name] = {"threshold": engine.card.threshold, **s}
+        result["models"][name] = {"threshold": engine.threshold, **s}
         g = s["groups"]
-        table.append(f"| {name} ({engine.card.threshold:.2f}) | {frac(s['near'])} | {frac(s['all'])} | "
+        table.append(f"| {name} ({engine.threshold:.2f}) | {frac(s['near'])} | {frac(s['all'])} | "
                      f"{frac(g['vehicles']['near'])} / {frac(g['vehicles']['all'])} | "
                      f"{frac(g['people']['near'])} / {frac(g['people']['all'])} | "
                      f"{frac(g['cyclists']['near'])} / {frac(g['cyclists']['all'])} | "

@@ -40,7 +40,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.common import named
+from benchmarks.common import load_engine, named
 from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.calibration.mount_fit import MountFitConfig
@@ -408,7 +408,7 @@ def _readings(engine: Engine, samples: list, readings: tuple[str, ...], way: str
             got[r][0].append(pd)
             got[r][1].append(td)
         if picture_to is not None and s is samples[0]:
-            cv2.imwrite(str(picture_to), picture(s, raw_depth, raw_prob, engine.card.threshold))
+            cv2.imwrite(str(picture_to), picture(s, raw_depth, raw_prob, engine.threshold))
     return got
 
 
@@ -471,7 +471,7 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
              "the bus carries. Frames: " + ", ".join(f"{t} {len(s)}" for _, t, s, _ in sets) + ".", ""]
     errors: dict[str, dict[str, FrameErrors]] = {}       # "data / reading" -> model -> its frames' errors
     for name, mp in models.items():
-        results["models"][name], section = _model_section(name, Engine(mp), sets, out, errors)
+        results["models"][name], section = _model_section(name, load_engine(mp), sets, out, errors)
         lines += section
     table, results["intervals"] = interval_table(errors, names)
     lo, hi = SPAN_M

@@ -25,7 +25,7 @@ import numpy as np
 
 from benchmarks import runner
 from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_samples
-from benchmarks.common import named
+from benchmarks.common import load_engine, named
 from benchmarks.runner import Report
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import Intrinsics
@@ -87,7 +87,7 @@ def run_model(engine: Engine, src: Source) -> list[np.ndarray]:
         if i not in src.shown:
             continue
         prob, _ = engine.infer(mf.to_model(frame)[None])
-        mask = mf.to_raw(prob) >= engine.card.threshold
+        mask = mf.to_raw(prob) >= engine.threshold
         scale = WIDTH / frame.shape[1]
         size = (WIDTH, round(frame.shape[0] * scale))
         img = cv2.resize(frame, size, interpolation=cv2.INTER_AREA)
@@ -128,7 +128,7 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
         print(f"no real data at {REAL}: nothing to show")
         return None
     try:
-        models = {name: Engine(path) for name, path in named(args.model or [str(DEFAULT_MODEL)]).items()}
+        models = {name: load_engine(path) for name, path in named(args.model or [str(DEFAULT_MODEL)]).items()}
     except ValueError as e:
         p.error(str(e))
     out = Path(args.out)
@@ -137,7 +137,7 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
              "Blind spots (red) of each model at its own threshold, on the raw frames of every real source in "
              "`../shared/data/real/`, each seen as `bsn-run` sees it. Each picture carries the source and licence of "
              "its frames. Columns: " + ", ".join(models) + ".", ""]
-    result: dict = {"models": {n: e.card.threshold for n, e in models.items()}, "sources": {}}
+    result: dict = {"models": {n: e.threshold for n, e in models.items()}, "sources": {}}
     for src in sources():
         cols = {name: run_model(engine, src) for name, engine in models.items()}
         fname = f"realview_{src.name.replace(' ', '_')}.jpg"

@@ -42,16 +42,38 @@ def cpu_named(m: dict[str, Any]) -> str:
 
 def named(specs: list[str]) -> dict[str, str]:
     """``[NAME=]PATH`` arguments (``--model``, ``--teacher``) as ``{name: path}`` in their order; a path
-    given without a name is named by its file's stem. ValueError when two get the same name, which
-    would report one model's figures under the other's."""
+    given without a name is named by its file's stem (and its ``@THRESHOLD``, :func:`operating_point`).
+    ValueError when two get the same name, which would report one model's figures under the other's."""
     out: dict[str, str] = {}
     for spec in specs:
         name, _, path = spec.rpartition("=")
-        name = name or Path(path).stem
+        if not name:
+            file, threshold = operating_point(path)
+            name = Path(file).stem + ("" if threshold is None else f"@{threshold:g}")
         if name in out:
             raise ValueError(f"two models are named {name!r} ({out[name]} and {path}): name them, NAME=PATH")
         out[name] = path
     return out
+
+
+def operating_point(spec: str) -> tuple[str, float | None]:
+    """``MODEL.onnx[@THRESHOLD]`` as ``(path, threshold)``: a model read at another decision threshold
+    than its card's (``None``: the card's)."""
+    path, at, t = spec.rpartition("@")
+    if not at:
+        return spec, None
+    try:
+        return path, float(t)
+    except ValueError:
+        return spec, None       # an @ that is part of the file's name
+
+
+def load_engine(spec: str) -> Any:
+    """The model of ``MODEL.onnx[@THRESHOLD]`` loaded as the runtime loads it, deciding at that threshold."""
+    from bsn_edge.runtime.engine import Engine
+
+    path, threshold = operating_point(spec)
+    return Engine(path, threshold=threshold)
 
 
 def class_name(base: str) -> str:
@@ -97,8 +119,9 @@ def models_parser(description: str, name: str) -> argparse.ArgumentParser:
     (repeatable, scored side by side) and ``--name`` (the report's, default ``name``)."""
     p = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
-    p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx",
-                   help="exported models, scored side by side (default: the shipped one)")
+    p.add_argument("--model", action="append", metavar="[NAME=]MODEL.onnx[@THRESHOLD]",
+                   help="exported models, scored side by side (default: the shipped one), each at its card's "
+                        "threshold or at the one after @ (a model's operating points side by side)")
     p.add_argument("--name", default=name, help="the report's name in --out")
     return p
 
@@ -107,10 +130,9 @@ def engines(p: argparse.ArgumentParser, specs: list[str] | None) -> dict[str, An
     """The models ``--model`` names (the shipped one when none), loaded as the runtime loads them; a
     usage error through ``p`` for two of one name or a model that does not load."""
     from bsn_edge.default_model import DEFAULT_MODEL
-    from bsn_edge.runtime.engine import Engine
 
     try:
-        return {name: Engine(path) for name, path in named(specs or [str(DEFAULT_MODEL)]).items()}
+        return {name: load_engine(spec) for name, spec in named(specs or [str(DEFAULT_MODEL)]).items()}
     except ValueError as e:
         p.error(str(e))
 

@@ -30,14 +30,18 @@ class Engine:
     """Runs the model on its preallocated input buffer ``buf`` (the loop warps frames into it)."""
 
     def __init__(self, model: str | Path, threads: int = 2, spinning: bool = False,
-                 trust: TrustPolicy | Mapping[str, Any] | None = None) -> None:
+                 trust: TrustPolicy | Mapping[str, Any] | None = None, threshold: float | None = None) -> None:
         """``trust``: the policy (or public keys by id, allowing nothing else) the model's signature is
         checked against; a model it does not allow is refused. ``verdict`` says which trusted key signed
         it ("" when none did: ``authentic`` is then False). Without ``trust`` the signature is not checked
         and the model counts as not authentic (``bsn-run`` always checks). ``spinning``:
         onnxruntime's idle threads spin-wait for the next work; off by default, because between two
         inferences the loop decodes, warps and calibrates on the same cores, which spinning threads
-        take from it (``benchmarks/results/runtime.md``)."""
+        take from it (``benchmarks/results/runtime.md``). ``threshold``: decide at
+        this probability instead of the card's (a benchmark reading a model's operating points; ``bsn-run``
+        decides at the card's)."""
+        if threshold is not None and not 0 < threshold < 1:
+            raise ValueError(f"a decision threshold is a probability in (0, 1), got {threshold}")
         self.path = Path(model)
         mf = ModelFile.read(self.path)   # FileNotFoundError / ValueError name the file
         try:
@@ -50,7 +54,7 @@ class Engine:
                              f"{self.path} --out SEALED.onnx")
         if self.card.threshold is None:
             raise ModelError(f"{self.path}: the model's card has no decision threshold (its training chose none)")
-        self.threshold: float = self.card.threshold
+        self.threshold: float = self.card.threshold if threshold is None else threshold
         if mf.graph_sha256 != self.card.graph_sha256:
             raise ModelError(f"{self.path}: the model file is damaged: the sha256 of its graph and weights "
                              f"({mf.graph_sha256[:12]}...) is not the one its export recorded "

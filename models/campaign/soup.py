@@ -33,6 +33,12 @@ def mixed_state(start: dict[str, torch.Tensor], leg: dict[str, torch.Tensor], al
             for k, v in leg.items()}
 
 
+def leg_config(leg_run: Run) -> Config:
+    """The leg's training config, as its run recorded it."""
+    raw = leg_run.config()
+    return Config(**{s: build(SECTIONS[s], v, s, str(leg_run.config_path), set()) for s, v in raw.items()})
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("start")
@@ -49,8 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     if ModelSpec(**start_card.spec) != ModelSpec(**leg_card.spec):
         raise SystemExit("the runs are of different architectures")
     leg_model.load_state_dict(mixed_state(start_model.state_dict(), leg_model.state_dict(), a.alpha))
-    raw = leg_run.config()
-    cfg = Config(**{s: build(SECTIONS[s], v, s, str(leg_run.config_path), set()) for s, v in raw.items()})
+    cfg = leg_config(leg_run)
     data = datasets(cfg, a.data)
     threshold, val = choose_threshold(leg_model, data.val_ds)
     with tempfile.TemporaryDirectory() as tmp:

@@ -132,3 +132,19 @@ def test_models_are_named_by_name_or_by_file_stem_in_their_order():
     assert list(named(["z=1.onnx", "a=2.onnx"])) == ["z", "a"]
     with pytest.raises(ValueError, match="two models are named 'leg'"):
         named(["a/leg.onnx", "leg=b/x.onnx"])
+
+
+def test_a_model_is_read_at_the_threshold_after_its_at_sign_and_named_by_it():
+    from benchmarks.common import load_engine, named, operating_point
+    from bsn_edge.default_model import DEFAULT_MODEL
+
+    assert operating_point("a/leg.onnx@0.2") == ("a/leg.onnx", 0.2)
+    assert operating_point("a/leg.onnx") == ("a/leg.onnx", None)
+    assert operating_point("a/we@ird.onnx") == ("a/we@ird.onnx", None)
+    assert named(["a/leg.onnx@0.2", "a/leg.onnx", "low=a/leg.onnx@0.1"]) == {
+        "leg@0.2": "a/leg.onnx@0.2", "leg": "a/leg.onnx", "low": "a/leg.onnx@0.1"}
+    engine = load_engine(f"{DEFAULT_MODEL}@0.2")
+    assert engine.threshold == 0.2 and engine.card.threshold not in (None, 0.2)
+    assert load_engine(str(DEFAULT_MODEL)).threshold == engine.card.threshold
+    with pytest.raises(ValueError, match=r"probability in \(0, 1\), got 1.5"):
+        load_engine(f"{DEFAULT_MODEL}@1.5")
