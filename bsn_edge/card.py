@@ -73,7 +73,9 @@ class TrainingRecord:
     validated on, the run it started from (``init``, empty: from scratch), where its teacher
     came from, and the arithmetic D and B trained in (``precision``: every kind its pieces ran in,
     sorted, ``bf16`` or ``fp32``, ``unrecorded`` for a piece from before the trainer named it; empty
-    when no piece did, and then left out of the card, so older cards digest as they did)."""
+    when no piece did, and then left out of the card, so older cards digest as they did), and where the
+    card's threshold was chosen when not on the run's own validation clips (``threshold_from``; empty:
+    there, and left out of the card)."""
 
     steps: int
     samples: int
@@ -83,6 +85,7 @@ class TrainingRecord:
     init: str = ""
     teacher: str = ""
     precision: tuple[str, ...] = ()
+    threshold_from: str = ""
 
     def __post_init__(self) -> None:
         if min(self.steps, self.samples, self.train_clips, self.val_clips) < 0 or not self.hours >= 0:
@@ -96,13 +99,16 @@ class TrainingRecord:
             d["precision"] = list(self.precision)
         else:
             del d["precision"]
+        if not self.threshold_from:
+            del d["threshold_from"]
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> TrainingRecord:
         return cls(steps=int(d["steps"]), samples=int(d["samples"]), hours=float(d["hours"]),
                    train_clips=int(d["train_clips"]), val_clips=int(d["val_clips"]), init=str(d.get("init", "")),
-                   teacher=str(d.get("teacher", "")), precision=tuple(map(str, d.get("precision", ()))))
+                   teacher=str(d.get("teacher", "")), precision=tuple(map(str, d.get("precision", ()))),
+                   threshold_from=str(d.get("threshold_from", "")))
 
 
 @dataclass(frozen=True)

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
-from bsn_edge.card import DigestVersion
+from bsn_edge.card import DigestVersion, ModelCard
 from bsn_edge.cli.common import fail, glue_values, parse_size
 from bsn_edge.modelfile.quant_names import METHOD_NAMES, TYPE_NAMES
 from bsn_edge.modelfile.selftest import SelfTestError
@@ -59,6 +60,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "with the graph's sha256 and a self-test answer to --out), signed with --sign KEY.pem, "
                         "which it needs: a resealed model is vouched for by whoever resealed it. Only for a file "
                         "you trust: sealing cannot tell whether it was damaged before")
+    p.add_argument("--threshold", type=float, metavar="P",
+                   help="with --reseal: the card's decision threshold becomes P (a probability in (0, 1)); the graph "
+                        "stays as it is, bit for bit. Needs --threshold-from")
+    p.add_argument("--threshold-from", metavar="TEXT",
+                   help="with --threshold: where P was chosen (the card's training record keeps it)")
     p.add_argument("--integer-input", metavar="MODEL.onnx",
                    help="instead of exporting: rewrite an int8 model exported before the integer input so its frame "
                         "is normalised by an exact integer convolution on the uint8 frame (no float frame), resealed "
@@ -95,18 +101,29 @@ def signed(model: Path, key: str | None) -> int:
     return 0
 
 
-def reseal(src: Path, out: Path) -> int:
+def rethresholded(card: ModelCard, threshold: float | None, chosen_on: str | None) -> ModelCard:
+    """``card`` deciding at ``threshold`` (chosen on ``chosen_on``, which its training record keeps); as
+    it is when ``threshold`` is None."""
+    if threshold is None:
+        return card
+    if card.training is None:
+        raise ValueError("the model's card has no training record to say where its new threshold was chosen")
+    return card.replace(threshold=threshold,
+                        training=dataclasses.replace(card.training, threshold_from=chosen_on or ""))
+
+
+def reseal(src: Path, out: Path, threshold: float | None = None, chosen_on: str | None = None) -> int:
     from bsn_edge.export.seal import read_card, seal
 
     try:
-        card = read_card(src, (DigestVersion.V2, DigestVersion.V1))
+        card = rethresholded(read_card(src, (DigestVersion.V2, DigestVersion.V1)), threshold, chosen_on)
         sealed = seal(src, card.replace(graph_sha256="", self_test=None), out)
     except (FileNotFoundError, ValueError, SelfTestError) as e:
         return fail(PROG, f"{src}: {e}" if isinstance(e, SelfTestError) else str(e))
     except Exception as e:          # onnxruntime refusing the graph
         return fail(PROG, f"{src}: cannot be sealed: {type(e).__name__}: {e}")
-    print(f"wrote {out}: {sealed.variant} {sealed.input_size[0]}x{sealed.input_size[1]}, graph sha256 "
-          f"{sealed.graph_sha256[:16]}..., self-test recorded")
+    print(f"wrote {out}: {sealed.variant} {sealed.input_size[0]}x{sealed.input_size[1]}, threshold "
+          f"{sealed.threshold}, graph sha256 {sealed.graph_sha256[:16]}..., self-test recorded")
     return 0
 
 
@@ -139,12 +156,19 @@ def main(argv: list[str] | None = None) -> int:
             return fail(PROG, str(e))
     if out.exists() and not args.force:
         return fail(PROG, f"{out} exists; pass --force to overwrite it")
+    if (args.threshold is None) != (args.threshold_from is None):
+        return fail(PROG, "--threshold and --threshold-from go together: a new threshold says where it was chosen")
+    if args.threshold is not None and not args.reseal:
+        return fail(PROG, "--threshold re-decides a sealed model: give it with --reseal MODEL.onnx (an export "
+                          "takes its run's threshold)")
+    if args.threshold is not None and not 0 < args.threshold < 1:
+        return fail(PROG, f"--threshold must be a probability in (0, 1), got {args.threshold}")
     if args.reseal:
         if not args.sign:
             return fail(PROG, "--reseal needs --sign KEY.pem: a resealed model is vouched for only by whoever "
                               "resealed it, and bsn-run runs only models signed by a key it trusts (bsn-export "
                               "--new-key KEY.pem makes a key pair)")
-        return reseal(Path(args.reseal), out) or signed(out, args.sign)
+        return reseal(Path(args.reseal), out, args.threshold, args.threshold_from) or signed(out, args.sign)
     if args.integer_input:
         return _integer_input(args.integer_input, out) or signed(out, args.sign)
     if not args.checkpoint:

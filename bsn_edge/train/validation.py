@@ -28,15 +28,20 @@ def outputs(model: torch.nn.Module, x: torch.Tensor, b: dict[str, torch.Tensor])
 
 
 @torch.no_grad()
-def choose_threshold(model: torch.nn.Module, ds, batch: int = 8) -> tuple[float, dict[str, float]]:
-    """The threshold with the best IoU inside V on ``ds`` (the validation split)."""
+def sweep_thresholds(model: torch.nn.Module, ds, batch: int = 8) -> ThresholdSweep:
+    """The counts inside V on ``ds`` at every candidate threshold."""
     model.eval()
     sweep = ThresholdSweep()
     dev = next(model.parameters()).device
     for b in DataLoader(ds, batch_size=batch):
         prob = torch.sigmoid(outputs(model, b["image"].to(dev), b)[0]).cpu().numpy()
         sweep.add(prob, b["blindspot"].numpy() > 0.5, b["visibility"].numpy() > 0.5)
-    return sweep.best()
+    return sweep
+
+
+def choose_threshold(model: torch.nn.Module, ds, batch: int = 8) -> tuple[float, dict[str, float]]:
+    """The threshold with the best IoU inside V on ``ds`` (the validation split)."""
+    return sweep_thresholds(model, ds, batch).best()
 
 
 ROAD_RANGE_M = (5.0, 40.0)   # as the real-camera benchmark reads road depth

@@ -287,3 +287,39 @@ def test_the_card_digest_is_its_length_prefixed_entries():
                           + (5).to_bytes(8, "big") + b"bsn.a" + (3).to_bytes(8, "big") + b'"x"'
                           + (5).to_bytes(8, "big") + b"bsn.b" + (3).to_bytes(8, "big") + b"[1]").hexdigest()
     assert card_digest(props) == want
+
+
+def test_reseal_with_a_new_threshold_keeps_the_graph_to_the_bit_and_says_where_it_was_chosen(setup, tmp_path, keys,
+                                                                                                capsys):
+    """``--threshold P --threshold-from TEXT`` re-decides a sealed model: its card decides at P and its
+    training record names where P was chosen; the graph, and so the self-test answer, stay as they are."""
+    from bsn_edge.card import TrainingRecord
+    from bsn_edge.export.seal import read_card, set_metadata
+    untrained, _ = setup
+    refused = tmp_path / "refused.onnx"
+    assert export_cli.main(["--reseal", str(untrained), "--out", str(refused), "--sign", str(keys[0]),
+                            "--threshold", "0.2", "--threshold-from", "x"]) == 2
+    assert "no training record" in capsys.readouterr().err and not refused.exists()
+    m = onnx.load(str(untrained))
+    set_metadata(m, read_card(untrained).replace(training=TrainingRecord(10, 80, 0.1, 4, 1)))
+    model = tmp_path / "trained.onnx"
+    onnx.save(m, str(model))
+    out = tmp_path / "rethresholded.onnx"
+    args = ["--reseal", str(model), "--out", str(out), "--sign", str(keys[0])]
+    assert export_cli.main([*args, "--threshold", "0.2", "--threshold-from", "real drives A, B"]) == 0
+    before, after = onnx.load(str(model)), onnx.load(str(out))
+    assert before.graph.SerializeToString() == after.graph.SerializeToString()
+    engine, old = Engine(out), Engine(model)
+    assert engine.threshold == engine.card.threshold == 0.2 != old.card.threshold
+    assert engine.card.training is not None and engine.card.training.threshold_from == "real drives A, B"
+    assert engine.card.self_test == old.card.self_test
+    props = {p.key: p.value for p in after.metadata_props}
+    assert json.loads(props["bsn.training"])["threshold_from"] == "real drives A, B"
+    capsys.readouterr()
+    for extra, says in ((["--threshold", "0.2"], "go together"), (["--threshold-from", "x"], "go together"),
+                        (["--threshold", "1.2", "--threshold-from", "x"], "probability in (0, 1)")):
+        assert export_cli.main(["--reseal", str(model), "--out", str(refused), "--sign", str(keys[0]), *extra]) == 2
+        assert says in capsys.readouterr().err and not refused.exists()
+    assert export_cli.main(["--checkpoint", "run", "--out", str(tmp_path / "r.onnx"), "--threshold", "0.2",
+                            "--threshold-from", "x"]) == 2
+    assert "give it with --reseal" in capsys.readouterr().err
