@@ -19,6 +19,25 @@ PROG = "bsn-export"
 INT8_COUNT = 64
 
 
+def _sealed_model_options(p: argparse.ArgumentParser) -> None:
+    """The options that work on a sealed model instead of a run: reseal (at a new threshold), integer input."""
+    p.add_argument("--reseal", metavar="MODEL.onnx",
+                   help="instead of exporting: seal a model exported before models were sealed, or before their card "
+                        "digest was canonical (writes its card "
+                        "with the graph's sha256 and a self-test answer to --out), signed with --sign KEY.pem, "
+                        "which it needs: a resealed model is vouched for by whoever resealed it. Only for a file "
+                        "you trust: sealing cannot tell whether it was damaged before")
+    p.add_argument("--threshold", type=float, metavar="P",
+                   help="with --reseal: the card's decision threshold becomes P (a probability in (0, 1)); the graph "
+                        "stays as it is, bit for bit. Needs --threshold-from")
+    p.add_argument("--threshold-from", metavar="TEXT",
+                   help="with --threshold: where P was chosen (the card's training record keeps it)")
+    p.add_argument("--integer-input", metavar="MODEL.onnx",
+                   help="instead of exporting: rewrite an int8 model exported before the integer input so its frame "
+                        "is normalised by an exact integer convolution on the uint8 frame (no float frame), resealed "
+                        "to --out; written only if its outputs equal the original's to the bit")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=PROG,
@@ -54,21 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help=argparse.SUPPRESS)   # the earlier spelling of --weight-bits 7
     p.add_argument("--quantize-heads", action="store_true",
                    help="quantize the output heads too (by default they stay float)")
-    p.add_argument("--reseal", metavar="MODEL.onnx",
-                   help="instead of exporting: seal a model exported before models were sealed, or before their card "
-                        "digest was canonical (writes its card "
-                        "with the graph's sha256 and a self-test answer to --out), signed with --sign KEY.pem, "
-                        "which it needs: a resealed model is vouched for by whoever resealed it. Only for a file "
-                        "you trust: sealing cannot tell whether it was damaged before")
-    p.add_argument("--threshold", type=float, metavar="P",
-                   help="with --reseal: the card's decision threshold becomes P (a probability in (0, 1)); the graph "
-                        "stays as it is, bit for bit. Needs --threshold-from")
-    p.add_argument("--threshold-from", metavar="TEXT",
-                   help="with --threshold: where P was chosen (the card's training record keeps it)")
-    p.add_argument("--integer-input", metavar="MODEL.onnx",
-                   help="instead of exporting: rewrite an int8 model exported before the integer input so its frame "
-                        "is normalised by an exact integer convolution on the uint8 frame (no float frame), resealed "
-                        "to --out; written only if its outputs equal the original's to the bit")
+    _sealed_model_options(p)
     p.add_argument("--ship-run", metavar="DIR",
                    help="also write the run itself beside the model: D and B weights and the teacher in fp16, "
                         "each with its sha256, the card, config and history (no optimizer state), so users can "
