@@ -21,7 +21,7 @@ from pathlib import Path
 
 from soup import leg_config
 
-from bsn_edge.data import BlindSpotDataset, find_clips
+from bsn_edge.data import BlindSpotDataset
 from bsn_edge.labels.camvid import STYLE as CAMVID_STYLE
 from bsn_edge.metrics import THRESHOLDS
 from bsn_edge.train.batches import datasets
@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     cfg = leg_config(run)
     data = datasets(cfg, a.data)
     rendered = [c for c in data.val if c.style != CAMVID_STYLE]
-    real = [c for c in find_clips(a.data, cfg.data.label) if c.style == CAMVID_STYLE]
+    real = [c for part in data.clips.values() for c in part if c.style == CAMVID_STYLE]
     if not rendered or not real:
         raise SystemExit(f"{a.data}: needs rendered validation clips ({len(rendered)}) and CamVid drives ({len(real)})")
     camera, mounting = cfg.data.model_camera()
