@@ -113,8 +113,10 @@ def rethresholded(card: ModelCard, threshold: float | None, chosen_on: str | Non
         return card
     if card.training is None:
         raise ValueError("the model's card has no training record to say where its new threshold was chosen")
-    return card.replace(threshold=threshold,
-                        training=dataclasses.replace(card.training, threshold_from=chosen_on or ""))
+    if not (chosen_on or "").strip():
+        raise ValueError("a new threshold needs where it was chosen: a card without it says its run's validation "
+                         "clips chose it")
+    return card.replace(threshold=threshold, training=dataclasses.replace(card.training, threshold_from=chosen_on))
 
 
 def reseal(src: Path, out: Path, threshold: float | None = None, chosen_on: str | None = None) -> int:
@@ -161,8 +163,10 @@ def main(argv: list[str] | None = None) -> int:
             return fail(PROG, str(e))
     if out.exists() and not args.force:
         return fail(PROG, f"{out} exists; pass --force to overwrite it")
-    if (args.threshold is None) != (args.threshold_from is None):
-        return fail(PROG, "--threshold and --threshold-from go together: a new threshold says where it was chosen")
+    blank_from = args.threshold_from is not None and not args.threshold_from.strip()
+    if (args.threshold is None) != (args.threshold_from is None) or blank_from:
+        return fail(PROG, "--threshold and --threshold-from go together: a new threshold says where it was chosen "
+                          "(--threshold-from may not be blank)")
     if args.threshold is not None and not args.reseal:
         return fail(PROG, "--threshold re-decides a sealed model: give it with --reseal MODEL.onnx (an export "
                           "takes its run's threshold)")

@@ -317,9 +317,12 @@ def test_reseal_with_a_new_threshold_keeps_the_graph_to_the_bit_and_says_where_i
     assert json.loads(props["bsn.training"])["threshold_from"] == "real drives A, B"
     capsys.readouterr()
     for extra, says in ((["--threshold", "0.2"], "go together"), (["--threshold-from", "x"], "go together"),
+                        (["--threshold", "0.2", "--threshold-from", " "], "may not be blank"),
                         (["--threshold", "1.2", "--threshold-from", "x"], "probability in (0, 1)")):
         assert export_cli.main(["--reseal", str(model), "--out", str(refused), "--sign", str(keys[0]), *extra]) == 2
         assert says in capsys.readouterr().err and not refused.exists()
     assert export_cli.main(["--checkpoint", "run", "--out", str(tmp_path / "r.onnx"), "--threshold", "0.2",
                             "--threshold-from", "x"]) == 2
     assert "give it with --reseal" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="where it was chosen"):
+        export_cli.rethresholded(read_card(model), 0.2, "")
