@@ -33,6 +33,8 @@ MODEL_NAME = "BlindSpotNet"
 PREFIX = "bsn."
 CARD_SHA_KEY = f"{PREFIX}card_sha256"
 FP32 = "none (fp32)"
+# what the cards of fp32 exports said while the name above was shadowed by the training precision's ("fp32")
+_FP32_AS_SEALED_BEFORE = "fp32"
 SEVEN_BIT_WEIGHTS = "(7-bit range)"      # how a quantization scheme says its int8 weights lie in [-64, 63]
 # used only when a run has no validation clips to choose the threshold on (the trainer says so)
 UNCHOSEN_THRESHOLD = 0.5
@@ -53,6 +55,14 @@ class DigestVersion(IntEnum):
 _DIGEST_DOMAIN = b"bsn-edge model card v2\0"
 
 
+def is_float_scheme(quantization: str) -> bool:
+    """Whether a card's ``quantization`` says the graph computes in float (an fp32 export), so its
+    self-test holds to fp32's tolerance, not int8's. Cards sealed while ``FP32`` was shadowed said
+    ``fp32``; they are float graphs too. What a later step adds after a comma (the integer input's
+    upgrade) does not change the arithmetic of the weights."""
+    return quantization.split(",")[0].strip() in (FP32, _FP32_AS_SEALED_BEFORE)
+
+
 # the entries of a card (``ModelCard.to_dict``; ``training`` only when recorded), and those a card read
 # from a run's checkpoint.json or a model sealed before they existed may lack
 CARD_FIELDS = ("card_version", "model", "variant", "spec", "input_size", "threshold", "camera", "depth_range",
@@ -62,8 +72,8 @@ OPTIONAL_FIELDS = ("train_camera", "self_test", "config_digest", "graph_sha256",
 
 
 # the arithmetic a training piece ran in; UNRECORDED: its records do not name it (written before they did)
-BF16, FP32, UNRECORDED = "bf16", "fp32", "unrecorded"
-PRECISIONS = (BF16, FP32, UNRECORDED)
+PRECISION_BF16, PRECISION_FP32, UNRECORDED = "bf16", "fp32", "unrecorded"
+PRECISIONS = (PRECISION_BF16, PRECISION_FP32, UNRECORDED)
 
 
 @dataclass(frozen=True)
@@ -199,6 +209,11 @@ class ModelCard:
     @property
     def sealed(self) -> bool:
         return bool(self.graph_sha256) and self.self_test is not None
+
+    @property
+    def float_graph(self) -> bool:
+        """Whether the graph computes in float (an fp32 export): :func:`is_float_scheme` of its scheme."""
+        return is_float_scheme(self.quantization)
 
     @property
     def seven_bit_weights(self) -> bool:

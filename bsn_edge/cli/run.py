@@ -356,7 +356,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _stopped_early(args: argparse.Namespace, stopper: StopOnSignal, senders: list[Sender] | None = None) -> int:
     """A signal before the first frame: UNAVAILABLE on every bus asked for (opened now if need be), the
-    summary written, the signal's exit code."""
+    summary written, the signal's exit code (1 when the summary could not be written)."""
     if senders is None:
         try:
             senders = make_senders(args)
@@ -366,6 +366,7 @@ def _stopped_early(args: argparse.Namespace, stopper: StopOnSignal, senders: lis
         from bsn_edge.alerts.frame import AlertFrame
         s.send(AlertFrame.unavailable(0.0))
         s.close()
+    summary_failed = False
     if args.summary:
         from bsn_edge.sequence.images import atomic_write_bytes
         early = {"frames": 0, "valid_frames": 0, "stopped": True, "signal": stopper.signal, "phase": "start-up"}
@@ -373,9 +374,11 @@ def _stopped_early(args: argparse.Namespace, stopper: StopOnSignal, senders: lis
             atomic_write_bytes(args.summary, (json.dumps(early, indent=1) + "\n").encode())
         except OSError as e:
             print(f"{PROG}: error: cannot write the summary {args.summary}: {e}", file=sys.stderr)
+            summary_failed = True
     print(f"{PROG}: stopped by {stopper.signal} during start-up" + (" (UNAVAILABLE sent)" if senders else ""),
           file=sys.stderr)
-    return exit_code(stopper.signal)
+    code = exit_code(stopper.signal)
+    return 1 if summary_failed and code == 0 else code
 
 
 def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:

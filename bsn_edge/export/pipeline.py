@@ -12,7 +12,7 @@ import json
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 import onnx
@@ -32,13 +32,15 @@ from bsn_edge.train.run import Run
 
 def export_run(checkpoint: str | Path, out: str | Path, size: tuple[int, int] | None = None, int8: bool = False,
                calib: str | Path | None = None, calib_frames: int = 64, qcfg: QuantConfig | None = None,
-               log=sys.stderr) -> dict[str, Any]:
+               log: TextIO | None = None) -> dict[str, Any]:
     """Export the run ``checkpoint`` to ``out`` (and ``out`` with ``.json``: the summary, returned).
 
     fp32 parity with torch is checked (``ValueError`` past the tolerance); with ``int8`` the graph
     is statically quantized on ``calib_frames`` frames of ``calib`` and compared with fp32. Raises
     ``FileNotFoundError`` / ``ValueError`` for a missing or unfinished run or unreadable frames;
-    ``out`` is replaced only when everything succeeded."""
+    ``out`` is replaced only when everything succeeded. Progress goes to ``log``: standard error as it
+    is when called (not when this module was imported: a stream replaced since may be closed)."""
+    log = log if log is not None else sys.stderr
     out = Path(out)
     if int8 and not calib:
         raise ValueError("int8 export needs calibration frames (a folder of images or a video)")

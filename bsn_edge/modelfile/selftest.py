@@ -15,7 +15,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
-from bsn_edge.card import SelfTest
+from bsn_edge.card import SelfTest, is_float_scheme
 
 GRID = (8, 16)
 # how far a healthy run may stray from the stored answer, per quantization (prob abs, depth rel);
@@ -73,7 +73,7 @@ def record(infer: Infer, size: tuple[int, int], quantization: str) -> SelfTest:
     p, d = pooled(prob, depth)
     if not (np.isfinite(p).all() and np.isfinite(d).all() and (d > 0).all()):
         raise SelfTestError("the model gives non-finite or non-positive outputs on the self-test frame")
-    atol, rtol = TOLERANCE["fp32" if quantization.startswith("none") else "int8"]
+    atol, rtol = TOLERANCE["fp32" if is_float_scheme(quantization) else "int8"]
     return SelfTest(GRID, tuple(round(float(v), 6) for v in p.ravel()),
                     tuple(round(float(v), 5) for v in d.ravel()), atol, rtol)
 

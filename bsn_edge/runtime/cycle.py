@@ -83,15 +83,24 @@ class CycleEmitter:
 
 class Heartbeat:
     """A thread that drives a CycleEmitter on the wall clock (live sources). It survives any
-    exception of a cycle: counted as ``heartbeat_errors`` (the next status carries it), then on."""
+    exception of a cycle: counted as ``heartbeat_errors`` (the next status carries it), then on.
 
-    def __init__(self, emitter: CycleEmitter, clock: Callable[[], float] = time.monotonic) -> None:
+    It wakes every half cycle (:attr:`WAKES_PER_CYCLE`), so a cycle goes out at most half a cycle
+    late and no two go out further apart than one and a half cycles. ``wait(seconds)`` sleeps
+    between wakes and says whether to stop; by default the wall clock's, a simulated one in tests."""
+
+    WAKES_PER_CYCLE = 2
+
+    def __init__(self, emitter: CycleEmitter, clock: Callable[[], float] = time.monotonic,
+                 wait: Callable[[float], bool] | None = None) -> None:
         self.emitter, self.clock = emitter, clock
         self.last_error = ""
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="bsn-heartbeat", daemon=True)
+        self._wait = wait if wait is not None else self._stop.wait
+        self._thread = threading.Thread(target=self.run, name="bsn-heartbeat", daemon=True)
 
-    def _run(self) -> None:
+    def run(self) -> None:
+        """The thread's loop (:meth:`start` runs it on its own thread): a beat, then a wait, until closed."""
         while not self._stop.is_set():
             try:
                 self.emitter.emit(self.clock())
@@ -99,7 +108,8 @@ class Heartbeat:
                 self.last_error = f"{type(e).__name__}: {e}"
                 with contextlib.suppress(Exception):   # nothing more to do than to go on
                     self.emitter.health.fault(Fault.HEARTBEAT_ERRORS)
-            self._stop.wait(self.emitter.cycle_s / 2)
+            if self._wait(self.emitter.cycle_s / self.WAKES_PER_CYCLE):
+                return
 
     def start(self) -> Heartbeat:
         """Start the thread; returns the heartbeat (``close()`` stops it)."""

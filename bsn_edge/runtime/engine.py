@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from bsn_edge.card import CARD_SHA_KEY, FP32, ModelCard
+from bsn_edge.card import CARD_SHA_KEY, ModelCard
 from bsn_edge.modelfile import selftest
 from bsn_edge.modelfile.read import ModelFile, session
 from bsn_edge.modelfile.trust import TrustPolicy, UntrustedModelError, Verdict
@@ -110,7 +110,7 @@ class Engine:
     @property
     def kernels(self) -> str:
         """Which onnxruntime kernels the model runs on, as the summary says it."""
-        if self.card.quantization == FP32:
+        if self.card.float_graph:
             return "fp32"
         if self.card.seven_bit_weights:
             return "int8: uint8 x int8 (7-bit weights, exact on every x86 CPU)"

@@ -9,7 +9,7 @@ import torch
 import torch.distributed as dist
 import torch.nn.functional as F
 
-from bsn_edge.card import BF16, FP32
+from bsn_edge.card import PRECISION_BF16, PRECISION_FP32
 from bsn_edge.train.config import Config
 
 
@@ -31,15 +31,15 @@ def autocast_dtype(cfg: Config, device: torch.device) -> torch.dtype | None:
     """The autocast dtype of ``train.precision`` on ``device`` (None: fp32)."""
     want = cfg.train.precision
     if want == "auto":
-        want = BF16 if device.type == "cpu" and cpu_has_native_bf16() else FP32
-    return torch.bfloat16 if want == BF16 else None
+        want = PRECISION_BF16 if device.type == "cpu" and cpu_has_native_bf16() else PRECISION_FP32
+    return torch.bfloat16 if want == PRECISION_BF16 else None
 
 
 def precision_name(dtype: torch.dtype | None) -> str:
-    """How a history record's training arithmetic is named: ``BF16`` (autocast) or ``FP32``. Every
+    """How a history record's training arithmetic is named: ``PRECISION_BF16`` (autocast) or ``PRECISION_FP32``. Every
     record carries it: ``train.precision=auto`` trains differently on different CPUs, and a run
     resumed on another machine may change it from one piece to the next."""
-    return BF16 if dtype == torch.bfloat16 else FP32
+    return PRECISION_BF16 if dtype == torch.bfloat16 else PRECISION_FP32
 
 
 def autocast(device: torch.device, dtype: torch.dtype | None):

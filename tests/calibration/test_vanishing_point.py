@@ -180,3 +180,42 @@ def test_a_city_drive_a_second_apart_gets_no_first_guess():
     assert guess["frames_found"] >= 5 and not guess["used"], guess
     assert camera.frame_for(frames[-1]).mounting == card.mounting
     assert "taken to sit as the model camera does" in camera.progress()
+
+
+def _guess(pairs, **kw) -> VanishingGuess:
+    g = VanishingGuess(**kw)
+    for py in pairs:
+        g.record(py)
+    return g
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_the_first_guess_needs_pitch_and_yaw_each_to_agree(axis):
+    """Worked by hand: the other angle reads -17, -8.5, 0, 8.5 and 17 degrees; its median is 0, the
+    absolute deviations 17, 8.5, 0, 8.5, 17, their median 8.5, so the scatter is 1.4826 x 8.5 = 12.6021
+    degrees, far over 1.5, while this angle agrees to the hundredth. One angle agreeing is not enough."""
+    scattered = [-17.0, -8.5, 0.0, 8.5, 17.0]
+    pairs = [(-2.0, s) if axis == 0 else (s, -2.0) for s in scattered]
+    g = _guess(pairs)
+    spread = g.spread_deg
+    assert spread[axis] == 0.0 and spread[1 - axis] == pytest.approx(12.6021, abs=1e-4)
+    assert not g.agreed and g.mounting(1.5) is None
+
+
+@pytest.mark.parametrize("mad,used", [(1.0, True), (1.0117, True), (1.02, False), (1.1, False)])
+def test_the_spread_gate_sits_at_one_and_a_half_degrees(mad, used):
+    """Five yaws at 0, +-mad and +-2 mad: a median absolute deviation of ``mad``, a scatter of 1.4826 mad:
+    1.4826 and 1.49995 are used, 1.51225 and 1.63086 are not (the limit is 1.5 degrees)."""
+    yaws = [0.0, mad, -mad, 2 * mad, -2 * mad]
+    g = _guess([(1.0, y) for y in yaws])
+    assert g.spread_deg[1] == pytest.approx(1.4826 * mad)
+    assert g.agreed is used
+
+
+def test_the_first_guess_needs_as_many_frames_as_it_is_told():
+    """Four perfect frames of the five needed are no guess; with agree=3, three are."""
+    perfect = [(1.0, 2.0)] * 4
+    assert not _guess(perfect).agreed
+    assert _guess(perfect[:3], agree=3).agreed
+    assert not _guess(perfect[:2], agree=3).agreed
+    assert not _guess([(1.0, 2.0)], frames=9, agree=1).agreed     # a spread needs two frames

@@ -143,3 +143,23 @@ def test_write_hands_the_frame_to_each_output_that_is_still_writing(pipeline):
         sink.close()
     assert len(got["overlay"]) == 1 and got["overlay"][0][0] is frame
     assert len(got["maps"]) == 1 and got["maps"][0][0] == "a"
+
+
+def test_a_camera_that_reconnects_at_another_size_runs_at_its_new_size(pipeline):
+    """A live camera reopened (``reconnects`` moves on) may come back at another resolution: its size is
+    learnt again from its first frame, so its frames run; a frame of the old size after that is the odd one."""
+    p, _, _ = pipeline
+    old, new = np.zeros((96, 192, 3), np.uint8), np.zeros((120, 160, 3), np.uint8)
+    assert p.read(Captured(0.0, old, 0), FrameRecord(0, 0.0))
+    rec = FrameRecord(1, 0.1)
+    assert not p.read(Captured(0.1, new, 1), rec) and rec.fault is Fault.SIZE_CHANGES   # same camera: damaged
+    p.source.reconnects += 1
+    for i in range(2, 6):
+        rec = FrameRecord(i, 0.1 * i)
+        assert p.read(Captured(0.1 * i, new, i), rec) and rec.fault is None, f"frame {i} after the reconnect"
+    buf = np.zeros((1, *p.engine.size, 3), np.uint8)
+    _, calibrating = p.warp(Captured(0.5, np.full((120, 160, 3), 128, np.uint8), 5), buf)     # warped at its new size
+    assert buf.any() and not calibrating
+    rec = FrameRecord(6, 0.6)
+    assert not p.read(Captured(0.6, old, 6), rec) and rec.fault is Fault.SIZE_CHANGES
+    assert p.health.faults[Fault.SIZE_CHANGES] == 2

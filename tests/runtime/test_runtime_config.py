@@ -76,3 +76,56 @@ def test_a_bad_setting_is_refused_naming_it_and_the_bus_says_unavailable(setup, 
         states = [db.decode_message(m.arbitration_id, bytes(m.data))["System_State"] for m in reader
                   if m.arbitration_id == db.get_message_by_name("BSN_Status").frame_id]
     assert [str(s) for s in states] == ["UNAVAILABLE"]
+
+
+def _tables(table: dict, prefix: str = "") -> list[tuple[str, dict]]:
+    """Every table of a parsed TOML file, nested ones too, by dotted name."""
+    out = []
+    for key, value in table.items():
+        if isinstance(value, dict):
+            out.append((prefix + key, value))
+            out += _tables(value, f"{prefix}{key}.")
+    return out
+
+
+def _shipped_tables() -> list[tuple[str, dict]]:
+    import tomllib
+
+    return _tables(tomllib.loads((ROOT / "configs" / "runtime.toml").read_text()))
+
+
+def test_the_walk_finds_every_table_of_the_shipped_file_nested_ones_too():
+    names = [name for name, _ in _shipped_tables()]
+    assert {"runtime", "sectors", "alerts", "alerts.caution", "alerts.warning", "health"} <= set(names)
+
+
+@pytest.mark.parametrize("table", [name for name, _ in _shipped_tables()])
+def test_an_unknown_key_in_any_table_nested_ones_too_is_refused_from_set_and_from_a_file(table, tmp_path):
+    """A typo of a real key (its name with one letter doubled), in each table of the shipped file: dropped
+    instead, the user's setting would silently never take effect."""
+    values = dict(_shipped_tables())[table]
+    real = next(k for k, v in values.items() if not isinstance(v, dict))
+    typo = real[:-1] + real[-1] * 2
+    with pytest.raises(ValueError, match=rf"unknown key\(s\) \['{typo}'\] in \[{table}\]"):
+        load_runtime_config(overrides=[f"{table}.{typo}=1"])
+    path = tmp_path / "typo.toml"
+    path.write_text(f"[{table}]\n{typo} = 1\n")
+    with pytest.raises(ValueError, match=rf"unknown key\(s\) \['{typo}'\] in \[{table}\]"):
+        load_runtime_config(path)
+
+
+TRAINING_CONFIGS = sorted(p.name for p in (ROOT / "configs").glob("*.toml") if p.name != "runtime.toml")
+
+
+@pytest.mark.parametrize("config", TRAINING_CONFIGS)
+def test_an_unknown_key_in_any_training_table_is_refused_too(config):
+    """The training configs share the loader: a typo in each of their tables is refused by name."""
+    import tomllib
+
+    from bsn_edge.train.config import load_config
+
+    for table, values in _tables(tomllib.loads((ROOT / "configs" / config).read_text())):
+        real = next(k for k, v in values.items() if not isinstance(v, dict))
+        typo = real + "x"
+        with pytest.raises(ValueError, match=rf"unknown key\(s\) \['{typo}'\] in \[{table}\]"):
+            load_config(ROOT / "configs" / config, [f"{table}.{typo}=1"])
