@@ -85,7 +85,9 @@ class TrainingRecord:
     sorted, ``bf16`` or ``fp32``, ``unrecorded`` for a piece from before the trainer named it; empty
     when no piece did, and then left out of the card, so older cards digest as they did), and where the
     card's threshold was chosen when not on the run's own validation clips (``threshold_from``; empty:
-    there, and left out of the card)."""
+    there, and left out of the card), and the share of D and B's convolution channels alive at the
+    run's last record (``alive``, one line; empty when its history did not count them, and then left
+    out of the card)."""
 
     steps: int
     samples: int
@@ -96,6 +98,7 @@ class TrainingRecord:
     teacher: str = ""
     precision: tuple[str, ...] = ()
     threshold_from: str = ""
+    alive: str = ""
 
     def __post_init__(self) -> None:
         if min(self.steps, self.samples, self.train_clips, self.val_clips) < 0 or not self.hours >= 0:
@@ -109,8 +112,9 @@ class TrainingRecord:
             d["precision"] = list(self.precision)
         else:
             del d["precision"]
-        if not self.threshold_from:
-            del d["threshold_from"]
+        for optional in ("threshold_from", "alive"):
+            if not d[optional]:
+                del d[optional]
         return d
 
     @classmethod
@@ -118,7 +122,7 @@ class TrainingRecord:
         return cls(steps=int(d["steps"]), samples=int(d["samples"]), hours=float(d["hours"]),
                    train_clips=int(d["train_clips"]), val_clips=int(d["val_clips"]), init=str(d.get("init", "")),
                    teacher=str(d.get("teacher", "")), precision=tuple(map(str, d.get("precision", ()))),
-                   threshold_from=str(d.get("threshold_from", "")))
+                   threshold_from=str(d.get("threshold_from", "")), alive=str(d.get("alive", "")))
 
 
 @dataclass(frozen=True)

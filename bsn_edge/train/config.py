@@ -87,6 +87,10 @@ class DataConfig:
         return model_camera(self.size, self.camera_hfov_deg, self.camera_height_m, self.camera_pitch_deg)
 
 
+ADAMW, ADAM = "adamw", "adam"
+OPTIMIZERS = (ADAMW, ADAM)
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     steps: int = 400
@@ -94,7 +98,10 @@ class TrainConfig:
     lr: float = 1e-3
     betas: tuple[float, float] = (0.9, 0.999)
     eps: float = 1e-8
-    weight_decay: float = 5e-4
+    # "adamw": decoupled decay on weights only; "adam": L2 on everything, the recipe that zeroed most
+    # channels of the runs trained with it (bsn_edge.train.optim.Optimizer), kept to reproduce them
+    optimizer: str = ADAMW
+    weight_decay: float = 1e-2
     poly_power: float = 0.9
     distill_weight: float = 1.0              # lambda
     depth_weight: float = 1.0
@@ -141,6 +148,10 @@ class TrainConfig:
             raise ValueError("train.eval_every must be >= 0 and train.eval_frames >= 1")
         if self.bce_range_m < 0:
             raise ValueError(f"train.bce_range_m is metres (0: off), got {self.bce_range_m}")
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"train.optimizer must be one of {', '.join(OPTIMIZERS)}, got {self.optimizer!r}")
+        if not 0 <= self.weight_decay < 1:
+            raise ValueError(f"train.weight_decay must be in [0, 1), got {self.weight_decay}")
 
 
 @dataclass(frozen=True)
@@ -148,8 +159,9 @@ class TeacherConfig:
     steps: int = 300
     batch_size: int = 8
     lr: float = 1e-3
-    encoder: str = "resnet18"                # resnet18/34/50/101, or efficientnet-lite0 (TEACHER_ENCODERS);
-                                             # a whole number N is resnetN (runs written before names)
+    # resnet18/34/50/101, or efficientnet-lite0 (TEACHER_ENCODERS); a whole number N is resnetN (runs
+    # written before names), which the loader lets through for __post_init__ to name
+    encoder: str = field(default="resnet18", metadata={"also": (int,)})
     pretrained: bool = False                 # a new teacher starts from the encoder's ImageNet weights
     encoder_lr: float = 1.0                  # share of lr for the encoder of a pretrained teacher
     width: int = 128

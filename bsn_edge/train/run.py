@@ -214,10 +214,14 @@ class Run:
             kinds |= set(before.precision) or {UNRECORDED}
             d_only = carried_over(cfg.get("model", {}).get("name", frozen["variant"]), frozen["variant"]) is Carried.D
             start += f" ({'its D, ' if d_only else ''}after {before.steps} steps)"
+        counted = [r for r in recs if "alive_share" in r]
+        alive = "" if not counted else (f"{100 * counted[-1]['alive_share']:.1f} % of "
+                                        f"{counted[-1]['channels']:,} convolution channels alive at step "
+                                        f"{counted[-1]['step']}")
         return TrainingRecord(steps=steps, samples=round(samples), hours=round(hours, 2),
                               train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),
                               init=start, teacher=teacher,
-                              precision=() if kinds <= {UNRECORDED} else tuple(sorted(kinds)))
+                              precision=() if kinds <= {UNRECORDED} else tuple(sorted(kinds)), alive=alive)
 
     @classmethod
     def init_record(cls, init: str | Path) -> dict[str, Any] | None:

@@ -15,6 +15,7 @@ import torch.nn.functional as F
 from bsn_edge import semantics as sm
 from bsn_edge.data.cache import SampleCache
 from bsn_edge.models import create_teacher
+from bsn_edge.models.alive import alive_channels
 from bsn_edge.progress import progress_bar
 from bsn_edge.train.batches import datasets, sample_cache, skipped_and_torn, training_batches
 from bsn_edge.train.checkpoints import open_run
@@ -95,7 +96,8 @@ def _teacher_record(teacher: torch.nn.Module, cfg: Config, val_cache, dtype: tor
     """The teacher's history line at ``step``: its held-out IoU by class group."""
     miou = teacher_miou(teacher, val_cache, cfg.teacher.scale, cfg.train.eval_frames, dtype)
     return {"phase": "teacher", "step": step, "samples": samples, "seconds": round(seconds, 1),
-            "precision": precision_name(dtype), **{f"val_{k}": v for k, v in miou.items()}}
+            "precision": precision_name(dtype), **{f"val_{k}": v for k, v in miou.items()},
+            **alive_channels(teacher).to_dict()}
 
 
 def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bool,

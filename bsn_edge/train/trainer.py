@@ -23,6 +23,7 @@ from bsn_edge.data.cache import SampleCache
 from bsn_edge.data.camera_mix import CameraMix
 from bsn_edge.data.guessed_camera import GuessedDepth
 from bsn_edge.models import BlindSpotNet, create_model, get_spec, start_from
+from bsn_edge.models.alive import alive_channels
 from bsn_edge.progress import progress_bar
 from bsn_edge.train.batches import datasets, sample_cache, skipped_and_torn, training_batches
 from bsn_edge.train.checkpoints import carried, checkpoint, finish, open_run
@@ -252,4 +253,5 @@ def _record(model: BlindSpotNet, cfg: Config, since: list[list[float]], done: in
            "seconds": round(seconds, 1), "loss": float(mean[0]), "bce": float(mean[1]),
            "kd": float(mean[2]), "depth": float(mean[3]), "precision": precision_name(dtype)}
     rec.update(validation_figures(model, cfg, dtype, val_caches))
+    rec.update(alive_channels(model).to_dict())     # training health: a channel once dead stays dead
     return rec

@@ -21,6 +21,7 @@ from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
 from bsn_edge.export import read_card
 from bsn_edge.metrics import THRESHOLDS
 from bsn_edge.models import BlindSpotNet
+from bsn_edge.models.alive import alive_channels
 from bsn_edge.train import Run, RunError, load_config
 from bsn_edge.train.device import cpu_has_native_bf16
 from bsn_edge.train.losses import masked_bce
@@ -521,6 +522,13 @@ def test_every_history_record_names_the_arithmetic_it_trained_in(data, tmp_path,
     assert sorted({r["phase"] for r in recs}) == ["teacher", "train"]
     assert [r["precision"] for r in recs] == [named] * len(recs)
     assert Run(tmp_path / "run").card().training.precision == (named,)
+    # training health beside it: every record counts the alive channels of the network it trained
+    student, _ = Run(tmp_path / "run").load_model()
+    want = alive_channels(student)
+    last = [r for r in recs if r["phase"] == "train"][-1]
+    assert (last["alive_channels"], last["channels"]) == (want.alive, want.channels) and want.channels > 1000
+    assert all(0 < r["alive_share"] <= 1 for r in recs)
+    assert Run(tmp_path / "run").card().training.alive.startswith(f"{100 * want.share:.1f} % of ")
 
 
 def test_the_card_names_every_arithmetic_its_pieces_trained_in(data, tmp_path, monkeypatch):

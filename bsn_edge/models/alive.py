@@ -1,0 +1,88 @@
+"""Training health: the share of a network's channels that are alive.
+
+A convolution's output channel is dead when its weights are all exactly zero, or when the batch norm
+right after it scales it by (about) nothing: either way it carries no information about the picture,
+though the graph still computes it. Adam with L2 weight decay drives channels there (the decay's
+gradient is normalised like any other, so a channel with little gradient of its own walks to zero at
+the learning rate's pace); a healthy run keeps nearly all of them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+# a normalisation scale under this (in absolute value) silences its channel
+SCALE_EPS = 1e-3
+# a layer with fewer of its channels alive than this share is named in the one-line summary
+WEAK_LAYER_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class LayerAlive:
+    """One convolution: its output channels and how many of them are alive."""
+
+    name: str
+    channels: int
+    alive: int
+
+    @property
+    def share(self) -> float:
+        return self.alive / self.channels if self.channels else 1.0
+
+
+@dataclass(frozen=True)
+class Alive:
+    """Every convolution of a network, in the order the network holds them."""
+
+    layers: tuple[LayerAlive, ...]
+
+    @property
+    def channels(self) -> int:
+        return sum(la.channels for la in self.layers)
+
+    @property
+    def alive(self) -> int:
+        return sum(la.alive for la in self.layers)
+
+    @property
+    def share(self) -> float:
+        return self.alive / self.channels if self.channels else 1.0
+
+    @property
+    def weak(self) -> tuple[LayerAlive, ...]:
+        """The layers with fewer than :data:`WEAK_LAYER_SHARE` of their channels alive."""
+        return tuple(la for la in self.layers if la.share < WEAK_LAYER_SHARE)
+
+    def line(self) -> str:
+        """One line for a card, a log or a report."""
+        return (f"alive channels {100 * self.share:.1f} % ({self.alive:,} of {self.channels:,}; "
+                f"{len(self.weak)} of {len(self.layers)} convolutions under {100 * WEAK_LAYER_SHARE:.0f} % alive)")
+
+    def to_dict(self, per_layer: bool = False) -> dict[str, object]:
+        """The record a run's history and report keep (``per_layer``: each convolution too)."""
+        out: dict[str, object] = {"alive_share": round(self.share, 4), "alive_channels": self.alive,
+                                  "channels": self.channels, "weak_layers": len(self.weak)}
+        if per_layer:
+            out["layers"] = [{"name": la.name, "channels": la.channels, "alive": la.alive} for la in self.layers]
+        return out
+
+
+def alive_channels(model: torch.nn.Module, scale_eps: float = SCALE_EPS) -> Alive:
+    """Which output channels of every convolution of ``model`` are alive: weights not all zero, and the
+    scale of the batch norm that follows it (the next module in ``model``'s order, when it normalises as
+    many channels) above ``scale_eps``."""
+    modules = list(model.named_modules())
+    layers = []
+    for i, (name, m) in enumerate(modules):
+        if not isinstance(m, torch.nn.Conv2d):
+            continue
+        w = m.weight.detach()
+        alive = w.reshape(w.shape[0], -1).ne(0).any(dim=1)
+        follower = modules[i + 1][1] if i + 1 < len(modules) else None
+        if isinstance(follower, torch.nn.modules.batchnorm._BatchNorm) and follower.affine \
+                and follower.num_features == w.shape[0]:
+            alive &= follower.weight.detach().abs().gt(scale_eps)
+        layers.append(LayerAlive(name, int(w.shape[0]), int(alive.sum())))
+    return Alive(tuple(layers))

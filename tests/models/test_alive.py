@@ -1,0 +1,34 @@
+"""Alive channels, against channels killed by hand: a convolution's row of zeros, a batch-norm scale of
+zero (or under the epsilon), a batch norm of another width that is not the convolution's."""
+
+import torch
+
+from bsn_edge.models.alive import SCALE_EPS, alive_channels
+
+
+def test_dead_channels_are_counted_where_they_were_killed():
+    torch.manual_seed(0)
+    net = torch.nn.Sequential(torch.nn.Conv2d(3, 6, 3), torch.nn.BatchNorm2d(6), torch.nn.ReLU(),
+                              torch.nn.Conv2d(6, 6, 3, groups=6), torch.nn.ReLU(),
+                              torch.nn.Conv2d(6, 4, 1), torch.nn.BatchNorm2d(4))
+    with torch.no_grad():
+        net[0].weight[1].zero_()                  # weights all zero
+        net[1].weight[2] = 0.0                    # silenced by its norm
+        net[1].weight[3] = 0.5 * SCALE_EPS        # under the epsilon
+        net[1].weight[4] = -2.0 * SCALE_EPS       # over it, negative: alive
+        net[3].weight[5].zero_()                  # a depthwise channel
+        net[5].weight[0, :3] = 0.0                # some weights zero, not all: alive
+    a = alive_channels(net)
+    assert [(la.name, la.channels, la.alive) for la in a.layers] == [("0", 6, 3), ("3", 6, 5), ("5", 4, 4)]
+    assert (a.alive, a.channels) == (12, 16) and a.share == 0.75 and a.weak == ()
+    assert a.line() == "alive channels 75.0 % (12 of 16; 0 of 3 convolutions under 50 % alive)"
+    with torch.no_grad():
+        net[5].weight[1:].zero_()
+    assert [la.name for la in alive_channels(net).weak] == ["5"]
+
+
+def test_a_norm_of_another_width_is_not_taken_for_the_convolutions():
+    net = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 1), torch.nn.BatchNorm2d(5))
+    with torch.no_grad():
+        net[1].weight.zero_()
+    assert alive_channels(net).alive == 4
