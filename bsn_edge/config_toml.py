@@ -1,19 +1,21 @@
 """Configuration as TOML sections of frozen dataclasses, with ``--set section.key=value`` overrides.
 
 One mechanism for every config of the project (training's, the runtime's): a section is a dataclass,
-a nested table is a dataclass field of it (``[alerts.caution]``), values are coerced to the field's
-type, and an unknown section or key, a value of the wrong kind or one out of range (the dataclass's own
+a nested table is a dataclass field of it (``[alerts.caution]``), values must be of the field's kind
+(nothing is coerced from a string; numbers are finite),
+and an unknown section or key, a value of the wrong kind or one out of range (the dataclass's own
 ``ValueError``) is refused naming the key and where it came from (the file or ``--set``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 from pathlib import Path
 from typing import Any
 
-KINDS = {int: "a whole number", float: "a number", str: "a string", bool: "true or false", tuple: "a list"}
+KINDS = {int: "a whole number", float: "a finite number", str: "a string", bool: "true or false", tuple: "a list"}
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:
@@ -34,10 +36,18 @@ def read_toml(path: str | Path | None) -> dict[str, Any]:
     if path is None:
         return {}
     p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"config {p} is a folder, not a TOML file")
     if not p.is_file():
         raise FileNotFoundError(f"config {p} not found")
+    data = p.read_bytes()
     try:
-        return tomllib.loads(p.read_text())
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{p}: not UTF-8 text (byte {e.start} is {data[e.start]:#04x}); a TOML file is "
+                         "UTF-8") from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"{p}: invalid TOML: {e}") from None
 
@@ -58,19 +68,83 @@ def merge_overrides(raw: dict[str, Any], overrides: list[str] | tuple[str, ...])
 
 
 def coerce(cls: type, key: str, value: Any) -> Any:
-    """``value`` as field ``key`` of ``cls`` wants it (a TOML int for a float, a list for a tuple...)."""
+    """``value`` as field ``key`` of ``cls`` wants it, strictly: a whole number where the default is
+    one, a number (a TOML integer taken as a float) where it is a float, true or false where it is a
+    boolean, a list where it is a tuple (its items likewise); nothing is read out of a string, and a
+    number is finite (a :func:`setting` with no default is a number). ``ValueError`` (from the caller's
+    message) for anything else."""
     default = default_of(cls, key)
-    if isinstance(default, tuple) and isinstance(value, list | tuple):
-        return tuple(value)
+    meta = {f.name: f.metadata for f in dataclasses.fields(cls)}[key]
+    if default is None and "range" in meta:
+        default = 0.0
+    if isinstance(value, meta.get("also", ())) and not isinstance(value, bool):
+        return value                        # a spelling the dataclass itself turns into its kind
+    return _strict(default, value)
+
+
+def _strict(default: Any, value: Any) -> Any:
     if isinstance(default, bool):
-        if isinstance(value, str):
-            return value.lower() in ("1", "true", "yes", "on")
-        return bool(value)
-    if isinstance(default, float) and isinstance(value, int | str) and not isinstance(value, bool):
+        if not isinstance(value, bool):
+            raise ValueError(value)
+        return value
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(value)
+        return value
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise ValueError(value)
         return float(value)
-    if isinstance(default, int) and isinstance(value, str):
-        return int(value)
+    if isinstance(default, tuple):
+        if not isinstance(value, list | tuple):
+            raise ValueError(value)
+        if not default:                                   # a list of any length, of anything
+            return tuple(value)
+        if _numbers(default) and len(value) != len(default):   # a size, a pair: its length is its meaning
+            raise ValueError(value)
+        return tuple(_strict(default[0], v) for v in value)
+    if isinstance(default, str) and not isinstance(value, str):
+        raise ValueError(value)
     return value
+
+
+def _numbers(default: tuple) -> bool:
+    return all(isinstance(v, int | float) and not isinstance(v, bool) for v in default)
+
+
+def setting(default: Any, lo: float, hi: float, unit: str = "") -> Any:
+    """A dataclass field whose value must lie in ``[lo, hi]`` (``unit`` said with it): held by
+    :func:`check_fields` in the dataclass's ``__post_init__``, so a value made in code is held too.
+    ``dataclasses.MISSING``: a field with no default."""
+    return dataclasses.field(default=default, metadata={"range": (lo, hi), "unit": unit})
+
+
+def _range_of(cls: type, key: str) -> str:
+    """`` in [lo, hi] unit`` for a :func:`setting` field, else empty."""
+    meta = {f.name: f.metadata for f in dataclasses.fields(cls)}[key]
+    if "range" not in meta:
+        return ""
+    lo, hi = meta["range"]
+    return f" in [{lo:g}, {hi:g}]" + (f" {meta['unit']}" if meta["unit"] else "")
+
+
+def check_fields(obj: Any) -> None:
+    """``ValueError`` naming the first field of dataclass ``obj`` of the wrong kind (a boolean for a
+    number, a float for a whole number, anything not finite) or outside its :func:`setting` range."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if isinstance(f.default, bool) and not isinstance(value, bool):
+            raise ValueError(f"{f.name} = {value!r} must be true or false")
+        if "range" not in f.metadata:
+            continue
+        lo, hi = f.metadata["range"]
+        unit = f" {f.metadata['unit']}" if f.metadata["unit"] else ""
+        whole = isinstance(f.default, int) and not isinstance(f.default, bool)
+        if isinstance(value, bool) or not isinstance(value, int | float) or (whole and not isinstance(value, int)):
+            raise ValueError(f"{f.name} = {value!r} must be {'a whole number' if whole else 'a finite number'}"
+                             f"{_range_of(type(obj), f.name)}")
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise ValueError(f"{f.name} = {value!r} is outside [{lo:g}, {hi:g}]{unit}")
 
 
 def default_of(cls: type, key: str) -> Any:
@@ -104,8 +178,10 @@ def build(cls: type, values: dict[str, Any], name: str, where: str, given: set[s
         try:
             out[key] = coerce(cls, key, value)
         except ValueError:
-            kind = KINDS.get(type(default), type(default).__name__)
-            raise ValueError(f"{dotted} = {value!r} ({src}) must be {kind}") from None
+            kind = KINDS.get(type(default), "a finite number" if _range_of(cls, key) else type(default).__name__)
+            if isinstance(default, tuple) and default and _numbers(default):
+                kind = f"a list of {len(default)} numbers"
+            raise ValueError(f"{dotted} = {value!r} ({src}) must be {kind}{_range_of(cls, key)}") from None
     try:
         return cls(**out)
     except ValueError as e:             # the dataclass's own check, which names its fields

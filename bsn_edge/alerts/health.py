@@ -12,6 +12,8 @@ from collections import deque
 from dataclasses import dataclass
 from enum import IntEnum, StrEnum
 
+from bsn_edge.config_toml import check_fields, setting
+
 
 class SystemState(IntEnum):
     OK = 0
@@ -44,13 +46,12 @@ DEGRADING = (Fault.SINK_ERRORS,)
 
 @dataclass(frozen=True)
 class HealthConfig:
-    deadline_s: float = 0.5     # no valid inference for longer: UNAVAILABLE
-    fps_floor: float = 8.0      # valid inferences per second under this: DEGRADED
-    window_s: float = 2.0       # over this window
+    deadline_s: float = setting(0.5, 0.05, 1.0, "s")          # no valid inference for longer: UNAVAILABLE
+    fps_floor: float = setting(8.0, 0.0, 60.0, "frames/s")    # valid inferences per second under this: DEGRADED
+    window_s: float = setting(2.0, 0.5, 10.0, "s")            # over this window
 
     def __post_init__(self) -> None:
-        if self.deadline_s <= 0 or self.fps_floor < 0 or self.window_s <= 0:
-            raise ValueError("deadline_s and window_s must be positive, fps_floor >= 0")
+        check_fields(self)
 
 
 class Health:

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bsn_edge.camera import Intrinsics
+from bsn_edge.config_toml import check_fields, setting
 from bsn_edge.model_frame import ModelFrame
 
 SECTORS = ("LEFT", "CENTRE", "RIGHT")   # the one list of sectors, left to right: the bus, the alert and the geometry
@@ -22,12 +23,15 @@ class SectorConfig:
     full_area: share of a sector's pixels that, at zero distance, makes its score 1.
     """
 
-    left_edge_deg: float = -12.0
-    right_edge_deg: float = 12.0
-    range_m: float = 30.0
-    full_area: float = 0.02
+    left_edge_deg: float = setting(-12.0, -89.0, 89.0, "deg")
+    right_edge_deg: float = setting(12.0, -89.0, 89.0, "deg")
+    # at least 10 m: nearer, a level could never be raised on a blind spot the car can still stop for
+    range_m: float = setting(30.0, 10.0, 200.0, "m")
+    # at most 5 %: more, and a sector could need more blind-spot pixels than it has to reach a level
+    full_area: float = setting(0.02, 0.001, 0.05)
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if not -89 < self.left_edge_deg < self.right_edge_deg < 89:
             raise ValueError(f"need -89 < left edge < right edge < 89 degrees, got {self.left_edge_deg}, "
                              f"{self.right_edge_deg}")

@@ -9,8 +9,10 @@ a minimum hold (a level stays at least this long). Tests just loop over timestam
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field
 from enum import IntEnum
+
+from bsn_edge.config_toml import check_fields, setting
 
 EPS_S = 1e-9  # timestamps from a caller carry float noise; a hold of 1 s ends at 0.9999999999 s too
 
@@ -25,12 +27,13 @@ class Level(IntEnum):
 class LevelRule:
     """When a level starts and ends (scores in [0, 1], times in seconds)."""
 
-    on: float
-    off: float
-    delay_s: float
-    hold_s: float
+    on: float = setting(MISSING, 0.05, 0.9)       # at most 0.9: a smoothed score must be able to reach it
+    off: float = setting(MISSING, 0.0, 0.9)
+    delay_s: float = setting(MISSING, 0.0, 5.0, "s")
+    hold_s: float = setting(MISSING, 0.0, 10.0, "s")
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if not 0 <= self.off < self.on <= 1:
             raise ValueError(f"need 0 <= off < on <= 1, got on={self.on} off={self.off}")
         if self.delay_s < 0 or self.hold_s < 0:
@@ -39,13 +42,12 @@ class LevelRule:
 
 @dataclass(frozen=True)
 class AlertConfig:
-    tau_s: float = 0.3                      # smoothing time constant
+    tau_s: float = setting(0.3, 0.0, 2.0, "s")   # smoothing time constant
     caution: LevelRule = field(default_factory=lambda: LevelRule(on=0.25, off=0.15, delay_s=0.2, hold_s=1.0))
     warning: LevelRule = field(default_factory=lambda: LevelRule(on=0.6, off=0.45, delay_s=0.1, hold_s=1.5))
 
     def __post_init__(self) -> None:
-        if self.tau_s < 0:
-            raise ValueError("tau_s must be >= 0")
+        check_fields(self)
         if self.warning.on <= self.caution.on:
             raise ValueError("a WARNING must need a higher score than a CAUTION")
 

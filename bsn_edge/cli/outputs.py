@@ -52,7 +52,26 @@ def check_output(kind: OutputKind, path: str | os.PathLike, force: bool) -> Path
 
 
 def check_outputs(outputs: Iterable[tuple[OutputKind, str | os.PathLike | None]], force: bool) -> None:
-    """Every given output of a command checked (those not asked for are None)."""
+    """Every given output of a command checked (those not asked for are None); two outputs naming one
+    file (through a link too) are refused, as one would overwrite the other."""
+    outputs = list(outputs)
+    check_distinct(outputs)
     for kind, path in outputs:
         if path:
             check_output(kind, path, force)
+
+
+def check_distinct(outputs: Iterable[tuple[OutputKind, str | os.PathLike | None]]) -> None:
+    """``ValueError`` when two outputs name one file, through a link too (pipes and devices, which many
+    may write into, excepted)."""
+    seen: dict[str, OutputKind] = {}
+    for kind, path in outputs:
+        if not path:
+            continue
+        p = Path(path)
+        if p.exists() and not p.is_file() and not p.is_dir():
+            continue
+        real = os.path.realpath(p)
+        if real in seen:
+            raise ValueError(f"{seen[real].flag} and {kind.flag} both name {path}: one would overwrite the other")
+        seen[real] = kind

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from bsn_edge.cli.common import fail
-from bsn_edge.cli.outputs import OutputKind, check_outputs
+from bsn_edge.cli.outputs import OutputKind, check_distinct, check_outputs
 from bsn_edge.default_model import DEFAULT_MODEL
 
 if TYPE_CHECKING:
@@ -228,14 +228,22 @@ def make_senders(args: argparse.Namespace) -> list[Sender]:
     return senders
 
 
-def refuse(senders: list[Sender], message: str) -> int:
-    """The runtime cannot start: say UNAVAILABLE on every bus first, then the reason."""
+def refuse(senders: list[Sender], message: str, summary: str | None = None) -> int:
+    """The runtime cannot start: say UNAVAILABLE on every bus first, then the reason, in the summary too
+    when one is asked for (``summary``: its path, already checked as an output)."""
     from bsn_edge.alerts.frame import AlertFrame
 
     frame = AlertFrame.unavailable(0.0)
     for s in senders:
         s.send(frame)
         s.close()
+    if summary:
+        from bsn_edge.sequence.images import atomic_write_bytes
+        record = {"frames": 0, "valid_frames": 0, "refused": message, "phase": "start-up"}
+        try:
+            atomic_write_bytes(summary, (json.dumps(record, indent=1) + "\n").encode())
+        except OSError as e:
+            print(f"{PROG}: error: cannot write the summary {summary}: {e}", file=sys.stderr)
     return fail(PROG, message + (" (UNAVAILABLE sent)" if senders else ""))
 
 
@@ -390,15 +398,19 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
         return _stopped_early(args, stopper)
     files = _output_files(args)
     try:
+        check_distinct(files)
         check_outputs(files[:1], args.force)          # the CAN log is the virtual bus's own sender
         senders = make_senders(args)
     except (ValueError, FileExistsError) as e:
         return fail(PROG, str(e))
     try:                                              # from here a refusal is UNAVAILABLE on the bus
         check_outputs(files[1:], args.force)
-        engine, camera, source, cfg, maps = _start(args)
     except (FileNotFoundError, ValueError, OSError) as e:
         return refuse(senders, str(e))
+    try:                                              # and, the outputs being free, said in the summary
+        engine, camera, source, cfg, maps = _start(args)
+    except (FileNotFoundError, ValueError, OSError) as e:
+        return refuse(senders, str(e), args.summary)
     if stopper.event.is_set():
         source.close()
         return _stopped_early(args, stopper, senders)

@@ -82,7 +82,12 @@ def _scan(f: BinaryIO, size: int) -> tuple[dict[str, str], str]:
             for n, _, s, e in _fields(io.BytesIO(entry), len(entry)):
                 if n in (ENTRY_KEY, ENTRY_VALUE):
                     kv[n] = entry[s:e].decode("utf-8", errors="replace")
-            metadata[kv.get(ENTRY_KEY, "")] = kv.get(ENTRY_VALUE, "")
+            key = kv.get(ENTRY_KEY, "")
+            if key in metadata:
+                # a second entry under one key: tools that list metadata would show both, and which of
+                # them the card stands for would depend on the reader
+                raise ValueError(f"its metadata holds the key {key!r} twice")
+            metadata[key] = kv.get(ENTRY_VALUE, "")
             continue
         f.seek(start)
         left = end - start

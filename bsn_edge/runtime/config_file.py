@@ -60,3 +60,32 @@ def to_dict(cfg: RuntimeConfig) -> dict[str, Any]:
 def digest(cfg: RuntimeConfig) -> str:
     """Short sha256 of the resolved settings: two runs with the same digest were tuned alike."""
     return hashlib.sha256(json.dumps(to_dict(cfg), sort_keys=True).encode()).hexdigest()[:16]
+
+
+def settings_table() -> list[str]:
+    """Every setting a vehicle file holds, with its default, kind and range, as Markdown table rows in
+    the file's order (the docs' settings table is this one, checked by a test)."""
+    rows = ["| setting | default | kind | range |", "|---|---|---|---|"]
+
+    def walk(instance: Any, prefix: str) -> None:
+        for f in dataclasses.fields(instance):
+            value = getattr(instance, f.name)
+            if prefix == LOOP and f.name in NESTED:
+                continue                      # a table of its own, after [runtime]
+            if dataclasses.is_dataclass(value):
+                walk(value, f"{prefix}.{f.name}")
+                continue
+            kind = "true or false" if isinstance(value, bool) else "whole number" if isinstance(value, int) \
+                else "number"
+            span = ""
+            if "range" in f.metadata:
+                lo, hi = f.metadata["range"]
+                span = f"{lo:g} to {hi:g}" + (f" {f.metadata['unit']}" if f.metadata["unit"] else "")
+            default = str(value).lower() if isinstance(value, bool) else f"{value:g}"
+            rows.append(f"| `{prefix}.{f.name}` | {default} | {kind} | {span} |")
+
+    cfg = RuntimeConfig()
+    walk(cfg, LOOP)
+    for name in NESTED:
+        walk(getattr(cfg, name), name)
+    return rows

@@ -30,6 +30,7 @@ from bsn_edge.alerts import (
 from bsn_edge.alerts.health import Fault, Health
 from bsn_edge.alerts.sectors import blind_spots
 from bsn_edge.alerts.senders import Sender
+from bsn_edge.config_toml import check_fields, setting
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
@@ -38,7 +39,7 @@ from bsn_edge.runtime.feeder import Feeder, Prepared
 from bsn_edge.runtime.frame_record import FrameRecord
 from bsn_edge.runtime.maps import MapWriter
 from bsn_edge.runtime.overlay import OverlayWriter, draw
-from bsn_edge.runtime.priority import check_nice
+from bsn_edge.runtime.priority import NICE_RANGE
 from bsn_edge.runtime.run_summary import ModelSummary, RunSummary, SinkSummary
 from bsn_edge.runtime.sinks import GuardedSink, LineLog, SinkFailure, open_all
 from bsn_edge.runtime.sources import Captured, Source
@@ -58,18 +59,14 @@ class RuntimeConfig:
     alerts: AlertConfig = field(default_factory=AlertConfig)
     sectors: SectorConfig = field(default_factory=SectorConfig)
     health: HealthConfig = field(default_factory=HealthConfig)
-    cycle_s: float = 0.1
-    warmup: int = 3
+    cycle_s: float = setting(0.1, 0.01, 1.0, "s")
+    warmup: int = setting(3, 0, 100, "inferences")
     overlap: bool = True         # decode and warp the next frame on a thread of its own while the model runs
-    feeder_nice: int = 10
-    in_flight: int = 1           # frames the model runs at once, each inference on a thread of its own
+    feeder_nice: int = setting(10, *NICE_RANGE)
+    in_flight: int = setting(1, 1, MAX_IN_FLIGHT, "frames")  # each inference on a thread of its own
 
     def __post_init__(self) -> None:
-        if not self.cycle_s > 0 or self.warmup < 0:
-            raise ValueError(f"cycle_s must be positive and warmup >= 0, got {self.cycle_s} and {self.warmup}")
-        check_nice(self.feeder_nice, "feeder_nice")
-        if not 1 <= self.in_flight <= MAX_IN_FLIGHT:
-            raise ValueError(f"in_flight must be within 1..{MAX_IN_FLIGHT}, got {self.in_flight}")
+        check_fields(self)
         if self.in_flight > 1 and not self.overlap:
             raise ValueError("more than one frame in flight needs reading overlapped with the model (overlap=True)")
 
@@ -161,6 +158,9 @@ class FramePipeline:
             return False
         if self.source.reconnects != self.reconnects_seen:    # a camera reopened may come back at another size
             self.reconnects_seen, self.shape = self.source.reconnects, None
+        elif self.shape is None and self.source.size is not None and self.source.one_camera and not self.frames - 1:
+            # the source's own size (a folder's: most of its first pictures'), not its first frame's
+            self.shape = (self.source.size[1], self.source.size[0], 3)
         if self.shape is None or not self.source.one_camera:     # each picture its own camera, its own size
             self.shape = cap.frame.shape
         elif cap.frame.shape != self.shape:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,7 @@ from bsn_edge.calibration.folder_cameras import FolderCameras, FolderVerdict, ju
 from bsn_edge.runtime.slot import LatestSlot
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import IMAGE_EXTS, is_image, picture_damage
+from bsn_edge.sequence.picture_header import declared_size, within_budget
 
 
 @dataclass(frozen=True)
@@ -173,6 +175,11 @@ class VideoFileSource(Source):
                         "frames unread")
 
 
+# the folder's size is the commonest of its first pictures' (their headers only); a JPEG's frame header
+# sits after its EXIF and tables, within the first 64 KiB of any camera's file
+SIZE_FROM = 9
+HEADER_BYTES = 1 << 16
+
 class ImageFolderSource(Source):
     def __init__(self, folder: str | Path, fps: float = 10.0) -> None:
         super().__init__()
@@ -184,9 +191,9 @@ class ImageFolderSource(Source):
             raise ValueError(f"{self.folder}: no images ({', '.join(IMAGE_EXTS)})")
         self.fps = fps
         self.total = len(self.files)
-        first = cv2.imread(str(self.files[0]), cv2.IMREAD_COLOR)     # as the frames are read: EXIF rotation applied
+        self.picture = self._typical(self.files[:SIZE_FROM])
+        first = self._read(self.picture)               # as the frames are read: EXIF rotation applied
         self.size = None if first is None else (first.shape[1], first.shape[0])
-        self.picture = self.files[0]
         self.cameras = judge_folder(self.files, read=self._read)
 
     def _frames(self) -> Iterator[Captured]:
@@ -196,16 +203,38 @@ class ImageFolderSource(Source):
             yield Captured(i / self.fps, frame, i, time.perf_counter() - t0, p.stem, p)
 
     @staticmethod
+    def _typical(files: list[Path]) -> Path:
+        """The first of ``files`` whose declared size is the commonest among them: the folder's size is
+        most of its first pictures', not the first one's (an odd picture sorted first is one counted
+        frame, not every frame after it)."""
+        sizes = {}
+        for p in files:
+            try:
+                with p.open("rb") as f:
+                    sizes[p] = declared_size(f.read(HEADER_BYTES))
+            except OSError:
+                sizes[p] = None
+        counts = Counter(s for s in sizes.values() if within_budget(s))
+        if not counts:
+            return files[0]
+        common = counts.most_common(1)[0][0]
+        return next(p for p in files if sizes[p] == common)
+
+    @staticmethod
     def _read(path: Path) -> np.ndarray | None:
-        """The picture, or None when it cannot be read whole (a cut file decodes with its missing part
-        filled in: not a frame to run)."""
+        """The picture, or None when it cannot be read whole: a header that cannot be read or that
+        declares more than the pixel budget (checked before anything is decoded), or a cut file (which
+        decodes with its missing part filled in: not a frame to run)."""
         try:
             data = path.read_bytes()
         except OSError:
             return None
-        if picture_damage(data, path.suffix) is not None:
+        if not within_budget(declared_size(data)) or picture_damage(data, path.suffix) is not None:
             return None
-        return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)     # EXIF rotation applied, as imread
+        try:
+            return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)  # EXIF rotation applied, as imread
+        except cv2.error:                # a decoder that refuses what the header let through
+            return None
 
 
 @dataclass(frozen=True)

@@ -33,8 +33,13 @@ def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], object], d
     """Write ``path`` through a temporary file, filled by ``write(file)``, and a rename, so readers
     never see a half-written file and a write that fails leaves nothing behind (a killed process can
     leave its temporary file: :func:`torn_writes` finds it). ``durable`` also fsyncs the data
-    before the rename, so a power cut cannot leave an empty file in its place."""
+    before the rename, so a power cut cannot leave an empty file in its place. A pipe or a device at
+    ``path`` is written into as asked, never replaced by a file."""
     path = Path(path)
+    if path.exists() and not path.is_file() and not path.is_dir():
+        with path.open("wb") as f:
+            write(f)
+        return
     prefix, suffix = _temp_affixes(path)
     fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=path.parent)
     try:

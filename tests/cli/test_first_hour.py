@@ -214,7 +214,7 @@ def test_a_config_value_of_the_wrong_kind_names_the_key_and_where_it_came_from(t
     from bsn_edge.train import load_config
     bad = tmp_path / "bad.toml"
     bad.write_text('[train]\nlr = "fast"\n')
-    with pytest.raises(ValueError, match=r"train\.lr = 'fast' \(.*bad\.toml\) must be a number"):
+    with pytest.raises(ValueError, match=r"train\.lr = 'fast' \(.*bad\.toml\) must be a finite number"):
         load_config(bad)
     with pytest.raises(ValueError, match=r"train\.steps = 'abc' \(--set\) must be a whole number"):
         load_config(ROOT / "configs" / "smoke.toml", ["train.steps=abc"])

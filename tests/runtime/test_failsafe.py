@@ -289,14 +289,14 @@ def test_a_stalled_stream_reconnects_and_the_bus_shows_it(setup):
 def test_health_survives_two_threads_hammering_it():
     """Two writers and a reader: every count lands (a counter bumped without the lock loses some once
     threads switch often, which the short switch interval makes happen within the test)."""
-    h = Health(HealthConfig(window_s=0.01))
+    h = Health(HealthConfig(window_s=0.5))      # the shortest window: 50 inferences in it
     errors: list[BaseException] = []
     n = 20000
 
     def writer():
         try:
             for i in range(n):
-                h.valid(i * 1e-4)
+                h.valid(i * 1e-2)
                 h.fault("decode_errors")
                 h.set_fault("dropped_frames", i)
         except BaseException as e:
@@ -305,8 +305,8 @@ def test_health_survives_two_threads_hammering_it():
     def reader():
         try:
             for i in range(n):
-                h.snapshot(i * 1e-4)
-                h.fps(i * 1e-4)
+                h.snapshot(i * 1e-2)
+                h.fps(i * 1e-2)
                 _ = h.faults
         except BaseException as e:
             errors.append(e)

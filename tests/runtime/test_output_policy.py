@@ -114,3 +114,36 @@ def test_a_summary_that_cannot_be_written_after_a_stop_at_start_up_fails_too(set
     assert _run(model, clip, "--summary", str(out)) == 1
     assert "cannot write the summary" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_pipe_given_as_the_summary_is_written_into_and_stays_a_pipe(setup, tmp_path):
+    import os
+    import stat
+    import threading
+
+    model, clip = setup
+    fifo = tmp_path / "summary.json"
+    os.mkfifo(fifo)
+    got: list[bytes] = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    assert _run(model, clip, "--summary", str(fifo)) == 0
+    reader.join(timeout=30)
+    assert stat.S_ISFIFO(fifo.stat().st_mode), "the pipe was replaced by a file"
+    assert json.loads(got[0])["frames"] == 3
+
+
+@pytest.mark.parametrize("link", [False, True])
+def test_two_outputs_naming_one_file_are_refused_before_anything_is_written(setup, tmp_path, capsys, link):
+    model, clip = setup
+    first = tmp_path / "out.json"
+    second = first
+    if link:
+        second = tmp_path / "other.json"
+        first.write_text("")
+        first.unlink()
+        second.symlink_to(first)
+    assert _run(model, clip, "--summary", str(first), "--save-calib", str(second), "--can-log",
+                str(tmp_path / "c.log")) == 2
+    assert "--summary and --save-calib both name" in capsys.readouterr().err
+    assert not first.exists() and not (tmp_path / "c.log").exists()

@@ -143,3 +143,26 @@ def test_half_the_pairs_showing_one_scene_is_the_edge_of_one_camera(three_drives
     moving on is half, the least that is one camera; 3 of 8 is not, nor is none."""
     files = [three_drives["ABC".index(name[0])][int(name[1])] for name in order.split()]
     assert judge_folder(files).cameras is cameras
+
+
+def test_a_picture_whose_header_lies_and_an_odd_one_first_each_cost_one_counted_frame(setup, tmp_path):
+    """A 64x64 JPEG whose frame header claims 60000x60000 (OpenCV would raise, or allocate gigabytes),
+    and an 80x80 picture sorted first in a folder of the clip's frames: each is one counted decode fault
+    or size change; every other frame runs, and the folder's size is that of most of its pictures."""
+    from tests.sequence.test_picture_header import sof_patched
+
+    model, clip = setup
+    folder = tmp_path / "pictures"
+    folder.mkdir()
+    files = sorted((clip / "rgb").glob("*.png"))[:8]
+    for i, f in enumerate(files):
+        cv2.imwrite(str(folder / f"{i + 1:03d}.jpg"), cv2.imread(str(f)))
+    cv2.imwrite(str(folder / "000.jpg"), np.full((80, 80, 3), 120, np.uint8))
+    _, buf = cv2.imencode(".jpg", np.full((64, 64, 3), 90, np.uint8))
+    (folder / "004a.jpg").write_bytes(sof_patched(buf.tobytes(), 60000, 60000))
+    summary = tmp_path / "s.json"
+    assert run_cli.main(["--model", str(model), "--source", str(folder), "--calib", str(clip / "calibration.json"),
+                         "--summary", str(summary)]) == 0
+    s = json.loads(summary.read_text())
+    assert s["frames"] == 10 and s["valid_frames"] == 8
+    assert s["faults"]["decode_errors"] == 1 and s["faults"]["size_changes"] == 1

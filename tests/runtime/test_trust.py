@@ -326,3 +326,24 @@ def test_reseal_with_a_new_threshold_keeps_the_graph_to_the_bit_and_says_where_i
     assert "give it with --reseal" in capsys.readouterr().err
     with pytest.raises(ValueError, match="where it was chosen"):
         export_cli.rethresholded(read_card(model), 0.2, "")
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_a_card_holding_a_key_twice_is_refused_by_name(setup, tmp_path, keys, where):
+    """A second 'bsn.threshold' beside the signed one: the runtime would read one, a tool listing the
+    metadata would show both. Refused, the key named, before or after the signed entry."""
+    model, _ = setup
+    signed = signed_copy(model, tmp_path, keys[0])
+    m = onnx.load(str(signed))
+    entries = [(p.key, p.value) for p in m.metadata_props]
+    twin = ("bsn.threshold", json.dumps(0.99))
+    at = next(i for i, (k, _) in enumerate(entries) if k == "bsn.threshold") + (where == "after")
+    entries.insert(at, twin)
+    del m.metadata_props[:]
+    for k, v in entries:
+        e = m.metadata_props.add()
+        e.key, e.value = k, v
+    out = tmp_path / f"twice_{where}.onnx"
+    onnx.save(m, str(out))
+    with pytest.raises((ModelError, ValueError), match=r"holds the key 'bsn\.threshold' twice"):
+        Engine(out, trust=TrustPolicy.default([str(keys[0]) + ".pub"], False))
