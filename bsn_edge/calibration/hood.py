@@ -16,6 +16,7 @@ real clips without one and on a real corner hood (``tests/calibration/test_hood.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -26,6 +27,10 @@ import numpy as np
 from bsn_edge.fields import number
 
 EDGE_ROWS = 3   # an outline is told from the mean picture 3 rows either side of it
+# a camera file's hood may mask at most this share of the picture, judged on the mask its arch draws: a
+# hood over more would leave the model too little road to see, and blind the run while it says OK
+MAX_MASKED = 0.35
+_JUDGED_AT = (90, 160)    # the grid the drawn mask is judged on (height, width)
 
 
 @dataclass(frozen=True)
@@ -119,11 +124,17 @@ class Hood:
         """As :meth:`to_dict` wrote it; ``ValueError`` naming ``where`` and the field otherwise."""
         share, spread, columns = (number(d, k, where) for k in ("share", "spread", "columns"))
         arch = d.get("arch", [])
-        if not (isinstance(arch, list) and len(arch) in (0, 3) and all(isinstance(a, int | float) for a in arch)):
-            raise ValueError(f"{where}: arch must be three numbers (or none), got {arch!r}")
+        if not (isinstance(arch, list) and len(arch) in (0, 3)
+                and all(isinstance(a, int | float) and not isinstance(a, bool) and math.isfinite(a) for a in arch)):
+            raise ValueError(f"{where}: arch must be three finite numbers (or none), got {arch!r}")
         if not (0 <= share < 1 and spread >= 0 and 0 <= columns <= 1) or (share > 0) != bool(arch):
             raise ValueError(f"{where}: share in [0, 1) with an arch when above 0, spread >= 0, columns in [0, 1]")
-        return cls(share, spread, columns, tuple(float(a) for a in arch), int(number(d, "frames", where, int)))
+        hood = cls(share, spread, columns, tuple(float(a) for a in arch), int(number(d, "frames", where, int)))
+        masked = float(hood.mask(_JUDGED_AT[1], _JUDGED_AT[0]).mean())
+        if masked > MAX_MASKED:
+            raise ValueError(f"{where}: its arch masks {100 * masked:.0f} % of the picture (at most "
+                             f"{100 * MAX_MASKED:.0f} %): the model would see too little road")
+        return hood
 
 
 class HoodFinder:

@@ -166,3 +166,21 @@ def test_a_real_hood_in_one_corner_is_found():
     assert hood.found and 0.04 < hood.share < 0.09, hood
     mask = hood.mask(640, 360)
     assert mask[350:, 600:].mean() > 0.9 and not mask[:, :320].any()
+
+
+def test_a_camera_files_hood_is_judged_by_the_mask_its_arch_draws():
+    """Worked by hand on the 90x160 grid: an arch at 0.9 of the height masks rows 81-89, 10 % of the
+    picture; an arch at the top row masks all of it, whatever its ``share`` says (0.1), and is refused;
+    an arch that is not three finite numbers is refused."""
+    from bsn_edge.calibration.hood import MAX_MASKED, Hood
+
+    base = {"share": 0.1, "spread": 0.0, "columns": 1.0, "frames": 5}
+    assert Hood.from_dict({**base, "arch": [0.0, 0.0, 0.9]}).mask(160, 90).mean() == pytest.approx(0.1)
+    with pytest.raises(ValueError, match=r"masks 100 % of the picture \(at most 35 %\)"):
+        Hood.from_dict({**base, "arch": [0, 0, 0]})
+    with pytest.raises(ValueError, match="at most 35 %"):
+        Hood.from_dict({**base, "arch": [0.0, 0.0, 1 - MAX_MASKED - 0.02]})
+    Hood.from_dict({**base, "arch": [0.0, 0.0, 1 - MAX_MASKED + 0.02]})
+    for arch in ([float("nan"), 0, 0], [True, 0, 0], [0, 0, float("inf")]):
+        with pytest.raises(ValueError, match="three finite numbers"):
+            Hood.from_dict({**base, "arch": arch})
