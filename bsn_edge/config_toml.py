@@ -74,7 +74,7 @@ def coerce(cls: type, key: str, value: Any) -> Any:
     number is finite (a :func:`setting` with no default is a number). ``ValueError`` (from the caller's
     message) for anything else."""
     default = default_of(cls, key)
-    meta = {f.name: f.metadata for f in dataclasses.fields(cls)}[key]
+    meta = _field(cls, key).metadata
     if default is None and "range" in meta:
         default = 0.0
     if isinstance(value, meta.get("also", ())) and not isinstance(value, bool):
@@ -121,7 +121,7 @@ def setting(default: Any, lo: float, hi: float, unit: str = "") -> Any:
 
 def _range_of(cls: type, key: str) -> str:
     """`` in [lo, hi] unit`` for a :func:`setting` field, else empty."""
-    meta = {f.name: f.metadata for f in dataclasses.fields(cls)}[key]
+    meta = _field(cls, key).metadata
     if "range" not in meta:
         return ""
     lo, hi = meta["range"]
@@ -147,8 +147,12 @@ def check_fields(obj: Any) -> None:
             raise ValueError(f"{f.name} = {value!r} is outside [{lo:g}, {hi:g}]{unit}")
 
 
+def _field(cls: type, key: str) -> dataclasses.Field:
+    return next(f for f in dataclasses.fields(cls) if f.name == key)
+
+
 def default_of(cls: type, key: str) -> Any:
-    f = {f.name: f for f in dataclasses.fields(cls)}[key]
+    f = _field(cls, key)
     if f.default is not dataclasses.MISSING:
         return f.default
     if f.default_factory is not dataclasses.MISSING:

@@ -158,7 +158,7 @@ class FramePipeline:
             return False
         if self.source.reconnects != self.reconnects_seen:    # a camera reopened may come back at another size
             self.reconnects_seen, self.shape = self.source.reconnects, None
-        elif self.shape is None and self.source.size is not None and self.source.one_camera and not self.frames - 1:
+        elif self.shape is None and self.frames == 1 and self.source.one_camera and self.source.size is not None:
             # the source's own size (a folder's: most of its first pictures'), not its first frame's
             self.shape = (self.source.size[1], self.source.size[0], 3)
         if self.shape is None or not self.source.one_camera:     # each picture its own camera, its own size

@@ -309,21 +309,29 @@ def test_reduced_range_keeps_every_weight_within_seven_bits(spread_int8, cli_int
     assert spans[False][0] < -64 or spans[False][1] > 64
 
 
+def _quantized_conv_weights(path) -> dict[str, tuple[int, list[int]]]:
+    """Each convolution whose weight is dequantized: ``{name: (output channels, its scale's dims)}``, read
+    off the graph's own initializers (not through the export's code)."""
+    g = onnx.load(str(path)).graph
+    inits = {i.name: i for i in g.initializer}
+    producer = {o: n for n in g.node for o in n.output}
+    out = {}
+    for n in g.node:
+        dq = producer.get(n.input[1]) if n.op_type == "Conv" else None
+        if dq is not None and dq.op_type == "DequantizeLinear":
+            out[n.name] = (inits[dq.input[0]].dims[0], list(inits[dq.input[1]].dims))
+    return out
+
+
 def test_per_channel_weights_are_in_the_graph_and_the_card_says_so(spread_int8, cli_int8):
     """Every quantized convolution weight has one scale per output channel (a 1-D scale as long as
     the weight's first axis), read off the graph's own initializers; and the card's scheme is the
     graph's, not the configuration's."""
     for out in (spread_int8[1], cli_int8):
-        g = onnx.load(str(out)).graph
-        inits = {i.name: i for i in g.initializer}
-        producer = {o: n for n in g.node for o in n.output}
-        convs = [n for n in g.node if n.op_type == "Conv" and producer.get(n.input[1]) is not None
-                 and producer[n.input[1]].op_type == "DequantizeLinear"]
+        convs = _quantized_conv_weights(out)
         assert len(convs) > 5
-        for n in convs:
-            dq = producer[n.input[1]]
-            c_out = inits[dq.input[0]].dims[0]
-            assert list(inits[dq.input[1]].dims) == [c_out], n.name
+        for name, (c_out, scale_dims) in convs.items():
+            assert scale_dims == [c_out], name
         assert "per-channel" in read_card(out).quantization
 
 
@@ -476,13 +484,9 @@ def test_per_tensor_and_quantize_heads_reach_the_graph(run, spread, tmp_path):
     out = tmp_path / "pt.onnx"
     assert export_main(["--checkpoint", str(spread[0]), "--out", str(out), "--size", "64x128", "--int8",
                         "--int8-frames", str(run[1]), "--int8-count", "2", "--per-tensor", "--quantize-heads"]) == 0
-    g = onnx.load(str(out)).graph
-    inits = {i.name: i for i in g.initializer}
-    producer = {o: n for n in g.node for o in n.output}
-    convs = [n for n in g.node if n.op_type == "Conv" and producer.get(n.input[1]) is not None
-             and producer[n.input[1]].op_type == "DequantizeLinear"]
+    convs = _quantized_conv_weights(out)
     assert len(convs) > 5
-    assert all(list(inits[producer[n.input[1]].input[1]].dims) in ([], [1]) for n in convs)
+    assert all(scale_dims in ([], [1]) for _, scale_dims in convs.values())
     assert "per-channel" not in read_card(out).quantization
     floats = json.loads(out.with_suffix(".json").read_text())["quantization"]["float_nodes"]
     assert not any("head" in why for why in floats.values()), floats
