@@ -40,6 +40,8 @@ TRAVERSABLE: tuple[int, ...] = (ROAD, SIDEWALK)
 VEHICLES: tuple[int, ...] = (CAR, TRUCK, BUS, TRAIN, MOTORCYCLE, BICYCLE)
 VULNERABLE: tuple[int, ...] = (PERSON, RIDER)
 ROAD_USERS: tuple[int, ...] = VEHICLES + VULNERABLE   # what hides road and moves on it
+# people and what they ride: the road users the labels teach least (a few pixels each, in few frames)
+PEOPLE_AND_CYCLES: tuple[int, ...] = (*VULNERABLE, BICYCLE, MOTORCYCLE)
 
 # Cityscapes colours, RGB.
 _PALETTE_RGB = np.array(

@@ -89,6 +89,8 @@ class DataConfig:
 
 ADAMW, ADAM = "adamw", "adam"
 OPTIMIZERS = (ADAMW, ADAM)
+# past this, a few people's pixels would outweigh the rest of a batch's blind spots
+MAX_PEOPLE_WEIGHT = 20.0
 
 
 @dataclass(frozen=True)
@@ -113,6 +115,8 @@ class TrainConfig:
     device: str = "cpu"                      # cpu, cuda or auto (cuda when torch sees a GPU)
     checkpoint_every: int = 100
     init: str = ""                           # start from this run's weights (fine-tuning)
+    # re-draw train.init's dead channels before training on (bsn_edge.models.revive)
+    revive: bool = False
     encoder_lr: float = 1.0                  # share of lr for an encoder that starts from ImageNet weights
     # what the frame encoder's batch norm normalises with in training (bsn_edge.train.encoder_norm.
     # EncoderNorm): "batch" (each batch's statistics) or "frozen" (the statistics it came with)
@@ -127,6 +131,9 @@ class TrainConfig:
     # be trusted) widened to every pixel the clip sees nearer than this many metres: far occluders
     # are taught as well. Rendered clips only, whose depth is exact (0: V as labelled)
     bce_range_m: float = 0.0
+    # BCE weight of the positive pixels on people and what they ride (semantics.PEOPLE_AND_CYCLES); every
+    # other pixel weighs 1. Their positives are a few % of the labels' (benchmarks/bench_label_classes.py)
+    people_weight: float = 1.0
 
     def __post_init__(self) -> None:
         if self.steps < 1 or self.batch_size < 1:
@@ -148,6 +155,11 @@ class TrainConfig:
             raise ValueError("train.eval_every must be >= 0 and train.eval_frames >= 1")
         if self.bce_range_m < 0:
             raise ValueError(f"train.bce_range_m is metres (0: off), got {self.bce_range_m}")
+        if self.revive and not self.init:
+            raise ValueError("train.revive re-draws the dead channels of the weights train.init starts from; "
+                             "set train.init to a run (a new network has none dead)")
+        if not 1.0 <= self.people_weight <= MAX_PEOPLE_WEIGHT:
+            raise ValueError(f"train.people_weight must be in [1, {MAX_PEOPLE_WEIGHT:g}], got {self.people_weight}")
         if self.optimizer not in OPTIMIZERS:
             raise ValueError(f"train.optimizer must be one of {', '.join(OPTIMIZERS)}, got {self.optimizer!r}")
         if not 0 <= self.weight_decay < 1:

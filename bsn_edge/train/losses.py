@@ -10,12 +10,16 @@ from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M
 from bsn_edge.semantics import IGNORE
 
 
-def masked_bce(logits: Tensor, target: Tensor, valid: Tensor) -> Tensor:
+def masked_bce(logits: Tensor, target: Tensor, valid: Tensor, weight: Tensor | None = None) -> Tensor:
     """Binary cross-entropy averaged over the pixels where ``valid`` (the visibility mask V) is set;
-    pixels outside V contribute nothing. Zero when no pixel is valid."""
+    pixels outside V contribute nothing. Zero when no pixel is valid.
+
+    ``weight`` (broadcastable to ``logits``, optional) multiplies each pixel's term; the sum is still
+    divided by the number of valid pixels, so a weight of 1 everywhere is the plain mean."""
     loss = F.binary_cross_entropy_with_logits(logits, target, reduction="none")
     v = valid.to(loss.dtype)
-    return (loss * v).sum() / v.sum().clamp_min(1.0)
+    w = v if weight is None else v * weight
+    return (loss * w).sum() / v.sum().clamp_min(1.0)
 
 
 def visible_out_to(visibility: Tensor, depth: Tensor, semantic: Tensor, range_m: float) -> Tensor:

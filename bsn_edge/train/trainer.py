@@ -24,6 +24,7 @@ from bsn_edge.data.camera_mix import CameraMix
 from bsn_edge.data.guessed_camera import GuessedDepth
 from bsn_edge.models import BlindSpotNet, create_model, get_spec, start_from
 from bsn_edge.models.alive import alive_channels
+from bsn_edge.models.revive import revive
 from bsn_edge.progress import progress_bar
 from bsn_edge.train.batches import datasets, sample_cache, skipped_and_torn, training_batches
 from bsn_edge.train.checkpoints import carried, checkpoint, finish, open_run
@@ -61,6 +62,17 @@ def _depth_weights(semantic: torch.Tensor, object_weight: float) -> torch.Tensor
     return 1.0 + (object_weight - 1.0) * obj.to(torch.float32)
 
 
+def bce_weights(b: dict[str, torch.Tensor], people_weight: float) -> torch.Tensor | None:
+    """Per-pixel BCE weights ``[N, 1, H, W]``: ``people_weight`` on the blind-spot pixels of people and
+    what they ride, 1 elsewhere (their negatives too: the rendered clips already teach a person mostly
+    as not hiding road); None when the weight is 1."""
+    if people_weight == 1.0:
+        return None
+    ids = torch.tensor(sm.PEOPLE_AND_CYCLES, device=b["semantic"].device)
+    people = torch.isin(b["semantic"], ids)[:, None] & (b["blindspot"] > 0.5)
+    return 1.0 + (people_weight - 1.0) * people.to(torch.float32)
+
+
 def losses(net: torch.nn.Module, b: dict[str, torch.Tensor], teacher: torch.nn.Module | None, cfg: Config,
            dtype: torch.dtype | None) -> tuple[torch.Tensor, ...]:
     """``(loss, bce, distillation, depth)`` of one batch: BCE inside V (out to ``train.bce_range_m``
@@ -75,7 +87,7 @@ def losses(net: torch.nn.Module, b: dict[str, torch.Tensor], teacher: torch.nn.M
     valid = b["visibility"]
     if cfg.train.bce_range_m > 0:
         valid = visible_out_to(valid, b["depth"], b["semantic"], cfg.train.bce_range_m)
-    l_bce = masked_bce(logits, b["blindspot"], valid)
+    l_bce = masked_bce(logits, b["blindspot"], valid, bce_weights(b, cfg.train.people_weight))
     weight, free_scale = depth_weights(b, cfg)
     l_depth = depth_loss(depth, b["depth"], b["sky"], weight, cfg.train.depth_grad_scales, free_scale)
     loss = l_bce + cfg.train.depth_weight * l_depth
@@ -221,6 +233,8 @@ def _model_and_optimizer(cfg: Config, state: dict[str, Any] | None,
             start_from(model, cfg.model.name, init, init_card.variant)
         except ValueError as e:
             raise ValueError(f"train.init {cfg.train.init}: {e}") from None
+        if cfg.train.revive and state is None:
+            revive(model, seed=cfg.train.seed)
     if EncoderNorm(cfg.train.encoder_bn) is EncoderNorm.FROZEN:
         _freeze_encoder_stats(model, cfg, spec.pretrained)
     model.to(dev)

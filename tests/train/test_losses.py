@@ -65,3 +65,13 @@ def test_v_widens_to_every_seen_pixel_nearer_than_the_range_and_no_farther():
     # kept (V), near car, car just inside, road at the range, no depth, the hood or outside the view
     assert visible_out_to(v, depth, sem, 30.0).flatten().tolist() == [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]
     assert visible_out_to(v, depth, sem, 4.0).flatten().tolist() == v.flatten().tolist()
+
+
+def test_a_weight_multiplies_each_pixels_term_and_the_mean_stays_over_v():
+    logits = torch.zeros(1, 1, 1, 3)                  # each term is ln 2 at logit 0
+    target = torch.tensor([[[[1.0, 0.0, 1.0]]]])
+    valid = torch.tensor([[[[1.0, 1.0, 0.0]]]])
+    weight = torch.tensor([[[[4.0, 1.0, 9.0]]]])      # the third pixel is outside V: its weight is moot
+    assert math.isclose(masked_bce(logits, target, valid, weight).item(), (4 + 1) * math.log(2) / 2, rel_tol=1e-6)
+    assert math.isclose(masked_bce(logits, target, valid, torch.ones_like(weight)).item(),
+                        masked_bce(logits, target, valid).item(), rel_tol=1e-7)
