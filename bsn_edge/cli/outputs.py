@@ -24,20 +24,45 @@ class OutputKind:
     what: str = ""
 
 
-def check_output(kind: OutputKind, path: str | os.PathLike, force: bool) -> Path:
-    """``path`` checked and its folder made; ``FileExistsError`` or ``ValueError`` naming the flag."""
+class OutputsRefusedError(ValueError):
+    """Outputs a command cannot write, every one named (``problems``), found before anything is written."""
+
+    def __init__(self, problems: list[str]) -> None:
+        self.problems = tuple(problems)
+        exists = [m for m in problems if m.endswith(EXISTS)]
+        rest = [m for m in problems if not m.endswith(EXISTS)]
+        said = [f"{', '.join(m[: -len(EXISTS)] for m in exists)} "
+                f"{'exists' if len(exists) == 1 else 'exist'}; pass --force to replace "
+                f"{'it' if len(exists) == 1 else 'them'}"] if exists else []
+        super().__init__("; ".join(rest + said))
+
+
+EXISTS = " exists"
+
+
+def judge_output(kind: OutputKind, path: str | os.PathLike, force: bool) -> str | None:
+    """What is wrong with writing ``path`` as ``kind`` (None: nothing), judged without touching the disk."""
     p = Path(path)
     name = f"{kind.flag} {p}"
     if p.exists() and not p.is_file() and not p.is_dir():
-        return p                          # a pipe or a device (/dev/null, /dev/full): written to as asked
+        return None                       # a pipe or a device (/dev/null, /dev/full): written to as asked
     if kind.suffixes and p.suffix.lower() not in kind.suffixes:
         known = ", ".join(kind.suffixes)
-        raise ValueError(f"{name}: {kind.what + ' ' if kind.what else ''}files end in {known}, "
-                         f"not {p.suffix or 'nothing'}")
+        return f"{name}: {kind.what + ' ' if kind.what else ''}files end in {known}, not {p.suffix or 'nothing'}"
     if p.is_dir():
-        raise ValueError(f"{name}: is a folder; give a file name")
+        return f"{name}: is a folder; give a file name"
     if p.is_file() and not force:
-        raise FileExistsError(f"{name} exists; pass --force to replace it")
+        return name + EXISTS
+    return None
+
+
+def prepare_output(kind: OutputKind, path: str | os.PathLike) -> Path:
+    """``path``'s folder made and probed for writing (after :func:`judge_output` found nothing wrong);
+    ``ValueError`` naming the flag."""
+    p = Path(path)
+    if p.exists() and not p.is_file() and not p.is_dir():
+        return p
+    name = f"{kind.flag} {p}"
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -51,14 +76,25 @@ def check_output(kind: OutputKind, path: str | os.PathLike, force: bool) -> Path
     return p
 
 
+def check_output(kind: OutputKind, path: str | os.PathLike, force: bool) -> Path:
+    """``path`` checked and its folder made; :class:`OutputsRefusedError` (a ``ValueError``) naming the flag."""
+    if (problem := judge_output(kind, path, force)) is not None:
+        raise OutputsRefusedError([problem])
+    return prepare_output(kind, path)
+
+
 def check_outputs(outputs: Iterable[tuple[OutputKind, str | os.PathLike | None]], force: bool) -> None:
-    """Every given output of a command checked (those not asked for are None); two outputs naming one
-    file (through a link too) are refused, as one would overwrite the other."""
-    outputs = list(outputs)
-    check_distinct(outputs)
-    for kind, path in outputs:
-        if path:
-            check_output(kind, path, force)
+    """Every given output of a command checked (those not asked for are None), all of them before any
+    folder is made: one :class:`OutputsRefusedError` names every output that cannot be written, so a refused
+    command writes nothing and the next try is not refused for another. Two outputs naming one file
+    (through a link too) are refused, as one would overwrite the other."""
+    given = [(kind, path) for kind, path in outputs if path]
+    check_distinct(given)
+    problems = [m for kind, path in given if (m := judge_output(kind, path, force)) is not None]
+    if problems:
+        raise OutputsRefusedError(problems)
+    for kind, path in given:
+        prepare_output(kind, path)
 
 
 def check_distinct(outputs: Iterable[tuple[OutputKind, str | os.PathLike | None]]) -> None:

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from bsn_edge.cli.common import fail
-from bsn_edge.cli.outputs import OutputKind, check_distinct, check_outputs
+from bsn_edge.cli.outputs import OutputKind, check_outputs
 from bsn_edge.default_model import DEFAULT_MODEL
 
 if TYPE_CHECKING:
@@ -114,11 +114,27 @@ def _outputs(p: argparse.ArgumentParser) -> None:
                         "first frame. Missing folders are made")
 
 
+class _PrintDefaults(argparse.Action):
+    """``--print-config``: the packaged settings file on standard output, then exit (as ``--help``)."""
+
+    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        from bsn_edge.runtime.config_file import DEFAULTS_FILE
+        sys.stdout.write(DEFAULTS_FILE.read_text(encoding="utf-8"))
+        parser.exit()
+
+
 def _settings(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("the runtime's settings (sectors, smoothing, levels, health, the cycle)")
     g.add_argument("--config", metavar="RUNTIME.toml",
-                   help="the runtime's settings in one file (configs/runtime.toml lists each at its default, with "
-                        "what it does); the summary holds the resolved settings and their digest")
+                   help="the runtime's settings in one file (--print-config prints one with each at its default and "
+                        "what it does, to copy and edit); the summary holds the resolved settings and their digest")
+    g.add_argument("--print-config", action=_PrintDefaults,
+                   help="print the runtime's settings file, every setting at its default with what it does and its "
+                        "range, and exit (it ships inside the package; configs/runtime.toml in a checkout)")
     g.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="change one setting, after --config: e.g. --set sectors.left_edge_deg=-15 --set "
                         "alerts.tau_s=0.5 --set alerts.warning.on=0.7 (repeatable). --cycle, --in-flight and "
@@ -226,6 +242,16 @@ def make_senders(args: argparse.Namespace) -> list[Sender]:
             s.close()
         raise
     return senders
+
+
+def _refuse_outputs(args: argparse.Namespace, message: str) -> int:
+    """Outputs that cannot be written: nothing is written (no CAN log, no summary), and a vehicle bus or
+    serial link asked for hears UNAVAILABLE."""
+    try:
+        senders = make_senders(argparse.Namespace(**{**vars(args), "can_log": None}))
+    except ValueError:
+        senders = []
+    return refuse(senders, message)
 
 
 def refuse(senders: list[Sender], message: str, summary: str | None = None) -> int:
@@ -396,18 +422,16 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     from bsn_edge.runtime import run
     if stopper.event.is_set():          # a signal while the runtime loaded
         return _stopped_early(args, stopper)
-    files = _output_files(args)
+    try:                                              # every output judged before any is written
+        check_outputs(_output_files(args), args.force)
+    except (ValueError, OSError) as e:
+        return _refuse_outputs(args, str(e))
     try:
-        check_distinct(files)
-        check_outputs(files[:1], args.force)          # the CAN log is the virtual bus's own sender
         senders = make_senders(args)
-    except (ValueError, FileExistsError) as e:
+    except ValueError as e:
         return fail(PROG, str(e))
-    try:                                              # from here a refusal is UNAVAILABLE on the bus
-        check_outputs(files[1:], args.force)
-    except (FileNotFoundError, ValueError, OSError) as e:
-        return refuse(senders, str(e))
-    try:                                              # and, the outputs being free, said in the summary
+    try:                                              # from here a refusal is UNAVAILABLE on the bus and,
+        # the outputs being free, said in the summary
         engine, camera, source, cfg, maps = _start(args)
     except (FileNotFoundError, ValueError, OSError) as e:
         return refuse(senders, str(e), args.summary)

@@ -1,6 +1,7 @@
 """The runtime's settings in one TOML file: what an integrator tunes without code.
 
-``configs/runtime.toml`` holds every one at its default, with what it does:
+:data:`DEFAULTS_FILE` (in the package, so every install has it; ``configs/runtime.toml`` in a checkout,
+``bsn-run --print-config`` prints it) holds every one at its default, with what it does:
 
 - ``[runtime]``: the loop (``cycle_s``, ``warmup``, ``overlap``, ``in_flight``, ``feeder_nice``);
 - ``[sectors]``: the sector edges as bearings and how far blind spots count (:class:`SectorConfig`);
@@ -27,6 +28,7 @@ from bsn_edge.alerts.state_machine import AlertConfig
 from bsn_edge.config_toml import build, merge_overrides, read_toml
 from bsn_edge.runtime.loop import RuntimeConfig
 
+DEFAULTS_FILE = Path(__file__).with_name("runtime.toml")
 NESTED: dict[str, type] = {"sectors": SectorConfig, "alerts": AlertConfig, "health": HealthConfig}
 LOOP = "runtime"
 

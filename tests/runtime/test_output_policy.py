@@ -29,6 +29,20 @@ def test_an_existing_output_is_refused_before_the_first_frame_and_replaced_with_
         assert path.read_bytes() != b"the user's own\n"
 
 
+def test_every_existing_output_is_named_in_one_refusal_and_the_refused_run_writes_nothing(setup, tmp_path, capsys):
+    model, clip = setup
+    overlay, log = tmp_path / "o.mp4", tmp_path / "f.jsonl"
+    overlay.write_bytes(b"mine\n")
+    log.write_bytes(b"mine too\n")
+    can_log, summary, fresh = tmp_path / "c.log", tmp_path / "s.json", tmp_path / "new" / "cam.json"
+    assert _run(model, clip, "--overlay", str(overlay), "--log", str(log), "--can-log", str(can_log),
+                "--summary", str(summary), "--save-calib", str(fresh)) == 2
+    err = capsys.readouterr().err
+    assert f"--overlay {overlay}, --log {log} exist; pass --force to replace them" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.jsonl", "o.mp4"]     # no CAN log, summary, folder
+    assert overlay.read_bytes() == b"mine\n" and log.read_bytes() == b"mine too\n"
+
+
 @pytest.mark.parametrize("flag,name,known", [("--overlay", "o.txt", ".mp4"), ("--log", "f.csv", ".jsonl"),
                                              ("--summary", "s.yaml", ".json"), ("--can-log", "c.txt", ".blf"),
                                              ("--save-calib", "cam", ".json")])
