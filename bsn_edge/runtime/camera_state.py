@@ -2,7 +2,8 @@
 
 With a camera file that carries a mounting, that mounting is used from the first frame. Without
 one, the camera is calibrated online as openpilot's calibration daemon does: frames are warped with
-a first guess (the pitch and yaw of the road's vanishing point in the first frames,
+a first guess (the pitch and yaw of the road's vanishing point in the first frames, provisionally from
+the first frame it is found in,
 :mod:`bsn_edge.calibration.vanishing_point`; else as the model camera sits) while pitch and yaw are
 estimated from the focus of expansion of forward driving (:mod:`bsn_edge.calibration.mount_fit`); the
 status on the bus says CALIBRATING until the estimate has converged, then the estimate is used (and
@@ -170,7 +171,7 @@ class CameraState:
     def _guess(self) -> Mounting:
         """The mounting while calibrating: the vanishing point's, else the model camera's."""
         assumed = assumed_mounting(self.card.mounting, self.height_m)
-        seen = self._vanishing.mounting(assumed.height_m, assumed.roll_deg) if self._vanishing is not None else None
+        seen = self._vanishing.provisional(assumed) if self._vanishing is not None else None
         return seen or assumed
 
     def _calibrate(self, frame: np.ndarray) -> None:
@@ -240,10 +241,13 @@ class CameraState:
         g = self._vanishing
         if g is None or not g.looked:
             return ""
-        m = g.mounting(1.0)
+        m = g.provisional(assumed_mounting(self.card.mounting, self.height_m))
         if m is None:
             return (f"; meanwhile the camera is taken to sit as the model camera does (the road's vanishing point "
                     f"is {g.state()})")
+        if not g.agreed:
+            return (f"; meanwhile pitch {m.pitch_deg:+.2f} yaw {m.yaw_deg:+.2f} deg from the road's vanishing point, "
+                    f"provisionally ({len(g.found)} of the {g.agree} frames it needs)")
         return (f"; meanwhile pitch {m.pitch_deg:+.2f} yaw {m.yaw_deg:+.2f} deg from the road's vanishing point "
                 f"({len(g.found)} of {g.looked} frames agree within {max(g.spread_deg or (0.0,)):.1f} deg)")
 

@@ -146,13 +146,13 @@ def test_a_point_beyond_every_mounting_is_no_guess_not_an_error():
 
 def test_the_first_guess_is_used_only_when_enough_frames_agree():
     """Pitch and yaw found frame by frame: five within a fraction of a degree are used (their median);
-    four are not yet; nine whose yaws scatter over 20 degrees (city corners a second apart) never are,
+    four only provisionally; nine whose yaws scatter over 20 degrees (city corners a second apart) never are,
     and the camera is then taken to sit as the model camera does."""
     agreeing = [(1.0, 2.0), (1.2, 2.3), (0.9, 1.8), (1.1, 2.1), (1.0, 2.2)]
     g = VanishingGuess()
     for py in agreeing[:4]:
         g.record(py)
-    assert g.mounting(1.5) is None and "not used yet" in g.state()
+    assert g.mounting(1.5) is None and "used provisionally" in g.state()
     g.record(agreeing[4])
     m = g.mounting(1.5)
     assert (m.pitch_deg, m.yaw_deg) == (1.0, 2.1) and g.state() == "used"
