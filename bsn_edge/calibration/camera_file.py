@@ -121,6 +121,13 @@ class Calibration:
             raise FileNotFoundError(f"calibration file {p} not found")
         d = read_json_object(p, "not a camera file")
         known = {f.name for f in fields(cls)}     # fields of other versions are left out, not guessed at
+        lens = ("fx", "fy", "cx", "cy", "width", "height")
+        if not any(k in d for k in lens):
+            has = ", ".join(sorted(k for k in d if k in known)) or "nothing a camera file holds"
+            raise ValueError(f"{p}: holds no lens ({', '.join(lens)}), only {has}. A camera file starts from "
+                             "its lens: bsn-calibrate VIDEO --hfov DEG --out CALIB.json for a lens known by its "
+                             "field of view (or from a chessboard's pictures); bsn-calibrate --mount then adds the "
+                             "mounting and the hood to it")
         try:
             m = d.get("mounting")
             hood = d.get("hood")

@@ -352,6 +352,7 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
         lines.append(f"  camera: still {camera.progress()}; online calibration needs a few seconds of straight "
                      "forward driving, longer with turns, stops or little texture (or run bsn-calibrate --mount once "
                      "and pass --calib)")
+        lines.append(f"  levels computed meanwhile with: {camera.assumed()}")
     elif m is not None:
         report = summary["camera"]["calibration"]
         source = report.get("source", "camera file")
@@ -442,10 +443,16 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     try:
         total = args.max_frames or getattr(source, "total", None)
         with progress_bar(total=total, unit="frame", desc="bsn-run", file=sys.stderr) as bar:
+            shown = [""]
+
             def tick(n: int) -> None:
                 bar.update(n)
-                if camera.calibrating and bar.n % 25 == 0:
-                    bar.set_postfix_str(camera.progress(), refresh=False)
+                # every 25 frames while calibrating, and once more when it converges: never a stale line
+                if bar.n % 25 == 0 or (shown[0].startswith("calibrating") and not camera.calibrating):
+                    text = camera.progress()
+                    if text != shown[0]:
+                        bar.set_postfix_str(text, refresh=False)
+                        shown[0] = text
 
             summary = run(engine, source, senders, cfg, overlay=args.overlay, log=args.log,
                           max_frames=args.max_frames, progress=tick, camera=camera, save_maps=maps,

@@ -5,11 +5,10 @@ new training use them, while the channels that are alive keep what they learnt.
 
 A dead channel is re-drawn the way :func:`bsn_edge.models.alive.alive_channels` pairs layers: its
 convolution row at random (normal, with the spread of the layer's living rows; Kaiming's where none
-live), and the batch norm that follows it at a small scale (:data:`REVIVED_SCALE` of its living
-scales' median), its shift kept (the constant the next layers have learnt to read from it) and its
-statistics reset (mean 0, variance 1; a training pass relearns them). A convolution with no batch
-norm after it is re-drawn at :data:`REVIVED_SCALE` of that spread (its bias kept), so the network's
-outputs move little at the start.
+live), and the batch norm that follows it at its living scales' median (:data:`REVIVED_SCALE`), its
+shift kept (the constant the next layers have learnt to read from it) and its statistics reset (mean 0,
+variance 1; a training pass relearns them). A convolution with no batch norm after it is re-drawn at
+:data:`UNNORMED_SCALE` of that spread (its bias kept), so the network's outputs move little at the start.
 """
 
 from __future__ import annotations
@@ -20,8 +19,14 @@ import torch
 
 from bsn_edge.models.alive import SCALE_EPS
 
-# a revived channel starts at this share of its layer's living scale: heard, not yet loud
-REVIVED_SCALE = 0.1
+# a revived channel's norm starts at this share of its layer's living scale. At a tenth (0.001-0.01 in the
+# default's encoder) Adam's steps of a learning rate's size swamped it: after 1,000 steps at 5e-4 half of them
+# sat under the 1e-3 that counts a channel dead again. Their outgoing weights were decayed to exactly zero
+# with them, so at the full living scale the revived channels still change little at the start (the
+# default's logits by 4 % of their mean size) and their readout learns from there
+REVIVED_SCALE = 1.0
+# a convolution with no norm after it writes its row straight into what follows: re-drawn at a tenth
+UNNORMED_SCALE = 0.1
 
 
 def _dead_rows(conv: torch.nn.Conv2d, bn: torch.nn.modules.batchnorm._BatchNorm | None,
@@ -62,7 +67,7 @@ def revive(model: torch.nn.Module, seed: int = 0, scale_eps: float = SCALE_EPS) 
         fan_in = rows.shape[1]
         std = float(living.std()) if living.numel() > 1 else math.sqrt(2.0 / fan_in)
         if bn is None:
-            std *= REVIVED_SCALE
+            std *= UNNORMED_SCALE
         fresh = torch.randn((n, *w.shape[1:]), generator=gen) * std
         w[dead] = fresh.to(w.device, w.dtype)
         if bn is not None:

@@ -14,6 +14,7 @@ the overlay and summary say so.
 
 from __future__ import annotations
 
+import math
 import threading
 from pathlib import Path
 from typing import Any
@@ -58,6 +59,8 @@ class CameraState:
             else intrinsics_from
         self.height_m = height_m or (calibration.mounting.height_m if calibration and calibration.mounting
                                      else card.mounting.height_m)
+        self.height_from = "given" if height_m else ("the camera file's" if calibration and calibration.mounting
+                                                     else "the model camera's; --height sets it")
         self.mounting: Mounting | None = calibration.mounting if calibration is not None else None
         if self.mounting is not None and height_m:
             self.mounting = Mounting(height_m, self.mounting.pitch_deg, self.mounting.yaw_deg, self.mounting.roll_deg)
@@ -202,6 +205,22 @@ class CameraState:
         if m is not None:
             self._calibrator.close()
 
+    def assumed(self) -> str:
+        """What the levels are computed with while calibrating, in a line: the camera's height and where it
+        came from, its lens (horizontal field of view) and where that came from, and why frame pairs were
+        not used ("" before the first frame)."""
+        with self._lock:
+            if self._camera_file is None:
+                return ""
+            intr = self._camera_file[1].intrinsics
+            report = dict(self.report)
+        hfov = 2.0 * math.degrees(math.atan(intr.width / (2.0 * intr.fx)))
+        height = f"height {self.height_m:.2f} m ({self.height_from})"
+        lens = f"lens {hfov:.1f} deg across: {self.intrinsics_from}"
+        rejected = report.get("rejected") or {}
+        why = ", ".join(f"{n} {k}" for k, n in sorted(rejected.items(), key=lambda kv: -kv[1]))
+        return f"{height}, {lens}" + (f"; frame pairs not used: {why}" if why else "")
+
     def hood_progress(self) -> str:
         """Where the search for the hood stands, in words ("" once the hood is known)."""
         with self._lock:
@@ -217,13 +236,18 @@ class CameraState:
 
     def progress(self) -> str:
         """Where online calibration stands, in a line: pairs used and the standard errors of pitch and
-        yaw against what convergence needs ("" when not calibrating)."""
+        yaw against what convergence needs; once converged, the mounting and the frame it converged at
+        ("" with a camera file's mounting)."""
         with self._lock:
             return self._progress()
 
     def _progress(self) -> str:
         if not self.calibrating:
-            return ""
+            at, m = self.report.get("converged_at"), self.mounting
+            if not at or m is None:
+                return ""
+            return (f"calibrated: pitch {m.pitch_deg:+.2f} yaw {m.yaw_deg:+.2f} deg, converged at frame "
+                    f"{at['frame']}")
         r = self.report or {}
         need = self._calibrator.fit.cfg if self._calibrator is not None else None
         if need is None or not r.get("pairs"):

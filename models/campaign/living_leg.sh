@@ -4,11 +4,11 @@
 # campaign's rendered clips and CamVid's drives with their T-frame labels (every drive but the held-out 0006R0),
 # a quarter of each batch real, distilled from the real teacher (models/campaign/teacher_real, 99.4 % alive),
 # the positive pixels of people and cyclists weighted PEOPLE (bench_label_classes: 3-7 % of the positives).
-# 6,000 steps at 5e-4, seed 7. Resumable: run it again and it goes on from its last state (every 500 steps).
+# 6,000 steps at 2.5e-4, seed 7. Resumable: run it again and it goes on from its last state (every 500 steps).
 #   cd ~/.cache/bsn-edge/campaign && REPO=/path/to/bsn-edge /path/to/bsn-edge/models/campaign/living_leg.sh
 set -euo pipefail
 REPO=${REPO:?set REPO to the checkout}
-RUN=${RUN:-living1}
+RUN=${RUN:-living2}
 REAL=${REAL:-0.25}
 PEOPLE=${PEOPLE:-4.0}
 STEPS=${STEPS:-6000}
@@ -20,6 +20,6 @@ resume=()
 if [ -f "$RUN/state.pt" ]; then resume=(--resume); elif [ -d "$RUN" ]; then resume=(--force); fi
 "$BIN/bsn-train" --config "$REPO/configs/campaign.toml" --data data --out "$RUN" "${resume[@]}" \
   --set 'model.name="shared-light"' --set "train.init=\"$REPO/models/default\"" --set train.revive=true \
-  --set "teacher.checkpoint=\"$REPO/models/campaign/teacher_real\"" --set "train.lr=${LR:-0.0005}" \
+  --set "teacher.checkpoint=\"$REPO/models/campaign/teacher_real\"" --set "train.lr=${LR:-0.00025}" \
   --set train.seed=7 --set "train.steps=$STEPS" --set train.eval_every=1000 --set "data.real_share=$REAL" \
   --set "train.people_weight=$PEOPLE"

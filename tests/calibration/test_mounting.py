@@ -195,9 +195,13 @@ def test_bsn_run_leaves_calibrating_and_saves_the_camera_file(long_drive, small_
     written = json.loads(saved.read_text())
     assert not {"board", "square_m", "rms_px", "used", "skipped"} & set(written), "no chessboard was used"
     # the end lines say when calibration converged: the frame, and its time at the folder's 10 frames/s
-    said = re.search(r"online, converged at frame (\d+), ([\d.]+) s in", capsys.readouterr().out)
+    printed = capsys.readouterr()
+    said = re.search(r"online, converged at frame (\d+), ([\d.]+) s in", printed.out)
     assert said and 0 < int(said[1]) <= len(list((long_drive / "rgb").iterdir()))
     assert float(said[2]) == pytest.approx(int(said[1]) / 10.0)
+    # and the progress line's last word on the camera is the converged one, not a frozen "calibrating"
+    last = printed.err.replace("\r", "\n").strip().splitlines()[-1]
+    assert f"calibrated: pitch {got.pitch_deg:+.2f} yaw {got.yaw_deg:+.2f} deg, converged at frame {said[1]}" in last
 
 
 def test_road_normal_of_exact_correspondences_is_the_plane_down_direction():

@@ -1,12 +1,12 @@
 """Reviving dead channels: every channel killed by hand comes back (counted by ``alive_channels``), the
-living ones are bit-for-bit what they were, and the revived ones start quiet."""
+living ones are bit-for-bit what they were, and the revived ones start at their layer's living scale."""
 
 import copy
 
 import torch
 
 from bsn_edge.models.alive import alive_channels
-from bsn_edge.models.revive import REVIVED_SCALE, revive
+from bsn_edge.models.revive import REVIVED_SCALE, UNNORMED_SCALE, revive
 
 
 def _net() -> torch.nn.Sequential:
@@ -38,13 +38,14 @@ def test_every_dead_channel_comes_back_and_no_living_one_moves():
     assert torch.equal(net[4].weight[[0, 1, 3]], before[4].weight[[0, 1, 3]])
     assert torch.equal(net[6].weight[[0, 1, 2]], before[6].weight[[0, 1, 2]])
     assert torch.equal(net[6].bias, before[6].bias)
-    # a revived norm: a tenth of the living scales' median, its shift kept, its statistics reset
-    assert REVIVED_SCALE == 0.1
+    # a revived norm: at the living scales' median, its shift kept, its statistics reset
+    assert REVIVED_SCALE == 1.0
     median = float(before[1].weight.detach()[living0].median())
     assert torch.allclose(net[1].weight[[1, 5]], torch.full((2,), REVIVED_SCALE * median))
     assert torch.equal(net[1].bias, before[1].bias)
     assert net[1].running_var[[1, 5]].tolist() == [1.0, 1.0] and net[1].running_mean[[1, 5]].tolist() == [0.0, 0.0]
-    # the re-drawn rows have the spread of the living ones (no norm after: a tenth of it)
+    # the re-drawn rows have the spread of the living ones (no norm after: UNNORMED_SCALE of it, a tenth)
+    assert UNNORMED_SCALE == 0.1
     living_std = float(before[0].weight.detach()[living0].std())
     assert 0.5 * living_std < float(net[0].weight[[1, 5]].std()) < 2.0 * living_std
     assert float(net[6].weight[3].abs().max()) < float(before[6].weight[[0, 1, 2]].abs().max())

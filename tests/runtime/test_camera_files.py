@@ -52,6 +52,22 @@ def test_a_camera_that_cannot_exist_is_refused_with_the_field_named(setup, tmp_p
     assert states == [SystemState.UNAVAILABLE]
 
 
+def test_a_camera_file_of_a_hood_alone_is_refused_with_how_to_make_the_rest(tmp_path, capsys):
+    only = tmp_path / "hood.json"
+    only.write_text(json.dumps({"hood": {"share": 0.1, "spread": 0.0, "columns": 1.0, "arch": [0.0, 0.0, 0.9],
+                                         "frames": 40}}))
+    with pytest.raises(ValueError) as refused:
+        Calibration.read(only)
+    said = str(refused.value)
+    assert said.startswith(f"{only}: holds no lens (fx, fy, cx, cy, width, height), only hood.")
+    assert "bsn-calibrate VIDEO --hfov DEG --out CALIB.json" in said and "'fx' is missing" not in said
+    # a file with part of a lens is still refused by the field it lacks
+    part = tmp_path / "part.json"
+    part.write_text(json.dumps({"fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "width": 640}))
+    with pytest.raises(ValueError, match="height"):
+        Calibration.read(part)
+
+
 @pytest.mark.parametrize(("cx", "cy"), [(-1.0, 360.0), (1281.0, 360.0), (640.0, -1.0), (640.0, 900.0),
                                       (0.0, 360.0), (640.0, 720.0)])
 def test_a_principal_point_off_the_picture_on_any_side_is_refused(cx, cy):

@@ -78,3 +78,19 @@ def test_once_agreed_the_provisional_guess_is_the_agreed_one():
     for p in (-3.0, -3.1, -2.9, -3.2, -3.0):
         g.record((p, 0.2))
     assert g.agreed and g.provisional(ASSUMED) == g.mounting(1.5)
+
+
+def test_an_unconverged_run_says_what_its_levels_were_computed_with(setup, capsys):
+    import math
+
+    from bsn_edge.card import ModelCard
+    from bsn_edge.modelfile.read import ModelFile
+
+    model, clip = setup
+    card = ModelCard.from_metadata(ModelFile.read(model).metadata, str(model))
+    hfov = 2 * math.degrees(math.atan(card.camera.width / (2 * card.camera.fx)))    # resizing keeps the angle
+    assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--height", "1.3"]) == 0
+    out = capsys.readouterr().out
+    assert "camera: still calibrating" in out
+    said = next(line for line in out.splitlines() if "levels computed meanwhile with:" in line)
+    assert f"height 1.30 m (given), lens {hfov:.1f} deg across: assumed: the model camera's" in said
