@@ -18,11 +18,11 @@ from typing import Any
 KINDS = {int: "a whole number", float: "a finite number", str: "a string", bool: "true or false", tuple: "a list"}
 
 
-def parse_override(text: str) -> tuple[list[str], Any]:
+def parse_override(text: str, example: str) -> tuple[list[str], Any]:
     """``section.key=value`` (or ``section.sub.key=value``) -> (the dotted path, value); the value is read
-    as TOML if it can be."""
+    as TOML if it can be. ``example``: an override of the caller's own, shown when ``text`` is not one."""
     if "=" not in text or "." not in text.split("=", 1)[0]:
-        raise ValueError(f"override {text!r} must look like section.key=value (e.g. train.steps=100)")
+        raise ValueError(f"override {text!r} must look like section.key=value (e.g. {example})")
     dotted, raw = text.split("=", 1)
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
@@ -52,11 +52,12 @@ def read_toml(path: str | Path | None) -> dict[str, Any]:
         raise ValueError(f"{p}: invalid TOML: {e}") from None
 
 
-def merge_overrides(raw: dict[str, Any], overrides: list[str] | tuple[str, ...]) -> set[str]:
-    """Apply ``overrides`` onto ``raw`` in place; the dotted keys they set (to say where a bad one came from)."""
+def merge_overrides(raw: dict[str, Any], overrides: list[str] | tuple[str, ...], example: str) -> set[str]:
+    """Apply ``overrides`` onto ``raw`` in place; the dotted keys they set (to say where a bad one came from).
+    ``example``: a valid override of the caller's settings, for the message when one is malformed."""
     given = set()
     for ov in overrides:
-        path, value = parse_override(ov)
+        path, value = parse_override(ov, example)
         table = raw
         for part in path[:-1]:
             table = table.setdefault(part, {})

@@ -9,6 +9,7 @@ import time
 from bsn_edge.cli.common import fail, glue_values, parse_size
 from bsn_edge.progress import progress_bar
 from bsn_edge.synth import STYLES, SynthConfig, write_clip
+from bsn_edge.synth.clip import check_output
 
 PROG = "bsn-synth"
 
@@ -64,6 +65,10 @@ def main(argv: list[str] | None = None) -> int:
                           pedestrians=args.pedestrians, lead=args.lead, queue=args.queue, bs_range=args.bs_range,
                           sensor_effects=not args.no_sensor_effects)
     except ValueError as e:
+        return fail(PROG, str(e))
+    try:
+        check_output(args.out, args.force)            # before the progress line: a refusal is all it prints
+    except FileExistsError as e:
         return fail(PROG, str(e))
     t0 = time.perf_counter()
     try:

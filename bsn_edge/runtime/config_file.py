@@ -38,7 +38,7 @@ def load_runtime_config(path: str | Path | None = None, overrides: list[str] | t
     """The runtime's settings: the defaults, then the file at ``path``, then ``overrides``
     (``section.key=value``); ``ValueError`` or ``FileNotFoundError`` naming what is wrong."""
     raw = read_toml(path)
-    given = merge_overrides(raw, overrides)
+    given = merge_overrides(raw, overrides, example="sectors.left_edge_deg=-15")
     where = str(path) if path is not None else "--set"
     valid = [LOOP, *NESTED]
     unknown = sorted(set(raw) - set(valid))

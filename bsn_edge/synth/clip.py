@@ -137,13 +137,20 @@ def render_frames(clip: Clip, renderer: Renderer | None = None, workers: int = 1
             yield from frames
 
 
-def prepare_output(out: Path, force: bool) -> None:
-    """Create ``out``; refuse a non-empty folder unless ``force``, then clear only what we write."""
+def check_output(out: str | Path, force: bool) -> None:
+    """``FileExistsError`` when ``out`` cannot take a clip: a file, or a folder with something in it
+    (unless ``force``). Touches nothing, so a command can refuse before it starts its work."""
+    out = Path(out)
     if out.exists() and not out.is_dir():
         raise FileExistsError(f"{out} exists and is not a folder")
+    if out.exists() and any(out.iterdir()) and not force:
+        raise FileExistsError(f"{out} already exists and is not empty; pass --force to overwrite it")
+
+
+def prepare_output(out: Path, force: bool) -> None:
+    """Create ``out``; refuse a non-empty folder unless ``force``, then clear only what we write."""
+    check_output(out, force)
     if out.exists() and any(out.iterdir()):
-        if not force:
-            raise FileExistsError(f"{out} already exists and is not empty; pass --force to overwrite it")
         for name in (*SequenceFolder.SYNTH_OUTPUTS, SequenceFolder.LABELS):
             p = out / name
             if p.is_dir():

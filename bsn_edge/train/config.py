@@ -227,7 +227,7 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
     """Read a TOML config and apply overrides; unknown sections or keys are errors that list the
     valid ones (the mechanism of :mod:`bsn_edge.config_toml`)."""
     raw = read_toml(path)
-    given = merge_overrides(raw, overrides)
+    given = merge_overrides(raw, overrides, example="train.steps=100")
     parts = {}
     for section, values in raw.items():
         if section not in SECTIONS:

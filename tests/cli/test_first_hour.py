@@ -70,6 +70,18 @@ def test_sizes_are_printed_as_typed_and_bad_ones_say_what_is_wrong(tmp_path, cap
     assert "positive whole numbers" in err and "expected one argument" not in err
 
 
+def test_bsn_synth_refuses_a_full_folder_in_one_line_and_no_progress_before_it(tmp_path, capsys):
+    from bsn_edge.cli import synth as synth_cli
+    (tmp_path / "c").mkdir()
+    (tmp_path / "c" / "mine.txt").write_text("keep")
+    assert synth_cli.main([str(tmp_path / "c"), "--frames", "2", "--size", "64x128", "--no-video"]) == 2
+    printed = capsys.readouterr()
+    lines = [ln for ln in (printed.out + printed.err).replace("\r", "\n").splitlines() if ln.strip()]
+    assert lines == [f"bsn-synth: error: {tmp_path / 'c'} already exists and is not empty; pass --force to "
+                     "overwrite it"]
+    assert [p.name for p in (tmp_path / "c").iterdir()] == ["mine.txt"]
+
+
 @pytest.mark.parametrize(("flag", "value", "words"), [("--height", "7", "[0.2, 5]"), ("--lane-width", "12", "[2, 6]")])
 def test_calibrate_checks_its_ranges_before_reading_the_video(tmp_path, capsys, flag, value, words):
     from bsn_edge.cli import calibrate as calib_cli

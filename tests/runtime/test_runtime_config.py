@@ -260,3 +260,9 @@ def test_a_config_that_is_a_folder_or_not_utf8_is_named_as_such(tmp_path):
         load_runtime_config(latin)
     with pytest.raises(FileNotFoundError, match="not found"):
         load_runtime_config(tmp_path / "none.toml")
+
+
+def test_a_malformed_set_is_answered_with_an_example_of_the_runtimes_own():
+    with pytest.raises(ValueError) as refused:
+        load_runtime_config(None, ["left_edge_deg=-15"])
+    assert "e.g. sectors.left_edge_deg=-15" in str(refused.value) and "train." not in str(refused.value)
