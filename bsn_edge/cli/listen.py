@@ -158,6 +158,9 @@ def main(argv: list[str] | None = None) -> int:
                 if not more():
                     break
                 show(fid, data, where)
+            if show.frames == 0 and not show.bad_lines:   # a run that sent nothing is not a clean run
+                print(show.summary(), file=sys.stderr)
+                return fail(PROG, f"{path}: holds no frame (bsn-run writes one every cycle from its start)", 1)
         elif args.can:
             import can
             iface, _, channel = args.can.partition(":")

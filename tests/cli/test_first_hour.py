@@ -230,3 +230,11 @@ def test_a_config_value_of_the_wrong_kind_names_the_key_and_where_it_came_from(t
         load_config(bad)
     with pytest.raises(ValueError, match=r"train\.steps = 'abc' \(--set\) must be a whole number"):
         load_config(ROOT / "configs" / "smoke.toml", ["train.steps=abc"])
+
+
+def test_bsn_listen_fails_on_a_log_that_holds_no_frame(tmp_path, capsys):
+    from bsn_edge.cli import listen as listen_cli
+    empty = tmp_path / "empty.log"
+    empty.write_text("")
+    assert listen_cli.main(["--can-log", str(empty)]) == 1
+    assert f"{empty}: holds no frame" in capsys.readouterr().err
