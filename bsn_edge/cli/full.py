@@ -10,7 +10,6 @@ raised as it is.
 
 from __future__ import annotations
 
-import importlib
 import sys
 from collections.abc import Callable
 
@@ -28,11 +27,14 @@ def missing_full_module(e: ModuleNotFoundError) -> str | None:
     return top if top in FULL_MODULES else None
 
 
-def guarded(prog: str, module: str, argv: list[str] | None = None) -> int:
-    """``module``'s ``main(argv)``, with a missing module of the full install said in one line."""
+Main = Callable[[list[str] | None], int]
+
+
+def guarded(prog: str, load: Callable[[], Main], argv: list[str] | None = None) -> int:
+    """The command ``load`` imports, run on ``argv``, with a missing module of the full install said in one
+    line."""
     try:
-        main: Callable[[list[str] | None], int] = importlib.import_module(module).main
-        return main(argv)
+        return load()(argv)
     except ModuleNotFoundError as e:
         name = missing_full_module(e)
         if name is None:
@@ -43,24 +45,42 @@ def guarded(prog: str, module: str, argv: list[str] | None = None) -> int:
 
 
 def train() -> int:
-    return guarded("bsn-train", "bsn_edge.cli.train")
+    def load() -> Main:
+        from bsn_edge.cli.train import main
+        return main
+    return guarded("bsn-train", load)
 
 
 def eval() -> int:
-    return guarded("bsn-eval", "bsn_edge.cli.eval")
+    def load() -> Main:
+        from bsn_edge.cli.eval import main
+        return main
+    return guarded("bsn-eval", load)
 
 
 def export() -> int:
-    return guarded("bsn-export", "bsn_edge.cli.export")
+    def load() -> Main:
+        from bsn_edge.cli.export import main
+        return main
+    return guarded("bsn-export", load)
 
 
 def adapt() -> int:
-    return guarded("bsn-adapt", "bsn_edge.cli.adapt")
+    def load() -> Main:
+        from bsn_edge.cli.adapt import main
+        return main
+    return guarded("bsn-adapt", load)
 
 
 def bench() -> int:
-    return guarded("bsn-bench", "bsn_edge.cli.bench")
+    def load() -> Main:
+        from bsn_edge.cli.bench import main
+        return main
+    return guarded("bsn-bench", load)
 
 
 def label() -> int:
-    return guarded("bsn-label", "bsn_edge.cli.label")
+    def load() -> Main:
+        from bsn_edge.cli.label import main
+        return main
+    return guarded("bsn-label", load)
