@@ -33,6 +33,9 @@ class LineProgress:
         self.postfix = ""
         self.start = self.last = clock()
         self.closed = False
+        # the first update carries the start-up (caches, a teacher, the first compiled step): the time left is
+        # read from the rate after it
+        self.first: tuple[float, float] | None = None
 
     def __iter__(self) -> Iterator[Any]:
         if self.iterable is None:
@@ -53,6 +56,8 @@ class LineProgress:
     def update(self, n: float = 1) -> None:
         self.n += n
         now = self.clock()
+        if self.first is None:
+            self.first = (now, self.n)
         if now - self.last >= self.every_s:
             self.last = now
             self._print(now)
@@ -80,8 +85,9 @@ class LineProgress:
         parts = [f"{self.desc}: {count}" if self.desc else count, f"{rate:.3g} {self.unit}/s"]
         if done:
             parts.append(f"done in {_duration(took)}")
-        elif self.total and rate > 0:
-            parts.append(f"{_duration((self.total - self.n) / rate)} left")
+        elif self.total and self.first is not None and self.n > self.first[1] and now > self.first[0]:
+            steady = (self.n - self.first[1]) / (now - self.first[0])
+            parts.append(f"{_duration((self.total - self.n) / steady)} left")
         if self.postfix:
             parts.append(self.postfix)
         return ", ".join(parts)

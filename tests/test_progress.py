@@ -56,3 +56,17 @@ def test_a_command_in_a_log_says_how_far_it_got():
                             "--no-video"], capture_output=True, text=True, check=False)
     assert r.returncode == 0, r.stderr
     assert "3/3 frame (100 %)" in r.stderr and "done in" in r.stderr
+
+
+def test_the_time_left_is_read_after_the_first_step_which_carries_the_start_up():
+    """A training whose first step takes 60 s (caches, the first compiled pass) and then 1 s a step: at 40 s
+    after it, 40 of the 400 steps after the first are done, so 359 are left at 1 a second, not at the
+    41 steps in 100 s the whole time gives (which said 15 minutes)."""
+    out, clock = io.StringIO(), Clock()
+    bar = LineProgress(total=400, desc="train", unit="step", file=out, clock=clock, every_s=1e9)
+    clock.t = 60.0
+    bar.update(1)
+    assert "left" not in bar.line(clock.t)                       # no rate after the first step yet
+    clock.t = 100.0
+    bar.update(40)
+    assert bar.line(clock.t) == "train: 41/400 step (10 %), 0.41 step/s, 6 min left"     # 359 s
