@@ -69,6 +69,17 @@ class Alive:
         return out
 
 
+def following_norm(modules: list[tuple[str, torch.nn.Module]],
+                   i: int) -> torch.nn.modules.batchnorm._BatchNorm | None:
+    """The batch norm that scales convolution ``modules[i]``'s channels: the next module in the network's
+    order, when it is an affine batch norm of as many channels; else None."""
+    conv, nxt = modules[i][1], (modules[i + 1][1] if i + 1 < len(modules) else None)
+    if isinstance(conv, torch.nn.Conv2d) and isinstance(nxt, torch.nn.modules.batchnorm._BatchNorm) \
+            and nxt.affine and nxt.num_features == conv.out_channels:
+        return nxt
+    return None
+
+
 def alive_channels(model: torch.nn.Module, scale_eps: float = SCALE_EPS) -> Alive:
     """Which output channels of every convolution of ``model`` are alive: weights not all zero, and the
     scale of the batch norm that follows it (the next module in ``model``'s order, when it normalises as
@@ -80,9 +91,7 @@ def alive_channels(model: torch.nn.Module, scale_eps: float = SCALE_EPS) -> Aliv
             continue
         w = m.weight.detach()
         alive = w.reshape(w.shape[0], -1).ne(0).any(dim=1)
-        follower = modules[i + 1][1] if i + 1 < len(modules) else None
-        if isinstance(follower, torch.nn.modules.batchnorm._BatchNorm) and follower.affine \
-                and follower.num_features == w.shape[0]:
-            alive &= follower.weight.detach().abs().gt(scale_eps)
+        if (norm := following_norm(modules, i)) is not None:
+            alive &= norm.weight.detach().abs().gt(scale_eps)
         layers.append(LayerAlive(name, int(w.shape[0]), int(alive.sum())))
     return Alive(tuple(layers))

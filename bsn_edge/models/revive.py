@@ -17,7 +17,7 @@ import math
 
 import torch
 
-from bsn_edge.models.alive import SCALE_EPS
+from bsn_edge.models.alive import SCALE_EPS, following_norm
 
 # a revived channel's norm starts at this share of its layer's living scale. At a tenth (0.001-0.01 in the
 # default's encoder) Adam's steps of a learning rate's size swamped it: after 1,000 steps at 5e-4 half of them
@@ -38,14 +38,6 @@ def _dead_rows(conv: torch.nn.Conv2d, bn: torch.nn.modules.batchnorm._BatchNorm 
     return dead
 
 
-def _follower(modules: list[tuple[str, torch.nn.Module]], i: int,
-              channels: int) -> torch.nn.modules.batchnorm._BatchNorm | None:
-    nxt = modules[i + 1][1] if i + 1 < len(modules) else None
-    if isinstance(nxt, torch.nn.modules.batchnorm._BatchNorm) and nxt.affine and nxt.num_features == channels:
-        return nxt
-    return None
-
-
 @torch.no_grad()
 def revive(model: torch.nn.Module, seed: int = 0, scale_eps: float = SCALE_EPS) -> int:
     """Re-initialise every dead output channel of ``model``'s convolutions in place (see the module's
@@ -56,7 +48,7 @@ def revive(model: torch.nn.Module, seed: int = 0, scale_eps: float = SCALE_EPS) 
     for i, (_, m) in enumerate(modules):
         if not isinstance(m, torch.nn.Conv2d):
             continue
-        bn = _follower(modules, i, m.out_channels)
+        bn = following_norm(modules, i)
         dead = _dead_rows(m, bn, scale_eps)
         n = int(dead.sum())
         if n == 0:
