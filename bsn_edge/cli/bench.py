@@ -15,7 +15,7 @@ PROG = "bsn-bench"
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "footprint",
-         "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive")
+         "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive", "prune")
 ADAPT_SOURCE, ADAPT_TARGET = "suburb", "urban"
 ADAPT_EVAL_SEEDS = (1300, 1301)   # held-out target clips: seeds no training clip has
 SEEDS = (0, 1, 2)                 # training seeds of the paper's tables
@@ -78,7 +78,8 @@ BY_OUT_ONLY = {"labels": "benchmarks.bench_labels", "realcam": "benchmarks.bench
                "camvid": "benchmarks.bench_camvid", "realteacher": "benchmarks.bench_realteacher",
                "vanishing": "benchmarks.bench_vanishing",
                "floor": "benchmarks.bench_floor", "int8_cpu": "benchmarks.bench_int8_cpu",
-               "footprint": "benchmarks.bench_footprint", "alive": "benchmarks.bench_alive"}
+               "footprint": "benchmarks.bench_footprint", "alive": "benchmarks.bench_alive",
+               "prune": "benchmarks.bench_prune"}
 
 
 def main(argv: list[str] | None = None) -> int:

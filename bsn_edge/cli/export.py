@@ -74,6 +74,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quantize-heads", action="store_true",
                    help="quantize the output heads too (by default they stay float)")
     _sealed_model_options(p)
+    p.add_argument("--no-prune", action="store_true",
+                   help="keep every convolution channel (by default the channels nothing reads, whose every "
+                        "reader multiplies them by exactly zero, are taken out of the graph: the same outputs "
+                        "for fewer multiply-accumulates)")
     p.add_argument("--ship-run", metavar="DIR",
                    help="also write the run itself beside the model: D and B weights and the teacher in fp16, "
                         "each with its sha256, the card, config and history (no optimizer state), so users can "
@@ -222,7 +226,8 @@ def _export(args: argparse.Namespace, out: Path) -> int:
     try:
         qcfg = QuantConfig(args.method, args.activations, args.weights, not args.per_tensor, not args.quantize_heads,
                            args.weight_bits == 7)
-        summary = export_run(args.checkpoint, out, args.size, args.int8, args.int8_frames, args.int8_count, qcfg)
+        summary = export_run(args.checkpoint, out, args.size, args.int8, args.int8_frames, args.int8_count, qcfg,
+                             prune_dead=not args.no_prune)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     print(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); fp32 parity: max |dp| "

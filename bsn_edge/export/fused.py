@@ -8,6 +8,7 @@ metres. ``metadata_props`` carries the sealed model card (``bsn_edge.card``), al
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,7 @@ from torch import Tensor, nn
 
 from bsn_edge.card import ModelCard
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
+from bsn_edge.export.prune import Pruned, prune
 from bsn_edge.export.seal import seal, set_metadata
 from bsn_edge.export.space_to_depth import SpaceToDepthInput, block_conv, fits
 from bsn_edge.export.upsample import ShuffleUpsample, with_shuffle_upsampling
@@ -94,9 +96,18 @@ class FusedModel(nn.Module):
         return torch.sigmoid(logits), depth
 
 
-def to_onnx(model: nn.Module, out: str | Path, card: ModelCard) -> ModelCard:
-    """Export ``model`` (a BlindSpotNet) fused at ``card.input_size``, sealed with ``card``;
-    returns the sealed card."""
+@dataclass(frozen=True)
+class Exported:
+    """A sealed fused export: its card, and what pruning removed (None when not asked)."""
+
+    card: ModelCard
+    pruned: Pruned | None
+
+
+def export_fused(model: nn.Module, out: str | Path, card: ModelCard, prune_dead: bool = True) -> Exported:
+    """Export ``model`` (a BlindSpotNet) fused at ``card.input_size`` to ``out``, sealed with ``card``;
+    with ``prune_dead`` the convolution channels nothing reads are first taken out of the graph
+    (``export.prune``: the same outputs, fewer multiply-accumulates)."""
     out = Path(out)
     h, w = card.input_size
     fused = FusedModel(model.eval(), (h, w)).eval()
@@ -109,12 +120,19 @@ def to_onnx(model: nn.Module, out: str | Path, card: ModelCard) -> ModelCard:
                               output_names=["blindspot", "depth"], opset_version=OPSET, dynamo=False,
                               do_constant_folding=True)
         m = onnx.load(str(tmp))
+        pruned = prune(m) if prune_dead else None
         set_metadata(m, card)
         onnx.checker.check_model(m)
         onnx.save(m, str(tmp))
-        return seal(tmp, card, out)
+        return Exported(seal(tmp, card, out), pruned)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def to_onnx(model: nn.Module, out: str | Path, card: ModelCard) -> ModelCard:
+    """Export ``model`` (a BlindSpotNet) fused at ``card.input_size``, unpruned, sealed with ``card``;
+    returns the sealed card."""
+    return export_fused(model, out, card, prune_dead=False).card
 
 
 def check_parity(model: nn.Module, path: str | Path, frames: list[np.ndarray]) -> dict[str, float]:

@@ -19,7 +19,7 @@ import onnx
 
 from bsn_edge.card import ModelCard
 from bsn_edge.export.calib_frames import load_frames
-from bsn_edge.export.fused import check_parity, to_onnx
+from bsn_edge.export.fused import check_parity, export_fused
 from bsn_edge.export.integer_input import INTEGER_INPUT, integer_input
 from bsn_edge.export.quantize import QuantConfig, quantize
 from bsn_edge.export.seal import seal
@@ -32,14 +32,16 @@ from bsn_edge.train.run import Run
 
 def export_run(checkpoint: str | Path, out: str | Path, size: tuple[int, int] | None = None, int8: bool = False,
                calib: str | Path | None = None, calib_frames: int = 64, qcfg: QuantConfig | None = None,
-               log: TextIO | None = None) -> dict[str, Any]:
+               log: TextIO | None = None, prune_dead: bool = True) -> dict[str, Any]:
     """Export the run ``checkpoint`` to ``out`` (and ``out`` with ``.json``: the summary, returned).
 
     fp32 parity with torch is checked (``ValueError`` past the tolerance); with ``int8`` the graph
     is statically quantized on ``calib_frames`` frames of ``calib`` and compared with fp32. Raises
     ``FileNotFoundError`` / ``ValueError`` for a missing or unfinished run or unreadable frames;
     ``out`` is replaced only when everything succeeded. Progress goes to ``log``: standard error as it
-    is when called (not when this module was imported: a stream replaced since may be closed)."""
+    is when called (not when this module was imported: a stream replaced since may be closed). With
+    ``prune_dead`` the convolution channels nothing reads are taken out of the graph first
+    (``export.prune``), recorded in the summary's ``pruned``."""
     log = log if log is not None else sys.stderr
     out = Path(out)
     if int8 and not calib:
@@ -62,7 +64,11 @@ def export_run(checkpoint: str | Path, out: str | Path, size: tuple[int, int] | 
     with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
         fp32 = Path(tmp) / "fp32.onnx"
         print(f"exporting {card.variant} at {h}x{w} ...", file=log)
-        sealed = to_onnx(model, fp32, card)
+        exported = export_fused(model, fp32, card, prune_dead)
+        sealed = exported.card
+        if exported.pruned is not None:
+            print(exported.pruned.line(), file=log)
+            summary["pruned"] = exported.pruned.to_dict()
         summary["parity_fp32"] = check_parity(model, fp32, check_frames)
         summary["fp32_bytes"] = fp32.stat().st_size
         final = fp32
