@@ -8,7 +8,9 @@ read as both ``X`` and ``X.Y`` for every ``X`` (``from onnxruntime import quanti
 quantization tools), and an ``import_module`` or ``__import__`` whose name is not written out is refused
 (nothing could say what it loads). This file is the one place that says which packages are torch-free
 (:data:`TORCH_FREE`) and what they must not load (:data:`HEAVY`, which ``tests/runtime/test_core_imports.py``
-checks at run time too): the car's side, which ``bsn-run``, ``bsn-listen`` and ``bsn-calibrate`` load.
+checks at run time too): the car's side, which ``bsn-run``, ``bsn-listen`` and ``bsn-calibrate`` load. Those
+commands (:data:`CAR_COMMANDS`), ``bsn_edge/__init__.py`` and every module of the package they import, followed
+import by import at the top or inside functions, are held to :data:`HEAVY` too.
 """
 
 import ast
@@ -41,6 +43,9 @@ TORCH_FREE = ("fields", "config_toml", "progress", "default_model", "camera", "m
               "tracks", "metrics", "card",
               "model_frame", "modelfile", "calibration", "synth", "alerts", "runtime")
 HEAVY = ("torch", "onnx", "onnxruntime.quantization", "matplotlib")
+# the car's commands: they, the package's own __init__ and every module of the package they import (at the top
+# or inside a function, followed module to module) are held to HEAVY as the torch-free packages are
+CAR_COMMANDS = ("cli/run.py", "cli/listen.py", "cli/calibrate.py")
 
 
 def unit(module: str) -> str | None:
@@ -118,6 +123,48 @@ def heavy_imports(root: Path = PACKAGE) -> list[str]:
     return bad
 
 
+def module_files(name: str, root: Path) -> list[Path]:
+    """The files importing the package's module ``name`` runs: each enclosing package's ``__init__`` and the
+    module itself (none for a name that is not a module of the package, such as a function's)."""
+    parts = name.split(".")
+    if parts[0] != "bsn_edge":
+        return []
+    files = []
+    for k in range(1, len(parts) + 1):
+        base = root.joinpath(*parts[1:k])
+        if (base / "__init__.py").is_file():
+            files.append(base / "__init__.py")
+        elif base.with_suffix(".py").is_file():
+            files.append(base.with_suffix(".py"))
+            break
+        else:
+            break
+    return files
+
+
+def car_side(root: Path = PACKAGE) -> dict[Path, str]:
+    """Every module of the package the car's commands load, each with the first one that loads it."""
+    seen: dict[Path, str] = {}
+    todo = [(root / c, c) for c in CAR_COMMANDS] + [(root / "__init__.py", "bsn_edge/__init__.py")]
+    while todo:
+        f, via = todo.pop()
+        if f in seen:
+            continue
+        seen[f] = via
+        for _, name in imported(ast.parse(f.read_text()), dotted(f, root)):
+            todo += [(g, str(f.relative_to(root.parent))) for g in module_files(name, root) if g not in seen]
+    return seen
+
+
+def car_heavy_imports(root: Path = PACKAGE) -> list[str]:
+    bad = []
+    for f, via in car_side(root).items():
+        for line, name in imported(ast.parse(f.read_text()), dotted(f, root)):
+            if any(name == h or name.startswith(h + ".") for h in HEAVY):
+                bad.append(f"{f.relative_to(root.parent)}:{line} (loaded by {via}, the car's side) imports {name}")
+    return bad
+
+
 def test_every_package_has_a_layer():
     pkgs = {pkg for _, pkg in modules() if pkg is not None}
     assert pkgs == set(LEVEL), f"place these in LAYERS: {sorted(pkgs - set(LEVEL))}; gone: {sorted(set(LEVEL) - pkgs)}"
@@ -134,6 +181,13 @@ def test_no_torch_free_package_names_a_training_tool():
     assert not bad, "\n".join(bad)
 
 
+def test_nothing_the_car_commands_load_names_a_training_tool():
+    side = car_side()
+    assert PACKAGE / "cli" / "common.py" in side and PACKAGE / "runtime" / "loop.py" in side   # it follows imports
+    bad = car_heavy_imports()
+    assert not bad, "\n".join(bad)
+
+
 @pytest.mark.parametrize(("module", "line"), [
     ("alerts/state_machine.py", "from bsn_edge import runtime"),
     ("alerts/state_machine.py", "importlib.import_module('bsn_edge.runtime')"),
@@ -144,13 +198,20 @@ def test_no_torch_free_package_names_a_training_tool():
     ("runtime/loop.py", "from .. import export"),
     ("runtime/loop.py", "from onnxruntime import quantization"),
     ("alerts/sectors.py", "importlib.import_module('bsn_edge.' + 'train')"),
+    ("cli/run.py", "import torch"),
+    ("cli/listen.py", "import onnx"),
+    ("cli/calibrate.py", "from onnxruntime import quantization"),
+    ("cli/calibrate.py", "from bsn_edge.export import pipeline"),
+    ("cli/outputs.py", "from bsn_edge.train import run"),
+    ("cli/common.py", "import matplotlib.pyplot"),
+    ("__init__.py", "import torch"),
 ])
 def test_the_checks_catch_each_way_of_importing_upwards(tmp_path, module, line):
     """Each form, written into a copy of the package, is found (and the copy is clean without it)."""
     import shutil
     copy = tmp_path / "bsn_edge"
     shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    assert upward_imports(copy) == [] and heavy_imports(copy) == []
+    assert upward_imports(copy) == [] and heavy_imports(copy) == [] and car_heavy_imports(copy) == []
     target = copy / module
     target.write_text(target.read_text() + f"\n\ndef _probe():\n    import importlib\n    {line}\n")
-    assert upward_imports(copy) + heavy_imports(copy), f"{line} in {module} was not caught"
+    assert upward_imports(copy) + heavy_imports(copy) + car_heavy_imports(copy), f"{line} in {module} was not caught"
