@@ -59,8 +59,8 @@ class Health:
     timestamps, ask for the state. ``unavailable()`` forces UNAVAILABLE from then on (the source
     ended or failed: no valid inference is coming).
 
-    Two clocks: ``t`` is the frames' time (the deadline is kept in it), ``wall`` the processing
-    clock, over which the frame rate is counted: a video file played faster or slower than it was
+    Two clocks: ``t`` is the frames' time, ``wall`` the processing clock, over which the frame rate is
+    counted (the deadline is kept in both): a video file played faster or slower than it was
     recorded reports the rate the runtime achieves, not the file's. Without ``wall`` both are ``t``
     (a live camera, whose frame times are the processing clock)."""
 
@@ -141,7 +141,10 @@ class Health:
     def _state(self, t: float, wall: float) -> SystemState:
         # precedence: a fault outranks calibrating (UNAVAILABLE > DEGRADED > CALIBRATING > OK), so a
         # fault while the camera is still being calibrated shows as the fault
-        if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s:
+        # the deadline holds on both clocks: a file's frame time stands still while the loop is stuck on a
+        # frame, the processing clock does not
+        if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s \
+                or wall - self._work[-1] > self.cfg.deadline_s:
             return SystemState.UNAVAILABLE
         # the rate is judged once a floor's interval has passed since the first inference in the window:
         # before that even one inference is on time (the first frame of a run is not DEGRADED)

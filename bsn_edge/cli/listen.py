@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import re
+import signal
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -136,7 +138,40 @@ def python_can_log(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]
         yield msg.arbitration_id, bytes(msg.data), str(path)
 
 
+class _Stopped(KeyboardInterrupt):
+    """A terminating signal (TERM from a service manager, HUP from a closed terminal): listening ends as
+    Ctrl-C ends it, with the summary."""
+
+
+def _quiet() -> None:
+    """The first signal decides: later ones, Ctrl-C included, change nothing while the summary is written."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in (*STOP_SIGNALS, signal.SIGINT):
+            signal.signal(sig, signal.SIG_IGN)
+
+
+def _stop(signum: int, _frame: object) -> None:
+    _quiet()
+    raise _Stopped(signal.Signals(signum).name)
+
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
 def main(argv: list[str] | None = None) -> int:
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        old = {signal.SIGINT: signal.getsignal(signal.SIGINT)}
+        old |= {sig: signal.signal(sig, _stop) for sig in STOP_SIGNALS}
+    try:
+        return _listen(argv)
+    finally:
+        for sig, handler in old.items():
+            if signal.getsignal(sig) is not signal.SIG_IGN:     # after a signal, a late one stays ignored
+                signal.signal(sig, handler)
+
+
+def _listen(argv: list[str] | None) -> int:
     args = build_parser().parse_args(argv)
     show = Printer()
     deadline = None if args.duration is None else time.monotonic() + args.duration
@@ -180,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
             finally:                  # SIGINT included: the frames whose CRC failed are counted
                 show.bad_crc += dec.errors
     except KeyboardInterrupt:
-        pass
+        _quiet()
     except Exception as e:
         print(show.summary(), file=sys.stderr)
         return fail(PROG, f"{type(e).__name__}: {e}")

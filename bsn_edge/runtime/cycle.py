@@ -34,6 +34,9 @@ class CycleEmitter:
         self.latest: AlertFrame | None = None
         self.next_t: float | None = None
         self.sent_cycles = 0
+        self.stall_cycles = 0           # of them, sent by the stall watch while the loop was stuck on a frame
+        self.last_sent_at: float | None = None     # on ``clock``, when there is one
+        self.stalling = False           # the last cycle was the stall watch's
         self._failing_since: dict[str, float] = {}     # a sender's first failed send of its current run
         self._lock = threading.Lock()
 
@@ -51,7 +54,30 @@ class CycleEmitter:
                 self._send(self.next_t)
                 self.next_t += self.cycle_s
                 n += 1
+            self.stalling = self.stalling and n == 0
             return n
+
+    def overdue(self, after_s: float) -> bool:
+        """Whether no cycle has gone out for ``after_s`` of the processing clock, or for a cycle once the
+        stall watch has begun sending (none yet counts from the first time this is asked); always False
+        without a processing clock."""
+        if self.clock is None:
+            return False
+        now = self.clock()
+        with self._lock:
+            if self.last_sent_at is None:
+                self.last_sent_at = now
+            return now - self.last_sent_at >= (self.cycle_s if self.stalling else after_s)
+
+    def stalled(self) -> None:
+        """Send one cycle now, while the frames' time stands still (the loop is stuck on a frame): stamped
+        at the last cycle's time, its state read at the processing clock's now, so it says UNAVAILABLE once
+        the deadline has passed there since the last valid inference. The schedule is not moved."""
+        with self._lock:
+            t = self.next_t - self.cycle_s if self.next_t is not None else 0.0
+            self._send(t)
+            self.stall_cycles += 1
+            self.stalling = True
 
     def final(self, t: float) -> None:
         """Send one more cycle at ``t`` now, whatever the schedule (the run is ending: the health
@@ -79,6 +105,8 @@ class CycleEmitter:
             if s.stats.log_errors > before_log:
                 h.fault(Fault.SINK_ERRORS, s.stats.log_errors - before_log)
         self.sent_cycles += 1
+        if self.clock is not None:
+            self.last_sent_at = self.clock()
 
 
 class Heartbeat:
@@ -103,13 +131,17 @@ class Heartbeat:
         """The thread's loop (:meth:`start` runs it on its own thread): a beat, then a wait, until closed."""
         while not self._stop.is_set():
             try:
-                self.emitter.emit(self.clock())
+                self.beat()
             except Exception as e:  # the bus must never go silent while the loop runs
                 self.last_error = f"{type(e).__name__}: {e}"
                 with contextlib.suppress(Exception):   # nothing more to do than to go on
                     self.emitter.health.fault(Fault.HEARTBEAT_ERRORS)
             if self._wait(self.emitter.cycle_s / self.WAKES_PER_CYCLE):
                 return
+
+    def beat(self) -> None:
+        """One wake's work: the cycles due by the wall clock's now."""
+        self.emitter.emit(self.clock())
 
     def start(self) -> Heartbeat:
         """Start the thread; returns the heartbeat (``close()`` stops it)."""
@@ -127,3 +159,22 @@ class Heartbeat:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class StallWatch(Heartbeat):
+    """The heartbeat of a source whose frames carry their own times (a file or a folder), whose cycles the
+    loop sends by those times: when none has gone out for ``after_s`` of the processing clock (the loop is
+    stuck on a slow frame, a slow disk or a slow model), it sends one, then one every cycle until the loop
+    sends again (:meth:`CycleEmitter.stalled`). The bus is never silent for longer than ``after_s`` and half
+    a cycle (its wakes) while the run lives."""
+
+    def __init__(self, emitter: CycleEmitter, after_s: float,
+                 wait: Callable[[float], bool] | None = None) -> None:
+        if emitter.clock is None:
+            raise ValueError("a stall watch needs the emitter's processing clock")
+        super().__init__(emitter, emitter.clock, wait)
+        self.after_s = after_s
+
+    def beat(self) -> None:
+        if self.emitter.overdue(self.after_s):
+            self.emitter.stalled()

@@ -33,7 +33,7 @@ from bsn_edge.alerts.senders import Sender
 from bsn_edge.config_toml import check_fields, setting
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CameraState
-from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
+from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat, StallWatch
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.feeder import Feeder, Prepared
 from bsn_edge.runtime.frame_record import FrameRecord
@@ -247,8 +247,9 @@ class FramePipeline:
         open raises (the run is refused: the user asked for it); one still opening after ``OPEN_WAIT_S``
         is not waited for (stuck, it fails later), and later failures only degrade the run."""
         self.camera.use_frame_rate(self.source.fps, live=self.source.live)
-        if self.source.live:
-            self.heartbeat = Heartbeat(self.emitter).start()
+        # a camera's cycles go out on the wall clock; a file's by its frames' times, watched on the wall clock
+        self.heartbeat = (Heartbeat(self.emitter) if self.source.live
+                          else StallWatch(self.emitter, self.cfg.health.deadline_s)).start()
         out = self.outputs
 
         def fault(_: SinkFailure) -> None:
@@ -385,7 +386,8 @@ class FramePipeline:
             fps=frames / elapsed if elapsed else 0.0, latency_ms=self.latency.percentiles(),
             wait_ms={k.removesuffix("_ms"): v for k, v in self.waiting.percentiles().items()},
             stage_ms=self.timer.per_frame_ms(frames), stage_share=self.timer.shares(), faults=self.health.faults,
-            cycles_sent=self.emitter.sent_cycles, senders={s.name: vars(s.stats) for s in self.senders},
+            cycles_sent=self.emitter.sent_cycles, stall_cycles=self.emitter.stall_cycles,
+            senders={s.name: vars(s.stats) for s in self.senders},
             senders_down=self.health.senders_down, source_failure=self.source.failure,
             stopped=bool(stop is not None and stop.is_set()),
             heartbeat_error=self.heartbeat.last_error if self.heartbeat is not None else "",

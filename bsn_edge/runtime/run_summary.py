@@ -7,7 +7,8 @@ source's frames the loop had no time for), ``before_start`` (replaced before the
 processing), ``p50_ms``, ``p95_ms``, ``p99_ms`` (latency), ``wait_ms`` (frames waiting for the model,
 same percentiles), ``stage_ms`` and ``stage_share`` (per stage: decode, preprocess, inference,
 postprocess, send), ``faults`` (the counters, by :class:`~bsn_edge.alerts.health.Fault` name),
-``cycles_sent``, ``senders`` (per sender: sent, errors, ...), ``senders_down`` (senders that could not
+``cycles_sent``, ``stall_cycles`` (of them, sent by the stall watch while a file's loop was stuck on a
+frame), ``senders`` (per sender: sent, errors, ...), ``senders_down`` (senders that could not
 send at the end), ``source_failure`` (why the source ended early, or null), ``stopped`` (by a signal
 or the caller), ``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report, hood: share of the rows,
 spread, columns agreeing, arch; null while still looked for),
@@ -60,6 +61,7 @@ class RunSummary:
     stage_share: dict[str, float]
     faults: dict[Fault, int]
     cycles_sent: int
+    stall_cycles: int
     senders: dict[str, dict[str, Any]]
     senders_down: list[str]
     source_failure: str | None

@@ -1,5 +1,10 @@
 """Checksums and framing against published values, and bsn-listen on damaged logs."""
 
+import signal
+import subprocess
+import sys
+import time
+
 import pytest
 
 from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
@@ -256,3 +261,16 @@ def test_every_decode_fault_reaches_the_bus_frames_of_another_size_included():
     assert st[:7] == want and st[7] == crc8_sae_j1850(bytes([0x01, 0x05]) + want)
     many = AlertFrame(0.0, (none,) * 3, SystemState.OK, 10.0, {"decode_errors": 200, "size_changes": 100})
     assert CanEncoder().encode(many)[1][1][2] == 255, "the sum saturates at 255"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_listen_ended_by_a_service_manager_or_a_closed_terminal_prints_its_summary(sig):
+    """TERM and HUP end listening as Ctrl-C does: the summary on standard error, no death by the signal."""
+    proc = subprocess.Popen([sys.executable, "-m", "bsn_edge.cli.listen", "--serial", "loop://"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(1.5)                        # past its imports, listening
+    proc.send_signal(sig)
+    proc.send_signal(signal.SIGINT)        # the first signal decides
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode in (0, 1), (proc.returncode, err)
+    assert "0 frames, 0 with a bad CRC" in err
