@@ -132,7 +132,11 @@ class Calibration:
             m = d.get("mounting")
             hood = d.get("hood")
             rest = {k: v for k, v in d.items() if k in known and k != "intrinsics"}
-            return cls(**{**rest, "intrinsics": Intrinsics.from_dict(d, str(p)), "dist": tuple(d.get("dist", ())),
+            dist = d.get("dist", [])
+            if not isinstance(dist, list):
+                raise ValueError(f"dist must be a list of numbers (OpenCV's order: k1, k2, p1, p2, k3, ...), "
+                                 f"got {json.dumps(dist)}")
+            return cls(**{**rest, "intrinsics": Intrinsics.from_dict(d, str(p)), "dist": tuple(dist),
                           "used": tuple(d.get("used", ())), "skipped": tuple(d.get("skipped", ())),
                           "board": tuple(d.get("board", (9, 6))),
                           "mounting": None if m is None else Mounting.from_dict(m, f"{p}: mounting"),
@@ -154,6 +158,14 @@ ASPECT_TOLERANCE = 0.01           # frames whose width / height is the file's wi
 # twice its distance. The Udacity dashcam's corners go to 1.1 times theirs, a strong barrel on a 70-degree
 # pinhole to 1.5; dist [0, 999, 0, 0, 0] on a 70-degree pinhole squeezes its picture's edge to 0.28
 LENS_ZOOM_RANGE = (0.5, 2.0)
+# the share of the picture a lens undistorts that must have a real pixel behind it: a quarter, what the
+# zoom range's 0.5 leaves of it (a barrel keeps all of it)
+LENS_REAL_SHARE = 0.25
+WARP_GRID = 97                    # points a side over which the lens's warp is judged
+# what the terms beyond the radial ones (decentring p1 p2, thin prism s1-s4, sensor tilt) may move a pixel, as a
+# share of the half diagonal: real lenses' decentring is under 1 %
+LENS_SKEW_LIMIT = 0.1
+RADIAL_TERMS = (0, 1, 4, 5, 6, 7)  # k1 k2 k3 k4 k5 k6 in OpenCV's order
 
 
 def check_physical(k: Intrinsics, dist: tuple[float, ...]) -> None:
@@ -178,14 +190,15 @@ def check_physical(k: Intrinsics, dist: tuple[float, ...]) -> None:
     if not (0 < k.cx < k.width and 0 < k.cy < k.height):
         raise ValueError(f"the principal point (cx {k.cx:g}, cy {k.cy:g}) lies outside the {k.width}x{k.height} "
                          f"image (width x height)")
-    if not all(isinstance(d, int | float) and math.isfinite(d) and abs(d) <= DIST_LIMIT for d in dist):
+    if not all(isinstance(d, int | float) and not isinstance(d, bool) and math.isfinite(d) and abs(d) <= DIST_LIMIT
+               for d in dist):
         raise ValueError(f"dist must hold finite numbers within +-{DIST_LIMIT:g}, got {list(dist)}")
     if dist:
         folded = _radial_fold(k, dist)
         if folded is not None:
             raise ValueError(f"dist: the radial distortion folds back {folded} (not monotonic out to the image's "
                              f"corners): no camera images that way")
-        moved = _undistortion_fault(k, dist)
+        moved = _undistortion_fault(k, dist) or _warp_fault(k, dist)
         if moved is not None:
             raise ValueError(f"dist: taking the lens out {moved}: no camera images that way")
 
@@ -200,9 +213,8 @@ def _border(k: Intrinsics, per_side: int = 64) -> dict[str, np.ndarray]:
 def _undistortion_fault(k: Intrinsics, dist: tuple[float, ...]) -> str | None:
     """What is wrong with taking the lens out over the picture's border, or None. Radially (exactly, on
     the radial polynomial, which :func:`_radial_fold` has found monotonic): every border pixel moves
-    along its ray to within :data:`LENS_ZOOM_RANGE` of its distance from the principal point. Then with
-    the tangential terms (OpenCV's undistortion, as the warps use it): every border pixel lands at a
-    finite place, in the order it has along its side."""
+    along its ray to within :data:`LENS_ZOOM_RANGE` of its distance from the principal point (the other
+    terms: :func:`_warp_fault`)."""
     d = list(dist) + [0.0] * (8 - len(dist))
     k1, k2, _, _, k3, k4, k5, k6 = d[:8]
     border = _border(k)
@@ -219,13 +231,44 @@ def _undistortion_fault(k: Intrinsics, dist: tuple[float, ...]) -> str | None:
         worst = float(zoom.min() if zoom.min() < lo else zoom.max())
         return (f"moves the picture's edge to {worst:.2f} times its distance from the principal point (a lens "
                 f"that exists: {lo:g} to {hi:g} times)")
-    for name, side in border.items():
-        out = cv2.undistortPoints(side[:, None], k.K, np.asarray(dist, np.float64), P=k.K).reshape(-1, 2)
-        if not np.isfinite(out).all():
-            return f"sends the {name} edge to infinity"
-        along = out[:, 0] if name in ("top", "bottom") else out[:, 1]
-        if np.any(np.diff(along) <= 0):
-            return f"folds the {name} edge back on itself"
+    return None
+
+
+def _warp_fault(k: Intrinsics, dist: tuple[float, ...]) -> str | None:
+    """What is wrong with the lens's warp, or None: judged on the map the warps sample with (the lens
+    model run forwards, as ``cv2.initUndistortRectifyMap`` runs it, tangential, thin-prism and tilt terms
+    included: no solver that may not converge). Over a grid of the picture the lens undistorted sees,
+    every source pixel must be finite, the terms beyond the radial ones may move it by at most
+    :data:`LENS_SKEW_LIMIT` of the half diagonal, at least :data:`LENS_REAL_SHARE` of it must have a real pixel
+    behind it, and where it does the map must keep the order of rows and columns (a fold shows one place
+    twice)."""
+    n = WARP_GRID
+    u, v = np.meshgrid(np.linspace(0.0, k.width, n), np.linspace(0.0, k.height, n))
+    rays = np.stack([(u - k.cx) / k.fx, (v - k.cy) / k.fy, np.ones_like(u)], -1).reshape(-1, 1, 3)
+    with np.errstate(all="ignore"):
+        src, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), k.K, np.asarray(dist, np.float64))
+    src = src.reshape(n, n, 2)
+    if not np.isfinite(src).all():
+        return "sends part of the picture to infinity"
+    radial = np.zeros(len(dist))
+    for i in RADIAL_TERMS:
+        if i < len(dist):
+            radial[i] = dist[i]
+    with np.errstate(all="ignore"):
+        only_radial, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), k.K, radial)
+    skew = float(np.max(np.hypot(*(src - only_radial.reshape(n, n, 2)).transpose(2, 0, 1))))
+    if not skew <= LENS_SKEW_LIMIT * math.hypot(k.width, k.height) / 2:
+        return (f"moves the picture by up to {skew:.0f} pixels beyond its radial distortion (decentring, thin "
+                f"prism, tilt; a lens that exists: at most {100 * LENS_SKEW_LIMIT:.0f} % of the half diagonal)")
+    inside = (src[..., 0] >= 0) & (src[..., 0] <= k.width) & (src[..., 1] >= 0) & (src[..., 1] <= k.height)
+    share = float(inside.mean())
+    if share < LENS_REAL_SHARE:
+        return (f"leaves real pixels behind only {100 * share:.0f} % of the picture it undistorts (a lens that "
+                f"exists: at least {100 * LENS_REAL_SHARE:.0f} %)")
+    across = inside[:, 1:] & inside[:, :-1]
+    down = inside[1:, :] & inside[:-1, :]
+    if np.any(np.diff(src[..., 0], axis=1)[across] <= 0) or np.any(np.diff(src[..., 1], axis=0)[down] <= 0):
+        return "folds the picture back on itself"
     return None
 
 

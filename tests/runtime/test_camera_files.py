@@ -182,3 +182,66 @@ def test_the_end_lines_say_where_the_first_guess_came_from(setup, capsys):
     assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--max-frames", "3",
                          "--calib", str(clip / "calibration.json")]) == 0
     assert "first guess" not in capsys.readouterr().out, "a camera file's mounting needs no guess"
+
+
+def test_a_lens_term_beyond_the_radial_ones_is_judged_on_the_warp_it_makes():
+    """Decentring p1 = 0.05 alone moves a pixel at normalised (x, y) by f (2 p1 x y, p1 (r^2 + 2 y^2))
+    (OpenCV's lens model, by hand): p1 = 0.08 moves the worst corner of a 1280x720 picture with f = 1150
+    by 67 px, under 10 % of the half diagonal (73 px), so it passes; 0.09 moves it 75 px and is refused,
+    naming the amount. A thin prism s1 = 5 (the issue's kaleidoscope, which OpenCV's undistortion solver returned
+    unmoved) is refused the same way."""
+    from bsn_edge.calibration.camera_file import LENS_SKEW_LIMIT
+    from bsn_edge.camera import Intrinsics
+
+    k = Intrinsics(1150.0, 1150.0, 650.0, 370.0, 1280, 720)
+
+    def worst(p1):
+        out = []
+        for u in (0, k.width):
+            for v in (0, k.height):
+                x, y = (u - k.cx) / k.fx, (v - k.cy) / k.fy
+                out.append(k.fx * math.hypot(2 * p1 * x * y, p1 * (x * x + y * y + 2 * y * y)))
+        return max(out)
+
+    limit = LENS_SKEW_LIMIT * math.hypot(1280, 720) / 2
+    assert worst(0.08) < limit < worst(0.09)
+    Calibration.of(k, (0.0, 0.0, 0.08, 0.0, 0.0))
+    with pytest.raises(ValueError, match=f"by up to {worst(0.09):.0f} pixels beyond its radial"):
+        Calibration.of(k, (0.0, 0.0, 0.09, 0.0, 0.0))
+    with pytest.raises(ValueError, match="beyond its radial distortion"):
+        Calibration.of(k, (0.0,) * 8 + (5.0, 0.0, 0.0, 0.0))
+
+
+def test_the_warp_must_leave_real_pixels_behind_a_quarter_of_the_picture_and_keep_its_order():
+    """Judged on the forward map alone: a pincushion k1 = 20 on a 960x540 camera leaves real pixels
+    behind under a quarter of what it undistorts; a barrel leaves them behind all of it."""
+    from bsn_edge.calibration.camera_file import _warp_fault
+    from bsn_edge.camera import Intrinsics
+
+    k = Intrinsics(700.0, 700.0, 480.0, 270.0, 960, 540)
+    assert "real pixels behind only" in (_warp_fault(k, (20.0, 0.0, 0.0, 0.0, 0.0)) or "")
+    assert _warp_fault(k, (-0.3, 0.1, 0.0, 0.0, 0.0)) is None
+
+
+def test_a_warp_that_folds_is_refused_on_its_own(monkeypatch):
+    """With the limit on the non-radial terms lifted, a thin prism s1 = 1 still cannot pass: its map runs
+    backwards along the picture's rows (x_d = x + s1 r^2 falls where 1 + 2 s1 x < 0, left of x = -0.5)."""
+    import bsn_edge.calibration.camera_file as camera_file
+    from bsn_edge.camera import Intrinsics
+
+    monkeypatch.setattr(camera_file, "LENS_SKEW_LIMIT", float("inf"))
+    k = Intrinsics(1150.0, 1150.0, 650.0, 370.0, 1280, 720)       # x reaches -0.57 at the left edge
+    assert camera_file._warp_fault(k, (0.0,) * 8 + (1.0, 0.0, 0.0, 0.0)) == "folds the picture back on itself"
+    assert camera_file._warp_fault(k, (0.0,) * 8 + (0.3, 0.0, 0.0, 0.0)) is None   # turns back at x = -1.67
+
+
+@pytest.mark.parametrize(("dist", "says"), [
+    (True, "dist must be a list of numbers"),
+    ({"k1": 0.1}, "dist must be a list of numbers"),
+    ([True, 0.0, 0.0, 0.0], "dist must hold finite numbers"),
+    ([0.1, 0.0, 0.0], "dist must hold 0, 4, 5, 8, 12 or 14 OpenCV coefficients, got 3"),
+])
+def test_dist_is_a_list_of_numbers_in_a_count_opencv_takes(setup, tmp_path, dist, says):
+    _, clip = setup
+    with pytest.raises(ValueError, match=says):
+        Calibration.read(_edited(clip, tmp_path, dist=dist))
