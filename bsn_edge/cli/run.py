@@ -512,9 +512,10 @@ def _start(args: argparse.Namespace):
     if calibration is not None and source.size is not None:
         try:
             camera.size_note = calibration.fit_to(*source.size, where=f"--calib {args.calib}")
-        except ValueError:
+            camera.check_view(*source.size)
+        except ValueError as e:
             source.close()
-            raise
+            raise ValueError(str(e) if str(e).startswith("--calib") else f"--calib {args.calib}: {e}") from None
         if camera.size_note:
             print(f"{PROG}: note: {camera.size_note}", file=sys.stderr)
     return engine, camera, source, cfg, maps

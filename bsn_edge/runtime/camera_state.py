@@ -42,6 +42,10 @@ class CameraState:
     :meth:`summary`: one lock guards the state."""
 
     CALIBRATE_HZ = 12.5
+    # a camera file whose camera shows the model less of its view than this (its hood masked) is refused:
+    # blind spots anywhere else could never be seen. A 16:9 lens of 30 degrees across straight ahead still
+    # shows 12 % of the model camera's 80 degrees (25 degrees: 8 %); a long lens pitched off the road, none
+    MIN_SEEN_SHARE = 0.1
 
     def __init__(self, card: ModelCard, calibration: Calibration | None = None, height_m: float | None = None,
                  save_to: str | Path | None = None, calibrate_every: int | None = None,
@@ -147,6 +151,22 @@ class CameraState:
                                                         mounting=self.mounting or self._guess)
                 self._frames[key] = mf
             return mf
+
+    def check_view(self, width: int, height: int) -> float:
+        """The share of the model's view that the camera file's camera shows, for frames of ``width`` x
+        ``height`` (its hood masked); ``ValueError`` naming it when under :attr:`MIN_SEEN_SHARE`. A camera
+        calibrated online is not judged: it starts from the model camera's own mounting."""
+        if self.mounting is None:
+            return 1.0
+        mf = self.frame_for(np.empty((height, width, 0), np.uint8))
+        share = float(mf.seen.mean())
+        if share < self.MIN_SEEN_SHARE:
+            m = self.mounting
+            raise ValueError(f"the camera file's camera (mounted at pitch {m.pitch_deg:+.1f}, yaw {m.yaw_deg:+.1f}, "
+                             f"roll {m.roll_deg:+.1f} degrees{', its hood masked' if self.hood is not None else ''}) "
+                             f"shows {100 * share:.1f} % of the model's view; at least "
+                             f"{100 * self.MIN_SEEN_SHARE:.0f} % is needed, or blind spots could never be seen")
+        return share
 
     def _look_for_hood(self, finder: HoodFinder, frame: np.ndarray) -> None:
         self._hood_seen += 1

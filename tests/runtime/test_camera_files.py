@@ -245,3 +245,22 @@ def test_dist_is_a_list_of_numbers_in_a_count_opencv_takes(setup, tmp_path, dist
     _, clip = setup
     with pytest.raises(ValueError, match=says):
         Calibration.read(_edited(clip, tmp_path, dist=dist))
+
+
+def test_a_camera_file_whose_camera_shows_the_model_almost_nothing_is_refused(setup, tmp_path, capsys):
+    """A 10-degree lens pitched 27 degrees: found by the run-level property test running with status OK and
+    never a level (nothing it saw was in the model's view). Refused before the first frame, naming the
+    share; the same lens straight ahead shows 1 % and is refused too, a 60-degree one passes."""
+    model, clip = setup
+    d = json.loads((clip / "calibration.json").read_text())
+    narrow = d["width"] / (2 * math.tan(math.radians(5.0)))
+    bad = _edited(clip, tmp_path, fx=narrow, fy=narrow, mounting=dict(d["mounting"], pitch_deg=27.0))
+    with can.Bus(interface="virtual", channel="bsn-camview") as rx:
+        rc = run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--calib", bad,
+                           "--can", "virtual:bsn-camview"])
+        msgs = [decode(m.arbitration_id, bytes(m.data)) for m in iter(lambda: rx.recv(0.2), None)]
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "% of the model's view; at least 10 % is needed" in err and "UNAVAILABLE sent" in err
+    states = [SystemState(int(x.signals["System_State"])) for x in msgs if x is not None and x.name == "BSN_Status"]
+    assert states == [SystemState.UNAVAILABLE]
