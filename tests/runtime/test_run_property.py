@@ -4,7 +4,7 @@ Random settings (every runtime key, drawn over its whole range and a little beyo
 files (field of view, lens, mounting and hood, drawn over what real cameras have and a little beyond) are
 either refused before the first frame, or a run of 12 s of video in which the model sees a near occluder
 wherever the camera looks raises a level on the bus. The model is the test's: the exported graph's
-answer replaced by that occluder (3 m away over the whole frame), so what is judged is everything
+answer replaced by that occluder (1 m away in the model camera, over the whole frame), so what is judged is everything
 around it: settings, camera, warp, hood, sectors, smoothing, state and send cycle.
 """
 
