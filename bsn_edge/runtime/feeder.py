@@ -47,8 +47,9 @@ class Prepared:
     ready_at: float
 
 
-# (captured frame, input buffer) -> (model frame, calibrating); writes the warped frame into the buffer
-Warp = Callable[[Captured, np.ndarray], tuple[ModelFrame, bool]]
+# (captured frame, input buffer) -> (model frame, calibrating), the warped frame written into the buffer; None
+# for a frame not to be warped (of another size than the source's: counted by the loop, nothing built for it)
+Warp = Callable[[Captured, np.ndarray], tuple[ModelFrame, bool] | None]
 
 
 class Feeder:
@@ -97,13 +98,15 @@ class Feeder:
             return self._dropped
 
     def prepare(self, cap: Captured, buf: np.ndarray) -> Prepared:
-        """``cap`` warped into ``buf`` (nothing to warp when it did not decode)."""
+        """``cap`` warped into ``buf`` (nothing to warp when it did not decode, or the warp declines it)."""
         if cap.frame is None:
             return Prepared(cap, None, None, False, 0.0, time.perf_counter())
         t0 = time.perf_counter()
-        mf, calibrating = self.warp(cap, buf)
+        warped = self.warp(cap, buf)
         t1 = time.perf_counter()
-        return Prepared(cap, mf, buf, calibrating, t1 - t0, t1)
+        if warped is None:
+            return Prepared(cap, None, None, False, t1 - t0, t1)
+        return Prepared(cap, warped[0], buf, warped[1], t1 - t0, t1)
 
     def release(self, buf: np.ndarray | None) -> None:
         """The model has read ``buf``: the feeder may warp the next frame into it. Asking for the next

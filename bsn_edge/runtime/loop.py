@@ -176,12 +176,19 @@ class FramePipeline:
         """Frames the model had no time for: skipped by a live source, or replaced in the feeder's slot."""
         return self.source.dropped + (self.feeder.dropped if self.feeder is not None else 0)
 
-    def warp(self, cap: Captured, buf: np.ndarray) -> tuple[ModelFrame, bool]:
+    def warp(self, cap: Captured, buf: np.ndarray) -> tuple[ModelFrame, bool] | None:
         """The frame shown to online calibration, then into the model camera, written into the input
-        buffer ``buf``; whether the camera was still calibrating for it."""
+        buffer ``buf``; whether the camera was still calibrating for it. None, with nothing done, for a
+        file's frame of another size than its source's (:meth:`read` counts it): neither calibration nor
+        a model frame is built for a size the source does not have (a 25-megapixel picture in a folder of
+        1280x720 frames took 580 MB for maps it would never use)."""
         frame = cap.frame
         if frame is None:
             raise ValueError(f"frame {cap.index} did not decode: nothing to warp")
+        size = self.source.size
+        if not self.source.live and not self.source.reconnects and self.source.one_camera and size is not None \
+                and frame.shape[:2] != (size[1], size[0]):
+            return None
         self.camera.picture(cap.picture, frame)
         self.camera.observe(frame)
         mf = self.camera.frame_for(frame)

@@ -386,3 +386,33 @@ def test_the_overlay_tints_the_blind_spots_and_nothing_else():
     want = frame * (1 - TINT_WEIGHT) + np.array(TINT) * TINT_WEIGHT
     assert np.abs(img[mask & away].astype(float) - want[mask & away]).max() <= 1.0
     assert np.array_equal(img[away & ~mask], frame[away & ~mask])
+
+
+def test_a_picture_of_another_size_in_a_folder_gets_no_model_frame_of_its_own(setup, tmp_path):
+    """A 4000x2000 picture among 192x96 frames is counted as a size change before anything is built for
+    it: neither online calibration nor a model frame (the warp maps of a 25-megapixel picture took 580 MB)
+    sees it. The camera's model frames are read back: only the folder's size was ever built."""
+    from bsn_edge.runtime.camera_state import CameraState
+
+    model, clip = setup
+    folder = tmp_path / "pics"
+    folder.mkdir()
+    for i in range(8):
+        img = cv2.imread(str(clip / "rgb" / f"{i:06d}.png"))
+        cv2.imwrite(str(folder / f"{i:06d}.png"), cv2.resize(img, (4000, 2000)) if i == 5 else img)
+
+    built, observed = [], []
+
+    class Sizes(CameraState):
+        def frame_for(self, frame):
+            built.append(frame.shape[:2])
+            return super().frame_for(frame)
+
+        def observe(self, frame):
+            observed.append(frame.shape[:2])
+            super().observe(frame)
+
+    engine = Engine(model)
+    summary = run(engine, ImageFolderSource(folder), [], camera=Sizes(engine.card))
+    assert summary["frames"] == 8 and summary["valid_frames"] == 7 and summary["faults"]["size_changes"] == 1
+    assert set(built) == set(observed) == {(96, 192)}
