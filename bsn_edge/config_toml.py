@@ -10,6 +10,7 @@ and an unknown section or key, a value of the wrong kind or one out of range (th
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import tomllib
 from pathlib import Path
@@ -161,13 +162,23 @@ def default_of(cls: type, key: str) -> Any:
     return None
 
 
+def unknown(bad: list[str], valid: list[str] | set[str], what: str) -> str:
+    """The refusal of keys (or sections) ``bad`` that ``what`` does not have: each with the valid name it is
+    closest to, when one is close ("did you mean"), then every valid name."""
+    hints = []
+    for b in bad:
+        close = difflib.get_close_matches(b, sorted(valid), n=1, cutoff=0.6)
+        hints.append(f"{b!r} (did you mean {close[0]!r}?)" if close else repr(b))
+    return f"unknown {what}: {', '.join(hints)}; valid: {', '.join(sorted(valid))}"
+
+
 def build(cls: type, values: dict[str, Any], name: str, where: str, given: set[str]) -> Any:
     """An instance of dataclass ``cls`` from ``values`` (a TOML table called ``name``), nested tables for
     its dataclass fields; ``ValueError`` naming the key and ``where`` (``--set`` for keys in ``given``)."""
     names = {f.name for f in dataclasses.fields(cls)}
     bad = sorted(set(values) - names)
     if bad:
-        raise ValueError(f"unknown key(s) {bad} in [{name}]; valid: {', '.join(sorted(names))}")
+        raise ValueError(unknown(bad, names, f"key(s) in [{name}]"))
     out = {}
     for key, value in values.items():
         dotted = f"{name}.{key}"

@@ -115,7 +115,8 @@ def _outputs(p: argparse.ArgumentParser) -> None:
 
 
 class _PrintDefaults(argparse.Action):
-    """``--print-config``: the packaged settings file on standard output, then exit (as ``--help``)."""
+    """``--print-config`` / ``--print-schema``: the packaged settings file, or its JSON Schema, on standard
+    output, then exit (as ``--help``)."""
 
     def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:
         super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
@@ -123,7 +124,8 @@ class _PrintDefaults(argparse.Action):
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
                  option_string: str | None = None) -> None:
         from bsn_edge.runtime.config_file import DEFAULTS_FILE
-        sys.stdout.write(DEFAULTS_FILE.read_text(encoding="utf-8"))
+        shown = DEFAULTS_FILE.with_name("runtime.schema.json") if option_string == "--print-schema" else DEFAULTS_FILE
+        sys.stdout.write(shown.read_text(encoding="utf-8"))
         parser.exit()
 
 
@@ -135,6 +137,9 @@ def _settings(p: argparse.ArgumentParser) -> None:
     g.add_argument("--print-config", action=_PrintDefaults,
                    help="print the runtime's settings file, every setting at its default with what it does and its "
                         "range, and exit (it ships inside the package; configs/runtime.toml in a checkout)")
+    g.add_argument("--print-schema", action=_PrintDefaults,
+                   help="print the JSON Schema of that file (types, ranges, defaults, what each does; "
+                        "configs/runtime.schema.json in a checkout) and exit; docs/settings.md is its reference")
     g.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="change one setting, after --config: e.g. --set sectors.left_edge_deg=-15 --set "
                         "alerts.tau_s=0.5 --set alerts.warning.on=0.7 (repeatable). --cycle, --in-flight and "

@@ -25,7 +25,7 @@ from typing import Any
 from bsn_edge.alerts.health import HealthConfig
 from bsn_edge.alerts.sectors import SectorConfig
 from bsn_edge.alerts.state_machine import AlertConfig
-from bsn_edge.config_toml import build, merge_overrides, read_toml
+from bsn_edge.config_toml import build, merge_overrides, read_toml, unknown
 from bsn_edge.runtime.loop import RuntimeConfig
 
 DEFAULTS_FILE = Path(__file__).with_name("runtime.toml")
@@ -41,14 +41,14 @@ def load_runtime_config(path: str | Path | None = None, overrides: list[str] | t
     given = merge_overrides(raw, overrides, example="sectors.left_edge_deg=-15")
     where = str(path) if path is not None else "--set"
     valid = [LOOP, *NESTED]
-    unknown = sorted(set(raw) - set(valid))
-    if unknown:
-        raise ValueError(f"unknown section(s) {unknown}; valid: {', '.join(valid)}")
+    sections = sorted(set(raw) - set(valid))
+    if sections:
+        raise ValueError(unknown(sections, valid, "section(s)"))
     loop_keys = {f.name for f in dataclasses.fields(RuntimeConfig)} - set(NESTED)
     loop = raw.get(LOOP, {})
     bad = sorted(set(loop) - loop_keys)
     if bad:
-        raise ValueError(f"unknown key(s) {bad} in [{LOOP}]; valid: {', '.join(sorted(loop_keys))}")
+        raise ValueError(unknown(bad, loop_keys, f"key(s) in [{LOOP}]"))
     parts = {name: build(cls, raw[name], name, where, given) for name, cls in NESTED.items() if name in raw}
     return dataclasses.replace(build(RuntimeConfig, loop, LOOP, where, given), **parts)
 

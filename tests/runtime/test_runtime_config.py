@@ -12,6 +12,7 @@ import pytest
 
 from bsn_edge.alerts.can_codec import DBC_PATH
 from bsn_edge.cli import run as run_cli
+from bsn_edge.cli.common import CHECKOUT
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime.config_file import load_runtime_config
 from bsn_edge.runtime.loop import RuntimeConfig
@@ -62,10 +63,10 @@ def test_a_sector_edge_and_a_smoothing_time_from_the_file_reach_the_bus(setup, t
 
 
 @pytest.mark.parametrize("setting,says", [
-    ("sectors.left_edge=-15", "unknown key(s) ['left_edge'] in [sectors]; valid: full_area, left_edge_deg"),
+    ("sectors.left_edge=-15", "unknown key(s) in [sectors]: 'left_edge' (did you mean 'left_edge_deg'?)"),
     ("alerts.caution.on=2", "[alerts.caution] (--set): on = 2.0 is outside [0.05, 0.9]"),
     ("runtime.cycle_s=abc", "runtime.cycle_s = 'abc' (--set) must be a finite number in [0.01, 1] s"),
-    ("wheels.count=4", "unknown section(s) ['wheels']; valid: runtime, sectors, alerts, health"),
+    ("wheels.count=4", "unknown section(s): 'wheels'; valid: alerts, health, runtime, sectors"),
 ])
 def test_a_bad_setting_is_refused_naming_it_and_the_bus_says_unavailable(setup, tmp_path, capsys, setting, says):
     _, clip = setup
@@ -110,11 +111,11 @@ def test_an_unknown_key_in_any_table_nested_ones_too_is_refused_from_set_and_fro
     values = dict(_shipped_tables())[table]
     real = next(k for k, v in values.items() if not isinstance(v, dict))
     typo = real[:-1] + real[-1] * 2
-    with pytest.raises(ValueError, match=rf"unknown key\(s\) \['{typo}'\] in \[{table}\]"):
+    with pytest.raises(ValueError, match=rf"unknown key\(s\) in \[{table}\]: '{typo}' \(did you mean '{real}'\?\)"):
         load_runtime_config(overrides=[f"{table}.{typo}=1"])
     path = tmp_path / "typo.toml"
     path.write_text(f"[{table}]\n{typo} = 1\n")
-    with pytest.raises(ValueError, match=rf"unknown key\(s\) \['{typo}'\] in \[{table}\]"):
+    with pytest.raises(ValueError, match=rf"unknown key\(s\) in \[{table}\]: '{typo}' \(did you mean '{real}'\?\)"):
         load_runtime_config(path)
 
 
@@ -131,7 +132,7 @@ def test_an_unknown_key_in_any_training_table_is_refused_too(config):
     for table, values in _tables(tomllib.loads((ROOT / "configs" / config).read_text())):
         real = next(k for k, v in values.items() if not isinstance(v, dict))
         typo = real + "x"
-        with pytest.raises(ValueError, match=rf"unknown key\(s\) \['{typo}'\] in \[{table}\]"):
+        with pytest.raises(ValueError, match=rf"unknown key\(s\) in \[{table}\]: '{typo}'"):
             load_config(ROOT / "configs" / config, [f"{table}.{typo}=1"])
 
 
@@ -266,3 +267,66 @@ def test_a_malformed_set_is_answered_with_an_example_of_the_runtimes_own():
     with pytest.raises(ValueError) as refused:
         load_runtime_config(None, ["left_edge_deg=-15"])
     assert "e.g. sectors.left_edge_deg=-15" in str(refused.value) and "train." not in str(refused.value)
+
+
+def test_the_schema_and_the_reference_page_are_the_ones_the_settings_make():
+    import json
+
+    from bsn_edge.runtime.config_schema import SCHEMA_FILE, reference_page, schema
+    assert json.loads(SCHEMA_FILE.read_text()) == schema(), "regenerate: configs/runtime.schema.json"
+    assert (CHECKOUT / "configs" / "runtime.schema.json").resolve() == SCHEMA_FILE.resolve()
+    assert (CHECKOUT / "docs" / "settings.md").read_text() == reference_page(), "regenerate: docs/settings.md"
+
+
+def test_the_shipped_file_lists_and_describes_every_key_the_schema_has():
+    from bsn_edge.runtime.config_schema import comments, schema
+
+    said = comments()
+
+    def leaves(node, name):
+        for key, v in node["properties"].items():
+            if v["type"] == "object":
+                yield from leaves(v, f"{name}.{key}")
+            else:
+                yield f"{name}.{key}", name
+
+    every = [x for name, node in schema()["properties"].items() for x in leaves(node, name)]
+    assert len(every) == 21     # runtime 5, sectors 4, alerts 1 + 4 + 4, health 3
+    for dotted, table in every:
+        assert dotted in said, f"{dotted} is not in the shipped file"
+        assert said[dotted] or said.get(table), f"{dotted} has no comment, nor has its table"
+
+
+def test_a_second_reader_holds_the_shipped_file_to_the_schema_and_refuses_what_the_loader_refuses():
+    """jsonschema (not the project's loader) validates the shipped file, and refuses a value out of range,
+    a string for a number and a misspelt key, as the loader does."""
+    import json
+    import tomllib
+
+    import jsonschema
+
+    from bsn_edge.runtime.config_file import DEFAULTS_FILE
+    from bsn_edge.runtime.config_schema import SCHEMA_FILE
+    schema = json.loads(SCHEMA_FILE.read_text())
+    shipped = tomllib.loads(DEFAULTS_FILE.read_text())
+    jsonschema.validate(shipped, schema)
+    for bad, key in ((("alerts", "tau_s"), 5.0), (("health", "deadline_s"), "0.5"), (("alerts", "tau"), 0.3)):
+        wrong = tomllib.loads(DEFAULTS_FILE.read_text())
+        wrong[bad[0]][bad[1]] = key
+        with pytest.raises(jsonschema.ValidationError):
+            jsonschema.validate(wrong, schema)
+        with pytest.raises(ValueError):
+            load_runtime_config(overrides=[f"{bad[0]}.{bad[1]}={key!r}" if isinstance(key, str)
+                                           else f"{bad[0]}.{bad[1]}={key}"])
+
+
+@pytest.mark.parametrize(("override", "says"), [
+    ("alerts.tau=0.2", "'tau' (did you mean 'tau_s'?)"),
+    ("sector.range_m=20", "'sector' (did you mean 'sectors'?)"),
+    ("alerts.caution.delay=1", "'delay' (did you mean 'delay_s'?)"),
+    ("runtime.cycle=0.2", "'cycle' (did you mean 'cycle_s'?)"),
+])
+def test_a_misspelt_key_is_answered_with_the_nearest_one(override, says):
+    with pytest.raises(ValueError) as refused:
+        load_runtime_config(overrides=[override])
+    assert says in str(refused.value)

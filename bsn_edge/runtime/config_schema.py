@@ -1,0 +1,120 @@
+"""The vehicle settings file's JSON Schema and reference page, both generated from the settings themselves.
+
+The types and ranges come from the settings' dataclasses (``config_toml.setting``), the defaults from
+their defaults, and each key's description from its comment in the shipped file
+(:data:`~bsn_edge.runtime.config_file.DEFAULTS_FILE`, a key's own comment or its table's). So the schema
+(``configs/runtime.schema.json``, checked in) and the reference page (``docs/settings.md``) cannot drift
+from what ``bsn-run`` accepts: tests hold both to this module, and the shipped file to the schema.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+from typing import Any
+
+from bsn_edge.runtime.config_file import DEFAULTS_FILE, LOOP, NESTED
+from bsn_edge.runtime.loop import RuntimeConfig
+
+SCHEMA_FILE = DEFAULTS_FILE.with_name("runtime.schema.json")
+DRAFT = "https://json-schema.org/draft/2020-12/schema"
+_TABLE = re.compile(r"^\[([\w.]+)\]\s*(?:#\s?(.*))?$")
+_KEY = re.compile(r"^(\w+)\s*=\s*[^#]*?(?:#\s?(.*))?$")
+
+
+def comments(path: Path = DEFAULTS_FILE) -> dict[str, str]:
+    """Each key's description in the settings file, by dotted key (``alerts.caution.on``), and each table's
+    by its name: the comment on its line, with the comment lines that follow it alone."""
+    out: dict[str, str] = {}
+    table, last = "", ""
+    for line in path.read_text().splitlines():
+        text = line.strip()
+        if m := _TABLE.match(text):
+            table, last = m.group(1), m.group(1)
+            out[last] = (m.group(2) or "").strip()
+        elif m := _KEY.match(text):
+            last = f"{table}.{m.group(1)}"
+            out[last] = (m.group(2) or "").strip()
+        elif text.startswith("#") and last and out.get(last):
+            out[last] += " " + text.lstrip("#").strip()     # a comment carried on to the next line
+        else:
+            last = ""
+    return out
+
+
+def _leaf(f: dataclasses.Field, value: Any, description: str) -> dict[str, Any]:
+    kind = "boolean" if isinstance(value, bool) else "integer" if isinstance(value, int) else "number"
+    out: dict[str, Any] = {"type": kind, "default": value}
+    if "range" in f.metadata:
+        out["minimum"], out["maximum"] = f.metadata["range"]
+        if f.metadata.get("unit"):
+            out["unit"] = f.metadata["unit"]
+    if description:
+        out["description"] = description
+    return out
+
+
+def _table(instance: Any, name: str, said: dict[str, str]) -> dict[str, Any]:
+    props: dict[str, Any] = {}
+    for f in dataclasses.fields(instance):
+        value = getattr(instance, f.name)
+        if name == LOOP and f.name in NESTED:
+            continue                       # a table of its own
+        dotted = f"{name}.{f.name}"
+        if dataclasses.is_dataclass(value):
+            props[f.name] = _table(value, dotted, said)
+        else:
+            props[f.name] = _leaf(f, value, said.get(dotted) or said.get(name, ""))
+    out: dict[str, Any] = {"type": "object", "additionalProperties": False, "properties": props}
+    if said.get(name):
+        out["description"] = said[name]
+    return out
+
+
+def schema() -> dict[str, Any]:
+    """The JSON Schema of a vehicle settings file (read as TOML, it is a JSON object)."""
+    said = comments()
+    cfg = RuntimeConfig()
+    tables = {LOOP: _table(cfg, LOOP, said), **{n: _table(getattr(cfg, n), n, said) for n in NESTED}}
+    return {"$schema": DRAFT, "$id": "https://bsn-edge/runtime.schema.json",
+            "title": "bsn-run vehicle settings",
+            "description": "Every runtime setting of bsn-run, as its settings file (TOML) holds them; every key is "
+                           "optional, a missing one keeps its default. The model's decision threshold is not "
+                           "here: it is part of the signed model card, chosen with the model.",
+            "type": "object", "additionalProperties": False, "properties": tables}
+
+
+def reference_page() -> str:
+    """``docs/settings.md``: every setting with its default, kind, range and description, from :func:`schema`."""
+    lines = ["# Vehicle settings reference", "",
+             "Generated from the settings themselves (`bsn_edge/runtime/config_schema.py`); a test holds this page, "
+             "`configs/runtime.schema.json` and the shipped `configs/runtime.toml` to them. `bsn-run --print-config` "
+             "prints the file with every key at its default; `bsn-run --print-schema` the JSON Schema. A key "
+             "`bsn-run` does not have is refused with the nearest it has (\"did you mean\").", "",
+             "The model's decision threshold is not a vehicle setting: it is part of the signed model card, chosen "
+             "with the model on real drives, so that no file beside the model can change what counts as a blind "
+             "spot.", ""]
+
+    def walk(node: dict[str, Any], name: str) -> None:
+        leaves = {k: v for k, v in node["properties"].items() if v["type"] != "object"}
+        lines.extend([f"## `[{name}]`", ""])
+        if node.get("description"):
+            lines.extend([node["description"], ""])
+        if leaves:
+            lines.extend(["| key | default | kind | range | what it does |", "|---|---|---|---|---|"])
+            for key, v in leaves.items():
+                default = str(v["default"]).lower() if v["type"] == "boolean" else f"{v['default']:g}"
+                span = f"{v['minimum']:g} to {v['maximum']:g}" + (f" {v['unit']}" if v.get("unit") else "") \
+                    if "minimum" in v else ""
+                kind = {"boolean": "true or false", "integer": "whole number"}.get(v["type"], "number")
+                what = v.get("description", "") if v.get("description") != node.get("description") else ""
+                lines.append(f"| `{key}` | {default} | {kind} | {span} | {what} |")
+            lines.append("")
+        for key, v in node["properties"].items():
+            if v["type"] == "object":
+                walk(v, f"{name}.{key}")
+
+    for name, node in schema()["properties"].items():
+        walk(node, name)
+    return "\n".join(lines).rstrip() + "\n"
