@@ -50,7 +50,9 @@ class CanEncoder:
         data[7] = e2e_crc(bytes(data[:7]), msg.frame_id)
         return msg.frame_id, bytes(data)
 
-    def encode(self, frame: AlertFrame) -> list[tuple[int, bytes]]:
+    def encode(self, frame: AlertFrame, messages: tuple[str, ...] | None = None) -> list[tuple[int, bytes]]:
+        """The frames of ``messages`` (by name, in the order given; None: every message) for ``frame``;
+        only a message sent moves its counter."""
         hz: dict[str, Any] = {}
         for name, s in zip(SIDES, frame.sectors, strict=True):
             hz[f"{name}_Level"] = int(s.level)
@@ -64,7 +66,8 @@ class CanEncoder:
               "Tx_Errors": min(sum(f.get(k, 0) for k in (Fault.TX_ERRORS, Fault.TX_FULL, Fault.SERIAL_ERRORS)), SAT),
               "Sink_Errors": min(f.get(Fault.SINK_ERRORS, 0), SINK_SAT),
               "Model_Unsigned": 1 if f.get(Fault.UNSIGNED_MODEL, 0) else 0}
-        return [self._encode(HAZARD, hz), self._encode(STATUS, st)]
+        values = {HAZARD: hz, STATUS: st}
+        return [self._encode(name, values[name]) for name in (messages if messages is not None else (HAZARD, STATUS))]
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ class SectorConfig:
     def __post_init__(self) -> None:
         check_fields(self)
         if not -89 < self.left_edge_deg < self.right_edge_deg < 89:
-            raise ValueError(f"need -89 < left edge < right edge < 89 degrees, got {self.left_edge_deg}, "
+            raise ValueError(f"need -89 < left_edge_deg < right_edge_deg < 89 degrees, got {self.left_edge_deg}, "
                              f"{self.right_edge_deg}")
         if not self.range_m > 0 or not 0 < self.full_area <= 1:
             raise ValueError("range_m must be positive and full_area in (0, 1]")

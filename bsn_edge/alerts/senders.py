@@ -12,6 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
+from bsn_edge.alerts.bus_config import BusConfig
 from bsn_edge.alerts.can_codec import CanEncoder
 from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.health import Fault
@@ -34,7 +35,7 @@ class Encoder(Protocol):
     the bus protocol's (:class:`~bsn_edge.alerts.can_codec.CanEncoder`: the DBC's hazard and status
     frames, with their counters and CRCs); a transport only carries what it is given."""
 
-    def encode(self, frame: AlertFrame) -> list[tuple[int, bytes]]: ...
+    def encode(self, frame: AlertFrame, messages: tuple[str, ...] | None = None) -> list[tuple[int, bytes]]: ...
 
 
 class Sender(ABC):
@@ -56,14 +57,15 @@ class Sender(ABC):
     def _close(self) -> None:  # noqa: B027 - optional hook
         pass
 
-    def send(self, frame: AlertFrame) -> bool:
-        """Encode and send one cycle; False (and counted) when it could not go out."""
+    def send(self, frame: AlertFrame, messages: tuple[str, ...] | None = None) -> bool:
+        """Encode and send one cycle (``messages``: the ones due, by name; None: every one); False (and
+        counted) when it could not go out."""
         if self._closed:
             self.stats.errors += 1
             self.stats.last_error = "sender is closed"
             return False
         try:
-            self._send(self.encoder.encode(frame))
+            self._send(self.encoder.encode(frame, messages) if messages is not None else self.encoder.encode(frame))
         except Exception as e:  # a transmit failure must never stop the loop
             self.stats.errors += 1
             self.stats.last_error = f"{type(e).__name__}: {e}"
@@ -170,14 +172,13 @@ class SerialSender(Sender):
     tx_fault = Fault.SERIAL_ERRORS
 
     def __init__(self, url: str, baudrate: int = 115200, port=None, retry_s: float = 1.0,
-                 encoder: Encoder | None = None) -> None:
+                 encoder: Encoder | None = None, write_timeout_s: float = 0.05) -> None:
         super().__init__(encoder)
         import serial
 
         self._serial = serial
-        self.url, self.baudrate, self.retry_s = url, baudrate, retry_s
-        self.port = port if port is not None else serial.serial_for_url(url, baudrate=baudrate, timeout=0,
-                                                                       write_timeout=0.05)
+        self.url, self.baudrate, self.retry_s, self.write_timeout_s = url, baudrate, retry_s, write_timeout_s
+        self.port = port if port is not None else self._open()
         self._next_retry = 0.0
 
     def _reopen(self) -> None:
@@ -185,8 +186,12 @@ class SerialSender(Sender):
         if now < self._next_retry:
             raise OSError(f"serial port {self.url} is down; next retry in {self._next_retry - now:.1f} s")
         self._next_retry = now + self.retry_s
-        self.port = self._serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0, write_timeout=0.05)
+        self.port = self._open()
         self.stats.reconnects += 1
+
+    def _open(self):
+        return self._serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0,
+                                           write_timeout=self.write_timeout_s)
 
     def _send(self, frames: list[tuple[int, bytes]]) -> None:
         if self.port is None or not self.port.is_open:
@@ -205,27 +210,31 @@ class SerialSender(Sender):
             self.port.close()
 
 
-def _can(target: str, encoder: Encoder | None, log_path: str | None) -> Sender:
+def _can(target: str, encoder: Encoder | None, log_path: str | None, bus: BusConfig) -> Sender:
     iface, _, channel = target.partition(":")
     if not (iface and channel):
         raise ValueError(f"can:{target}: give can:IFACE:CHANNEL, e.g. can:socketcan:can0")
-    return CanSender(iface, channel, log_path=log_path, encoder=encoder)
+    return CanSender(iface, channel, log_path=log_path, encoder=encoder, timeout_s=bus.can_timeout_s)
 
 
-def _serial(target: str, encoder: Encoder | None, log_path: str | None) -> Sender:
+def _serial(target: str, encoder: Encoder | None, log_path: str | None, bus: BusConfig) -> Sender:
     if log_path:
         raise ValueError("a serial output keeps no CAN log")
-    return SerialSender(target, encoder=encoder)
+    return SerialSender(target, bus.serial_baud, retry_s=bus.serial_retry_s, encoder=encoder,
+                        write_timeout_s=bus.serial_write_timeout_s)
 
 
 # the transports, by the scheme an output is named with: a new bus is one Sender subclass and one entry
-SENDERS: dict[str, Callable[[str, Encoder | None, str | None], Sender]] = {"can": _can, "serial": _serial}
+SENDERS: dict[str, Callable[[str, Encoder | None, str | None, BusConfig], Sender]] = {"can": _can,
+                                                                                      "serial": _serial}
 
 
-def open_sender(output: str, encoder: Encoder | None = None, log_path: str | None = None) -> Sender:
+def open_sender(output: str, encoder: Encoder | None = None, log_path: str | None = None,
+                bus: BusConfig | None = None) -> Sender:
     """The sender of ``SCHEME:TARGET`` (``can:socketcan:can0``, ``serial:/dev/ttyUSB0``) with ``encoder``
-    (the protocol's by default); ``ValueError`` naming the valid schemes for another."""
+    (the protocol's by default) and the vehicle file's ``bus`` settings (baud rate, timeouts); ``ValueError``
+    naming the valid schemes for another."""
     scheme, _, target = output.partition(":")
     if scheme not in SENDERS or not target:
         raise ValueError(f"output {output!r}: give SCHEME:TARGET with SCHEME one of {', '.join(sorted(SENDERS))}")
-    return SENDERS[scheme](target, encoder, log_path)
+    return SENDERS[scheme](target, encoder, log_path, bus or BusConfig())

@@ -21,6 +21,7 @@ from bsn_edge.cli.outputs import OutputKind, check_outputs
 from bsn_edge.default_model import DEFAULT_MODEL
 
 if TYPE_CHECKING:
+    from bsn_edge.alerts.bus_config import BusConfig
     from bsn_edge.alerts.senders import Sender
     from bsn_edge.runtime.camera_state import CameraState
     from bsn_edge.runtime.loop import RuntimeConfig
@@ -92,11 +93,15 @@ def _camera(p: argparse.ArgumentParser) -> None:
 
 def _outputs(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("where the alerts and the rest go")
-    g.add_argument("--can", metavar="IFACE:CHANNEL", help="send on this python-can bus, e.g. socketcan:can0")
+    g.add_argument("--can", metavar="IFACE:CHANNEL",
+                   help="send on this python-can bus, e.g. socketcan:can0 (bus.can in --config; its timeouts and "
+                        "each message's rate are there too)")
     g.add_argument("--can-log", metavar="FILE.log",
                    help="log every CAN frame sent: .log (candump format, readable by python -m cantools decode), "
                         ".asc or .blf; without --can, frames go to a virtual bus")
-    g.add_argument("--serial", metavar="URL", help="send on this serial port (pyserial URL, e.g. /dev/ttyUSB0)")
+    g.add_argument("--serial", metavar="URL",
+                   help="send on this serial port (pyserial URL, e.g. /dev/ttyUSB0; bus.serial in --config, its baud "
+                        "rate bus.serial_baud, default 115200)")
     g.add_argument("--cycle", type=float, default=None,
                    help="send cycle in seconds (default 0.1; runtime.cycle_s in --config)")
     g.add_argument("--overlay", metavar="OUT.mp4",
@@ -214,28 +219,32 @@ def _output_files(args: argparse.Namespace) -> list[tuple[OutputKind, str | None
             (OutputKind("--save-calib", (".json",), "camera"), args.save_calib)]
 
 
-def make_senders(args: argparse.Namespace) -> list[Sender]:
-    """The configured senders; ``ValueError`` names the bad option (a sender already opened is
+def make_senders(args: argparse.Namespace, bus: BusConfig | None = None) -> list[Sender]:
+    """The configured senders: the buses the flags name, else the vehicle file's (``bus``, which also
+    gives baud rate and timeouts); ``ValueError`` names the bad option (a sender already opened is
     closed again)."""
+    from bsn_edge.alerts.bus_config import BusConfig
     from bsn_edge.alerts.frame import AlertFrame
     from bsn_edge.alerts.senders import open_sender
 
+    bus = bus or BusConfig()
+    can_bus, serial_port = args.can or bus.can or None, args.serial or bus.serial or None
     outputs: list[tuple[str, str | None, str]] = []        # (SCHEME:TARGET, its log, what to call it)
-    if args.can or args.can_log:
-        can = args.can or f"virtual:{LOG_CHANNEL}"
+    if can_bus or args.can_log:
+        can = can_bus or f"virtual:{LOG_CHANNEL}"
         if ":" not in can:
             raise ValueError(f"--can needs IFACE:CHANNEL, got {args.can!r}")
         iface, _, channel = can.partition(":")
         what = f"CAN interface {iface!r} channel {channel!r}" + (f" with its log {args.can_log}" if args.can_log
                                                                  else "")
         outputs.append((f"can:{can}", args.can_log, what))
-    if args.serial:
-        outputs.append((f"serial:{args.serial}", None, f"serial port {args.serial!r}"))
+    if serial_port:
+        outputs.append((f"serial:{serial_port}", None, f"serial port {serial_port!r} at {bus.serial_baud} baud"))
     senders: list[Sender] = []
     try:
         for output, log_path, what in outputs:
             try:
-                senders.append(open_within(functools.partial(open_sender, output, log_path=log_path),
+                senders.append(open_within(functools.partial(open_sender, output, log_path=log_path, bus=bus),
                                            OPEN_DEADLINE_S, what))
             except Exception as e:
                 raise ValueError(f"cannot open {what}: {type(e).__name__}: {e}") from None
@@ -433,12 +442,20 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     except (ValueError, OSError) as e:
         return _refuse_outputs(args, str(e))
     try:
-        senders = make_senders(args)
+        cfg = runtime_settings(args)
+    except ValueError as e:                           # the buses the flags name still hear UNAVAILABLE
+        try:
+            senders = make_senders(args)
+        except ValueError as e2:
+            return fail(PROG, f"{e}; {e2}")
+        return refuse(senders, str(e), args.summary)
+    try:
+        senders = make_senders(args, cfg.bus)
     except ValueError as e:
         return fail(PROG, str(e))
     try:                                              # from here a refusal is UNAVAILABLE on the bus and,
         # the outputs being free, said in the summary
-        engine, camera, source, cfg, maps = _start(args)
+        engine, camera, source, maps = _start(args, cfg)
     except (FileNotFoundError, ValueError, OSError) as e:
         return refuse(senders, str(e), args.summary)
     if stopper.event.is_set():
@@ -477,9 +494,9 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     return _report(summary, args, camera, senders, stopper)
 
 
-def _start(args: argparse.Namespace):
-    """What the run needs before its first frame, each piece checked: ``(engine, camera, source, cfg,
-    maps)``; ``FileNotFoundError``, ``ValueError`` or ``OSError`` names what is wrong."""
+def _start(args: argparse.Namespace, cfg: RuntimeConfig):
+    """What the run needs before its first frame, each piece checked: ``(engine, camera, source, maps)``;
+    ``FileNotFoundError``, ``ValueError`` or ``OSError`` names what is wrong."""
     from bsn_edge.calibration.camera_file import Calibration
     from bsn_edge.calibration.exif import from_exif
     from bsn_edge.modelfile.trust import TrustPolicy
@@ -493,7 +510,6 @@ def _start(args: argparse.Namespace):
         check_height(args.height, "--height")
     maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
     trust = TrustPolicy.default(args.trust, args.allow_unsigned)
-    cfg = runtime_settings(args)
     threads = cfg.engine_threads if args.threads is None else args.threads
     engine = Engine(args.model, threads, args.spin, trust=trust)
     if not engine.authentic:
@@ -505,7 +521,7 @@ def _start(args: argparse.Namespace):
         print(f"{PROG}: note: {source.cameras.cameras.value}: {source.cameras.why}; each is warped with its own lens "
               "(EXIF, else assumed) and the model camera's mounting (pass --calib if they are one camera)",
               file=sys.stderr)
-        return engine, PictureCameras(engine.card, source.cameras, args.height), source, cfg, maps
+        return engine, PictureCameras(engine.card, source.cameras, args.height), source, maps
     intrinsics_from = "camera file"
     if calibration is None and source.picture is not None and source.size is not None:
         calibration = from_exif(source.picture, *source.size)
@@ -523,7 +539,7 @@ def _start(args: argparse.Namespace):
             raise ValueError(str(e) if str(e).startswith("--calib") else f"--calib {args.calib}: {e}") from None
         if camera.size_note:
             print(f"{PROG}: note: {camera.size_note}", file=sys.stderr)
-    return engine, camera, source, cfg, maps
+    return engine, camera, source, maps
 
 
 def _report(summary: dict[str, Any], args: argparse.Namespace, camera: CameraState, senders: list[Sender],

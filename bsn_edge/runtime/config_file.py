@@ -7,7 +7,9 @@
 - ``[sectors]``: the sector edges as bearings and how far blind spots count (:class:`SectorConfig`);
 - ``[alerts]``: smoothing (``tau_s``) and each level's rule (``[alerts.caution]``, ``[alerts.warning]``:
   ``on``, ``off``, ``delay_s``, ``hold_s``; :class:`AlertConfig`);
-- ``[health]``: when the status says DEGRADED or UNAVAILABLE (:class:`HealthConfig`).
+- ``[health]``: when the status says DEGRADED or UNAVAILABLE (:class:`HealthConfig`);
+- ``[bus]``: the buses, the serial baud rate, the sends' timeouts and when a bus is down (:class:`BusConfig`);
+- ``[messages]``: each message every so many cycles (:class:`MessageRates`).
 
 ``bsn-run --config FILE --set sectors.left_edge_deg=-15`` reads it with the mechanism the training config
 has (:mod:`bsn_edge.config_toml`): a key the runtime does not have, or a value out of range, is refused
@@ -22,6 +24,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from bsn_edge.alerts.bus_config import BusConfig, MessageRates
 from bsn_edge.alerts.health import HealthConfig
 from bsn_edge.alerts.sectors import SectorConfig
 from bsn_edge.alerts.state_machine import AlertConfig
@@ -29,7 +32,8 @@ from bsn_edge.config_toml import build, merge_overrides, read_toml, unknown
 from bsn_edge.runtime.loop import RuntimeConfig
 
 DEFAULTS_FILE = Path(__file__).with_name("runtime.toml")
-NESTED: dict[str, type] = {"sectors": SectorConfig, "alerts": AlertConfig, "health": HealthConfig}
+NESTED: dict[str, type] = {"sectors": SectorConfig, "alerts": AlertConfig, "health": HealthConfig,
+                           "bus": BusConfig, "messages": MessageRates}
 LOOP = "runtime"
 
 
@@ -78,12 +82,13 @@ def settings_table() -> list[str]:
                 walk(value, f"{prefix}.{f.name}")
                 continue
             kind = "true or false" if isinstance(value, bool) else "whole number" if isinstance(value, int) \
-                else "number"
+                else "text" if isinstance(value, str) else "number"
             span = ""
             if "range" in f.metadata:
                 lo, hi = f.metadata["range"]
                 span = f"{lo:g} to {hi:g}" + (f" {f.metadata['unit']}" if f.metadata["unit"] else "")
-            default = str(value).lower() if isinstance(value, bool) else f"{value:g}"
+            default = str(value).lower() if isinstance(value, bool) else f'"{value}"' if isinstance(value, str) \
+                else f"{value:g}"
             rows.append(f"| `{prefix}.{f.name}` | {default} | {kind} | {span} |")
 
     cfg = RuntimeConfig()

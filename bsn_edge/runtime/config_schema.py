@@ -20,6 +20,7 @@ from bsn_edge.runtime.loop import RuntimeConfig
 SCHEMA_FILE = DEFAULTS_FILE.with_name("runtime.schema.json")
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
 _TABLE = re.compile(r"^\[([\w.]+)\]\s*(?:#\s?(.*))?$")
+KINDS = {"boolean": "true or false", "integer": "whole number", "string": "text"}     # as the docs say them
 _KEY = re.compile(r"^(\w+)\s*=\s*[^#]*?(?:#\s?(.*))?$")
 
 
@@ -44,7 +45,8 @@ def comments(path: Path = DEFAULTS_FILE) -> dict[str, str]:
 
 
 def _leaf(f: dataclasses.Field, value: Any, description: str) -> dict[str, Any]:
-    kind = "boolean" if isinstance(value, bool) else "integer" if isinstance(value, int) else "number"
+    kind = "boolean" if isinstance(value, bool) else "integer" if isinstance(value, int) \
+        else "string" if isinstance(value, str) else "number"
     out: dict[str, Any] = {"type": kind, "default": value}
     if "range" in f.metadata:
         out["minimum"], out["maximum"] = f.metadata["range"]
@@ -104,10 +106,11 @@ def reference_page() -> str:
         if leaves:
             lines.extend(["| key | default | kind | range | what it does |", "|---|---|---|---|---|"])
             for key, v in leaves.items():
-                default = str(v["default"]).lower() if v["type"] == "boolean" else f"{v['default']:g}"
+                default = str(v["default"]).lower() if v["type"] == "boolean" else f'"{v["default"]}"' \
+                    if v["type"] == "string" else f"{v['default']:g}"
                 span = f"{v['minimum']:g} to {v['maximum']:g}" + (f" {v['unit']}" if v.get("unit") else "") \
                     if "minimum" in v else ""
-                kind = {"boolean": "true or false", "integer": "whole number"}.get(v["type"], "number")
+                kind = KINDS.get(v["type"], "number")
                 what = v.get("description", "") if v.get("description") != node.get("description") else ""
                 lines.append(f"| `{key}` | {default} | {kind} | {span} | {what} |")
             lines.append("")

@@ -8,6 +8,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 
+from bsn_edge.alerts.bus_config import BusConfig, MessageRates
 from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.health import Fault, Health, SystemState
 from bsn_edge.alerts.senders import Sender
@@ -19,18 +20,24 @@ class CycleEmitter:
     The state, frame rate and fault counters are those of ``t`` itself, so a stalled pipeline
     shows up as UNAVAILABLE on the bus within one cycle past the deadline. Sender failures are
     counted into the health's fault counters, which the next status message carries; a sender whose
-    every send has failed for :attr:`DOWN_AFTER_S` is down (DEGRADED) until one goes through.
+    every send has failed for ``down_after_s`` is down (DEGRADED) until one goes through. Each message
+    goes every so many cycles (``rates``, the vehicle file's ``[messages]``).
     """
 
-    DOWN_AFTER_S = 1.0
-
     def __init__(self, senders: list[Sender], health: Health, cycle_s: float = 0.1,
-                 clock: Callable[[], float] | None = None) -> None:
+                 clock: Callable[[], float] | None = None, rates: MessageRates | None = None,
+                 down_after_s: float = BusConfig.down_after_s) -> None:
         """``clock`` is the processing clock the frame rate is counted on when the cycle times are a
-        file's (see :class:`Health`); None when they are the processing clock already (live)."""
+        file's (see :class:`Health`); None when they are the processing clock already (live). ``rates``:
+        each message every so many cycles (all every cycle by default); ``down_after_s``: how long every
+        send of a sender may fail before it is down."""
         if cycle_s <= 0:
             raise ValueError(f"cycle must be positive, got {cycle_s}")
         self.senders, self.health, self.cycle_s, self.clock = senders, health, cycle_s, clock
+        self.rates = rates or MessageRates()
+        self.rates.check(cycle_s)
+        self.down_after_s = down_after_s
+        self.ticks = 0                  # cycles of the schedule sent: which messages are due
         self.latest: AlertFrame | None = None
         self.next_t: float | None = None
         self.sent_cycles = 0
@@ -51,11 +58,16 @@ class CycleEmitter:
                 self.next_t = t
             n = 0
             while self.next_t <= t + 1e-9:
-                self._send(self.next_t)
+                self._send(self.next_t, self._due())
                 self.next_t += self.cycle_s
+                self.ticks += 1
                 n += 1
             self.stalling = self.stalling and n == 0
             return n
+
+    def _due(self) -> tuple[str, ...]:
+        """The messages due at this cycle of the schedule (every one at the first)."""
+        return tuple(name for name, every in self.rates.every().items() if self.ticks % every == 0)
 
     def overdue(self, after_s: float) -> bool:
         """Whether no cycle has gone out for ``after_s`` of the processing clock, or for a cycle once the
@@ -85,7 +97,8 @@ class CycleEmitter:
         with self._lock:
             self._send(t)
 
-    def _send(self, t: float) -> None:
+    def _send(self, t: float, messages: tuple[str, ...] | None = None) -> None:
+        """Send ``messages`` (every one by default: a stall's or the last word) of the frame at ``t``."""
         h = self.health
         state, fps, faults = h.snapshot(t) if self.clock is None else h.snapshot(t, self.clock())
         base = self.latest if self.latest is not None and state != SystemState.UNAVAILABLE \
@@ -93,10 +106,10 @@ class CycleEmitter:
         frame = replace(base, t=t, state=state, fps=fps, faults=faults)
         for s in self.senders:
             before_err, before_full, before_log = s.stats.errors, s.stats.full, s.stats.log_errors
-            if s.send(frame):
+            if s.send(frame, messages):
                 self._failing_since.pop(s.name, None)
                 h.sender_down(s.name, False)
-            elif t - self._failing_since.setdefault(s.name, t) >= self.DOWN_AFTER_S:
+            elif t - self._failing_since.setdefault(s.name, t) >= self.down_after_s:
                 h.sender_down(s.name, True)
             if s.stats.errors > before_err:
                 h.fault(s.tx_fault, s.stats.errors - before_err)

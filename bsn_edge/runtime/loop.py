@@ -27,6 +27,7 @@ from bsn_edge.alerts import (
     SectorGeometry,
     SectorState,
 )
+from bsn_edge.alerts.bus_config import BusConfig, MessageRates
 from bsn_edge.alerts.health import Fault, Health
 from bsn_edge.alerts.sectors import blind_spots
 from bsn_edge.alerts.senders import Sender
@@ -59,6 +60,8 @@ class RuntimeConfig:
     alerts: AlertConfig = field(default_factory=AlertConfig)
     sectors: SectorConfig = field(default_factory=SectorConfig)
     health: HealthConfig = field(default_factory=HealthConfig)
+    bus: BusConfig = field(default_factory=BusConfig)
+    messages: MessageRates = field(default_factory=MessageRates)
     cycle_s: float = setting(0.1, 0.01, 1.0, "s")
     warmup: int = setting(3, 0, 100, "inferences")
     overlap: bool = True         # decode and warp the next frame on a thread of its own while the model runs
@@ -69,6 +72,7 @@ class RuntimeConfig:
         check_fields(self)
         if self.in_flight > 1 and not self.overlap:
             raise ValueError("more than one frame in flight needs reading overlapped with the model (overlap=True)")
+        self.messages.check(self.cycle_s)
 
     @property
     def engine_threads(self) -> int:
@@ -129,7 +133,7 @@ class FramePipeline:
         self.wall = None if source.live else clock    # a live source's frame times are the processing clock
         if not engine.authentic:        # said on every cycle: nobody trusted vouches for this model
             self.health.set_fault(Fault.UNSIGNED_MODEL, 1)
-        self.emitter = CycleEmitter(senders, self.health, cfg.cycle_s, self.wall)
+        self.emitter = CycleEmitter(senders, self.health, cfg.cycle_s, self.wall, cfg.messages, cfg.bus.down_after_s)
         self.timer = StageTimer()
         self.latency = LatencyStats()
         self.waiting = LatencyStats()        # warped frames waiting for the model (overlap)

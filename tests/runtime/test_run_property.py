@@ -24,7 +24,8 @@ from bsn_edge.runtime.config_file import load_runtime_config
 from tests.fakes import long_video
 
 OCCLUDER_M = 1.0     # metres in the model camera: 3.3 m from the highest camera a file may hold (5 m)
-EXAMPLES = 30
+EXAMPLES = 30       # derandomized, so CI runs the same examples every time (run with more to explore)
+CAMERA_EXAMPLES = 45    # most random camera files are refused: more of them, for as many runs
 
 
 class OccluderEngine(Engine):
@@ -103,14 +104,14 @@ def _camera():
         """Within a real camera's range six times in seven, a little beyond it the seventh."""
         return st.one_of(*[st.floats(lo, hi)] * 6, st.floats(lo - beyond, hi + beyond))
 
-    angle = mostly(-30.0, 30.0, 5.0)
-    mounting = st.fixed_dictionaries({"height_m": mostly(0.2, 5.0, 0.5), "pitch_deg": angle, "yaw_deg": angle,
-                                      "roll_deg": angle})
+    angle = st.one_of(*[st.floats(-8.0, 8.0)] * 3, mostly(-30.0, 30.0, 5.0))     # dashcams, then anything
+    height = st.one_of(*[st.sampled_from([1.1, 1.3, 1.5, 1.8, 2.4, 3.2])] * 3, mostly(0.2, 5.0, 0.5))
+    mounting = st.fixed_dictionaries({"height_m": height, "pitch_deg": angle, "yaw_deg": angle, "roll_deg": angle})
     # the hood's outline row as a share of the height, x^2, x and constant terms (np.polyval's order)
     arch = st.tuples(st.floats(-0.1, 0.1), st.floats(-0.05, 0.05), mostly(0.65, 1.0, 0.3)).map(list)
-    hood = st.one_of(st.none(), st.fixed_dictionaries({"share": mostly(0.0, 0.35, 0.2), "spread": st.just(0.0),
-                                                       "columns": st.just(1.0), "arch": arch,
-                                                       "frames": st.just(40)}))
+    drawn = st.fixed_dictionaries({"share": mostly(0.0, 0.35, 0.2), "spread": st.just(0.0), "columns": st.just(1.0),
+                                   "arch": arch, "frames": st.just(40)})
+    hood = st.one_of(st.none(), st.none(), drawn)
     hfov = st.one_of(*[st.floats(50.0, 120.0)] * 4, st.floats(5.0, 175.0))     # dashcams, then anything
     return st.fixed_dictionaries({"hfov_deg": hfov, "dist": lens, "mounting": mounting,
                                   "hood": hood})
@@ -165,7 +166,7 @@ def test_random_settings_are_refused_or_a_near_occluder_raises_a_level(setup, tm
     from hypothesis import HealthCheck, given, settings
 
     check, tally = _runs(setup, tmp_path)
-    given(_settings())(settings(max_examples=EXAMPLES, deadline=None,
+    given(_settings())(settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
                                 suppress_health_check=[HealthCheck.function_scoped_fixture])(
         lambda pairs: check(pairs, None)))()
     print(tally)
@@ -178,8 +179,8 @@ def test_random_camera_files_are_refused_or_a_near_occluder_raises_a_level(setup
     from hypothesis import HealthCheck, given, settings
 
     check, tally = _runs(setup, tmp_path)
-    given(_camera())(settings(max_examples=EXAMPLES, deadline=None,
+    given(_camera())(settings(max_examples=CAMERA_EXAMPLES, deadline=None, derandomize=True,
                               suppress_health_check=[HealthCheck.function_scoped_fixture])(
         lambda cam: check([], cam)))()
     print(tally)
-    assert tally["ran"] >= EXAMPLES // 3, tally
+    assert tally["ran"] >= CAMERA_EXAMPLES // 5, tally

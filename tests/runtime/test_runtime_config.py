@@ -66,7 +66,7 @@ def test_a_sector_edge_and_a_smoothing_time_from_the_file_reach_the_bus(setup, t
     ("sectors.left_edge=-15", "unknown key(s) in [sectors]: 'left_edge' (did you mean 'left_edge_deg'?)"),
     ("alerts.caution.on=2", "[alerts.caution] (--set): on = 2.0 is outside [0.05, 0.9]"),
     ("runtime.cycle_s=abc", "runtime.cycle_s = 'abc' (--set) must be a finite number in [0.01, 1] s"),
-    ("wheels.count=4", "unknown section(s): 'wheels'; valid: alerts, health, runtime, sectors"),
+    ("wheels.count=4", "unknown section(s): 'wheels'; valid: alerts, bus, health, messages, runtime, sectors"),
 ])
 def test_a_bad_setting_is_refused_naming_it_and_the_bus_says_unavailable(setup, tmp_path, capsys, setting, says):
     _, clip = setup
@@ -291,7 +291,7 @@ def test_the_shipped_file_lists_and_describes_every_key_the_schema_has():
                 yield f"{name}.{key}", name
 
     every = [x for name, node in schema()["properties"].items() for x in leaves(node, name)]
-    assert len(every) == 21     # runtime 5, sectors 4, alerts 1 + 4 + 4, health 3
+    assert len(every) == 30     # runtime 5, sectors 4, alerts 1 + 4 + 4, health 3, bus 7, messages 2
     for dotted, table in every:
         assert dotted in said, f"{dotted} is not in the shipped file"
         assert said[dotted] or said.get(table), f"{dotted} has no comment, nor has its table"
@@ -330,3 +330,46 @@ def test_a_misspelt_key_is_answered_with_the_nearest_one(override, says):
     with pytest.raises(ValueError) as refused:
         load_runtime_config(overrides=[override])
     assert says in str(refused.value)
+
+
+def test_a_vehicle_file_sets_each_messages_rate_as_heard_on_the_bus(setup, tmp_path):
+    """[messages] status_every = 4: on the wire (decoded with cantools from the DBC, not the project's
+    decoder), four hazard frames go out for each status frame, the status on every fourth cycle from the
+    first, and the last word (UNAVAILABLE) carries both."""
+    model, clip = setup
+    vehicle = tmp_path / "vehicle.toml"
+    vehicle.write_text("[bus]\ncan = \"virtual:bsn-rates\"\n\n[messages]\nhazard_every = 1\nstatus_every = 4\n")
+    db = cantools.database.load_file(str(DBC_PATH))
+    with can.Bus(interface="virtual", channel="bsn-rates") as rx:
+        assert run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
+                             str(clip / "calibration.json"), "--config", str(vehicle)]) == 0
+        names = [db.get_message_by_frame_id(m.arbitration_id).name for m in iter(lambda: rx.recv(0.2), None)]
+    assert names[-2:] == ["BSN_Hazard", "BSN_Status"]          # the last word: every message
+    cycles = names[:-2]
+    assert cycles.count("BSN_Hazard") >= 12
+    status_at = [i for i, n in enumerate(cycles) if n == "BSN_Status"]
+    hazards_before = [sum(n == "BSN_Hazard" for n in cycles[:i]) for i in status_at]
+    assert hazards_before == [1 + 4 * k for k in range(len(status_at))], hazards_before
+
+
+def test_a_vehicle_file_sets_the_serial_baud_rate_and_the_frames_come_through(tmp_path):
+    """[bus] serial on pyserial's loop (what is written is read back) at 57600 baud: the port is opened at
+    that rate, and a cycle's bytes read back from it decode as both messages."""
+    import argparse
+
+    from bsn_edge.alerts import AlertFrame
+    from bsn_edge.alerts.serial_codec import FrameDecoder
+
+    vehicle = tmp_path / "vehicle.toml"
+    vehicle.write_text("[bus]\nserial = \"loop://\"\nserial_baud = 57600\n")
+    cfg = load_runtime_config(vehicle)
+    args = argparse.Namespace(can=None, can_log=None, serial=None)
+    (sender,) = run_cli.make_senders(args, cfg.bus)
+    try:
+        assert sender.port.baudrate == 57600
+        assert sender.send(AlertFrame.unavailable(0.0))
+        db = cantools.database.load_file(str(DBC_PATH))
+        got = [db.get_message_by_frame_id(fid).name for fid, _ in FrameDecoder().feed(sender.port.read(256))]
+        assert got == ["BSN_Hazard", "BSN_Status"]
+    finally:
+        sender.close()
