@@ -28,6 +28,7 @@ LAYERS = [
     ("modelfile", "calibration"),
     ("synth", "alerts"),
     ("runtime",),
+    ("report",),
     ("labels",),
     ("models",),
     ("data",),

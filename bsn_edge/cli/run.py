@@ -490,6 +490,8 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
             s.close()
     summary["signal"] = stopper.signal
     from bsn_edge.runtime.config_file import digest, to_dict
+    from bsn_edge.runtime.run_summary import machine
+    summary["source"], summary["machine"] = args.source, machine()
     summary["settings"], summary["settings_digest"] = to_dict(cfg), digest(cfg)
     return _report(summary, args, camera, senders, stopper)
 

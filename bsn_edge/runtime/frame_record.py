@@ -5,16 +5,18 @@ Fields, in the order written (a field that does not apply to the frame is left o
 with this frame, by the names of :class:`~bsn_edge.alerts.health.Fault`: ``decode_errors``,
 ``size_changes``, ``nan_outputs``), ``levels`` (LEFT, CENTRE, RIGHT: ``NONE``, ``CAUTION`` or
 ``WARNING``), ``scores`` (smoothed, 0-1), ``distances`` (metres to the nearest blind spot, null for
-none), ``state`` (the system state sent with it) and ``latency_ms``.
+none), ``state`` (the system state sent with it), ``latency_ms`` and ``stage_ms`` (this frame's milliseconds
+in each stage it went through: ``decode``, ``preprocess``, ``inference``, ``postprocess``, ``send``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
-from bsn_edge.alerts.frame import AlertFrame
-from bsn_edge.alerts.health import Fault
+from bsn_edge.alerts.frame import AlertFrame, SectorAlert
+from bsn_edge.alerts.health import Fault, SystemState
+from bsn_edge.alerts.state_machine import Level
 
 
 @dataclass
@@ -26,6 +28,7 @@ class FrameRecord:
     fault: Fault | None = None
     alert: AlertFrame | None = None
     latency_ms: float | None = None
+    stage_ms: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         """The frame log's line (rounded as written)."""
@@ -39,4 +42,22 @@ class FrameRecord:
                        state=self.alert.state.name)
         if self.latency_ms is not None:
             out["latency_ms"] = round(self.latency_ms, 2)
+        if self.stage_ms:
+            out["stage_ms"] = {k: round(v, 3) for k, v in self.stage_ms.items()}
         return out
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> FrameRecord:
+        """A line of the frame log read back (``KeyError`` / ``ValueError`` for one that is not a line of it);
+        the alert's frame rate and counters, which the log does not keep, are 0 and empty."""
+        rec = cls(int(d["frame"]), float(d["t"]))
+        if "fault" in d:
+            rec.fault = Fault(d["fault"])
+        if "levels" in d:
+            sectors = tuple(SectorAlert(float(s), Level[lv], None if m is None else float(m))
+                            for lv, s, m in zip(d["levels"], d["scores"], d["distances"], strict=True))
+            rec.alert = AlertFrame(rec.t, sectors, SystemState[d["state"]], 0.0)
+        if "latency_ms" in d:
+            rec.latency_ms = float(d["latency_ms"])
+        rec.stage_ms = {str(k): float(v) for k, v in d.get("stage_ms", {}).items()}
+        return rec

@@ -298,6 +298,7 @@ class FramePipeline:
             sink.check()
         rec = FrameRecord(cap.index, cap.t)
         self.timer.add("preprocess", item.warp_s)
+        rec.stage_ms.update(decode=1e3 * cap.decode_s, preprocess=1e3 * item.warp_s)
         if self.read(cap, rec) and item.mf is not None and item.buf is not None:
             self.health.calibrating(item.calibrating)
             prob, depth, began, seconds = self.infer(item.buf) if inflight is None else inflight.result()
@@ -307,17 +308,20 @@ class FramePipeline:
                 self.feeder.release(item.buf)
             t2 = time.perf_counter()
             self.timer.add("inference", seconds)
+            rec.stage_ms["inference"] = 1e3 * seconds
             if out is None:
                 rec.fault = Fault.NAN_OUTPUTS
             else:
                 prob, depth = out
                 rec.alert, mask = self.sectors(cap, item.mf, prob, depth)
                 self.timer.add("postprocess", time.perf_counter() - t2)
+                rec.stage_ms["postprocess"] = 1e3 * (time.perf_counter() - t2)
                 self.write(cap, item.mf, mask, rec.alert, prob, depth)
         t4 = time.perf_counter()
         self.emit(cap)
         t5 = time.perf_counter()
         self.timer.add("send", t5 - t4)
+        rec.stage_ms["send"] = 1e3 * (t5 - t4)
         # a camera's frame: from its capture (the read returned) to its alert, waiting included; a
         # file's: its own path, decode to alert (the time it waited for the model is counted apart)
         latency = time.monotonic() - cap.t if self.source.live else t5 - t0 + item.warp_s + cap.decode_s
@@ -407,7 +411,8 @@ class FramePipeline:
                    for name, k in self.sinks.items()},
             model=ModelSummary(card.variant, card.input_size, self.engine.threshold, card.quantization,
                                self.engine.kernels, self.engine.self_test, self.engine.signer,
-                               self.engine.authentic, self.engine.verdict.note))
+                               self.engine.authentic, self.engine.verdict.note, card.graph_sha256 or "",
+                               card.config_digest or ""))
 
 
 def run(engine: Engine, source: Source, senders: list[Sender], cfg: RuntimeConfig | None = None,

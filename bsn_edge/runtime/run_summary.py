@@ -13,8 +13,8 @@ send at the end), ``source_failure`` (why the source ended early, or null), ``st
 or the caller), ``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report, hood: share of the rows,
 spread, columns agreeing, arch; null while still looked for),
 ``maps_written``, ``sinks`` (per output: written, dropped, failure), ``model`` (variant, size,
-threshold, quantization, kernels, self-test, signer, authentic, trust note); ``bsn-run`` adds
-``signal``.
+threshold, quantization, kernels, self-test, signer, authentic, trust note, graph and config digests); ``bsn-run`` adds
+``signal``, ``source`` (what it read) and ``machine`` (CPU, its int8 instruction sets, cores, Python).
 """
 
 from __future__ import annotations
@@ -23,6 +23,29 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from bsn_edge.alerts.health import Fault
+
+
+def machine() -> dict[str, Any]:
+    """The machine a run ran on, for its summary: the CPU's name, the int8 instruction sets the model's
+    speed depends on, cores and Python."""
+    import os
+    import platform
+
+    cpu, flags = platform.processor() or platform.machine(), set()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as info:
+            for line in info:
+                key, _, value = line.partition(":")
+                if key.strip() == "model name" and cpu == (platform.processor() or platform.machine()):
+                    cpu = value.strip()
+                elif key.strip() == "flags":
+                    flags = set(value.split())
+                    break
+    except OSError:
+        pass
+    isa = [name for name, flag in (("AVX2", "avx2"), ("AVX-512", "avx512f"), ("VNNI", "avx512_vnni"),
+                                   ("AVX-VNNI", "avx_vnni"), ("AMX", "amx_int8")) if flag in flags]
+    return {"cpu": cpu, "isa": isa, "cores": os.cpu_count(), "python": platform.python_version()}
 
 
 @dataclass(frozen=True)
@@ -36,6 +59,8 @@ class ModelSummary:
     signer: str
     authentic: bool
     trust_note: str
+    graph_sha256: str = ""        # the sealed card's digest of the graph run
+    config_digest: str = ""       # of the training config it came from
 
 
 @dataclass(frozen=True)

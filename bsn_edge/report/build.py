@@ -1,0 +1,58 @@
+"""A drive's report written: ``DIR/report.html`` (self-contained) and ``DIR/report.json`` (every number it shows)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from bsn_edge.report.drive import read_drive
+
+REPORT_FILES = ("report.html", "report.json")
+
+
+def make_report(log: str | Path, out: str | Path, summary: str | Path | None = None,
+                overlay: str | Path | None = None, can_log: str | Path | None = None, force: bool = False,
+                say: Callable[[str], Any] = print) -> dict[str, Any]:
+    """Read the run (``log`` and ``summary``), draw it, check the bus (``can_log``) and cut the onsets'
+    thumbnails (``overlay``); write ``out``/report.html and report.json, returned. ``out`` is refused when it
+    exists unless ``force`` (then only the report's two files are replaced); nothing is written until the
+    report is whole. ``say`` is told each step."""
+    from bsn_edge.report.can_check import bus_onsets, check
+    from bsn_edge.report.page import page, thumbnails, timelines
+
+    out = Path(out)
+    if out.exists() and not force:
+        raise FileExistsError(f"{out} exists; pass --force to replace its report")
+    for what, path in (("overlay", overlay), ("CAN log", can_log)):
+        if path is not None and not Path(path).is_file():
+            raise FileNotFoundError(f"{what} {path} not found")
+    say(f"reading {log}" + (f" and {summary}" if summary else ""))
+    drive = read_drive(log, summary)
+    if drive.damage:
+        first = drive.damage[0]
+        say(f"{len(drive.damage)} damaged line(s) in {log}, the first at line {first.line}: {first.why}; "
+            "the rest is reported")
+    record = drive.to_dict()
+    if can_log is not None:
+        say(f"checking the bus: {can_log}")
+        record["bus_check"] = check(drive.onsets, bus_onsets(can_log))
+    say(f"drawing {len(drive.records)} frames")
+    picture = timelines(drive)
+    thumbs = {}
+    if overlay is not None:
+        say(f"cutting {min(len(drive.onsets), 40)} onset thumbnails from {overlay}")
+        thumbs = thumbnails(overlay, drive.onsets)
+    html = page(drive, record, picture, thumbs, f"bsn-run drive report: {Path(log).name}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
+        (Path(tmp) / "report.html").write_text(html, encoding="utf-8")
+        (Path(tmp) / "report.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+        out.mkdir(exist_ok=True)
+        for name in REPORT_FILES:
+            shutil.move(str(Path(tmp) / name), out / name)
+    say(f"wrote {out / 'report.html'} and report.json: {len(drive.onsets)} onsets, {len(drive.damage)} damaged lines")
+    return record

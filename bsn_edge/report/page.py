@@ -1,0 +1,188 @@
+"""The report's page: one self-contained HTML file (pictures embedded, nothing fetched), and its figures.
+
+Timelines share one time axis (the source's seconds): per sector the smoothed score against the CAUTION and
+WARNING thresholds, the level as shading and the distance to the nearest blind spot; the system state and
+the faults; each stage's latency. One thumbnail per level onset is cut from the overlay video when given.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bsn_edge.alerts.sectors import SECTORS
+from bsn_edge.alerts.state_machine import AlertConfig
+from bsn_edge.report.drive import Drive, Onset
+from bsn_edge.runtime.loop import STAGES
+
+LEVEL_COLOURS = {"CAUTION": "#f2c14e", "WARNING": "#e4572e"}
+STATE_COLOURS = {"OK": "#59a14f", "CALIBRATING": "#76b7b2", "DEGRADED": "#f28e2b", "UNAVAILABLE": "#e15759"}
+THUMB_WIDTH = 320
+MAX_THUMBS = 40        # onsets shown with a picture; every onset is in the table and in report.json
+DPI = 100
+
+
+def _png(fig: Any) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
+    return base64.b64encode(buf.getvalue()).decode()
+
+
+def _thresholds(summary: dict[str, Any]) -> dict[str, float]:
+    alerts = (summary.get("settings") or {}).get("alerts") or {}
+    default = AlertConfig()
+    return {"CAUTION": float((alerts.get("caution") or {}).get("on", default.caution.on)),
+            "WARNING": float((alerts.get("warning") or {}).get("on", default.warning.on))}
+
+
+def timelines(drive: Drive) -> str:
+    """The sectors', the state's and the latency's timelines in one picture (base64 PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    recs = [r for r in drive.records if r.alert is not None]
+    t = np.array([r.t for r in recs])
+    on = _thresholds(drive.summary)
+    converged = (drive.summary.get("camera") or {}).get("calibration", {}).get("converged_at") or {}
+    t_conv = next((r.t for r in drive.records if r.frame + 1 == converged.get("frame")), None)
+    fig, axes = plt.subplots(len(SECTORS) + 2, 1, figsize=(12, 2.0 * (len(SECTORS) + 2)), sharex=True,
+                             gridspec_kw={"height_ratios": [3] * len(SECTORS) + [1, 3]})
+    for k, (name, ax) in enumerate(zip(SECTORS, axes, strict=False)):
+        score = np.array([r.alert.sectors[k].score for r in recs])     # type: ignore[union-attr]
+        levels = [r.alert.sectors[k].level.name for r in recs]          # type: ignore[union-attr]
+        for level, colour in LEVEL_COLOURS.items():
+            mask = np.array([lv == level for lv in levels])
+            if mask.any():
+                ax.fill_between(t, 0, 1, where=mask, color=colour, alpha=0.35, step="post", lw=0,
+                                label=f"{level.lower()} level")
+            ax.axhline(on[level], color=colour, ls="--", lw=1, label=f"{level.lower()} starts at")
+        ax.plot(t, score, color="#333", lw=1, label="score (smoothed)")
+        ax.set_ylim(0, 1.02)
+        ax.set_ylabel(f"{name}\nscore")
+        dist = np.array([np.nan if r.alert.sectors[k].distance_m is None     # type: ignore[union-attr]
+                         else r.alert.sectors[k].distance_m for r in recs], np.float64)   # type: ignore[union-attr]
+        twin = ax.twinx()
+        twin.plot(t, dist, ".", ms=2, color="#4e79a7", label="distance")
+        twin.set_ylabel("m", color="#4e79a7")
+        if k == 0:
+            ax.legend(loc="upper left", fontsize=7, ncol=3)
+    state_ax, lat_ax = axes[len(SECTORS)], axes[len(SECTORS) + 1]
+    for a, b, state in drive.states():
+        state_ax.axvspan(a, b if b > a else a + 1e-3, color=STATE_COLOURS.get(state, "#999"), lw=0)
+    for tf, _, _fault in drive.faults():
+        state_ax.plot([tf], [0.5], "kx", ms=5)
+    state_ax.set_yticks([])
+    state_ax.set_ylabel("state\nx: fault", fontsize=8)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in STATE_COLOURS.values()]
+    state_ax.legend(handles, list(STATE_COLOURS), loc="upper right", fontsize=7, ncol=4)
+    timed = [r for r in drive.records if r.stage_ms]
+    if timed:
+        tt = np.array([r.t for r in timed])
+        stacks = [np.array([r.stage_ms.get(s, 0.0) for r in timed]) for s in STAGES]
+        lat_ax.stackplot(tt, *stacks, labels=list(STAGES), alpha=0.8)
+        lat_ax.legend(loc="upper left", fontsize=7, ncol=len(STAGES))
+    lat_ax.set_ylabel("ms per frame")
+    lat_ax.set_xlabel("time in the source (s)")
+    if t_conv is not None:
+        for ax in axes:
+            ax.axvline(t_conv, color="k", lw=0.8, ls=":")
+        axes[0].annotate("calibrated", (t_conv, 1.0), fontsize=7, ha="left", va="top")
+    fig.tight_layout()
+    out = _png(fig)
+    plt.close(fig)
+    return out
+
+
+def thumbnails(overlay: str | Path, onsets: list[Onset]) -> dict[int, str]:
+    """A JPEG (base64) of the overlay's frame at each onset's frame, by frame index (the first
+    :data:`MAX_THUMBS` onsets)."""
+    import cv2
+
+    cap = cv2.VideoCapture(str(overlay))
+    out: dict[int, str] = {}
+    try:
+        for o in onsets[:MAX_THUMBS]:
+            if o.frame in out:
+                continue
+            cap.set(cv2.CAP_PROP_POS_FRAMES, o.frame)
+            ok, frame = cap.read()
+            if not ok:
+                continue
+            h, w = frame.shape[:2]
+            small = cv2.resize(frame, (THUMB_WIDTH, max(1, round(h * THUMB_WIDTH / w))), interpolation=cv2.INTER_AREA)
+            ok, jpg = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, 80])
+            if ok:
+                out[o.frame] = base64.b64encode(jpg.tobytes()).decode()
+    finally:
+        cap.release()
+    return out
+
+
+def _table(rows: list[list[Any]], head: list[str]) -> str:
+    cells = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table><tr>{cells}</tr>{body}</table>"
+
+
+def page(drive: Drive, record: dict[str, Any], picture: str, thumbs: dict[int, str], title: str) -> str:
+    """The HTML page: ``record`` is ``report.json``'s content, ``picture`` the timelines (base64 PNG)."""
+    e = html.escape
+    ident, cal = record["identity"], record["calibration"]
+    model = ident["model"]
+    parts = [f"<h1>{e(title)}</h1>",
+             "<h2>The run</h2>",
+             _table([["source", e(str(ident.get("source")))],
+                     ["model", e(f"{model.get('variant')}, graph {str(model.get('graph_sha256') or '')[:16]}, "
+                                 f"config {model.get('config_digest')}, threshold {model.get('threshold')}")],
+                     ["signed by", e(str(model.get("signer")) if model.get("authentic") else "NOT a trusted key")],
+                     ["settings digest", e(str(ident.get("settings_digest")))],
+                     ["machine", e(json.dumps(ident.get("machine")))],
+                     ["frames", f"{record['frames']} ({record['valid_frames']} with levels)"]], ["", ""]),
+             "<h2>Calibration</h2>",
+             _table([["camera from", e(str(cal.get("source")))],
+                     ["first guess", e(json.dumps(cal.get("first_guess")))],
+                     ["converged", e(json.dumps(cal.get("converged_at")) if cal.get("converged_at") else "no")],
+                     ["mounting", e(json.dumps(cal.get("mounting")))],
+                     ["hood", e(json.dumps(cal.get("hood")))]], ["", ""]),
+             "<h2>Timelines</h2>",
+             f'<img alt="timelines" src="data:image/png;base64,{picture}" style="max-width:100%">',
+             "<p>Per sector: the smoothed score (line) against the CAUTION and WARNING thresholds (dashed), the "
+             "level (shading) and the distance to the nearest blind spot (dots, right axis); the system state and "
+             "the frames with a fault (x); each stage's milliseconds per frame. The dotted line: calibration "
+             "converged.</p>",
+             "<h2>Level onsets</h2>"]
+    rows = []
+    for o in record["onsets"]:
+        img = thumbs.get(o["frame"])
+        pic = f'<img src="data:image/jpeg;base64,{img}" width="{THUMB_WIDTH}">' if img else ""
+        dist = "" if o["distance_m"] is None else f"{o['distance_m']:.1f} m"
+        rows.append([e(o["sector"]), e(o["level"]), f"{o['t']:.2f} s", o["frame"], dist, pic])
+    parts.append(_table(rows, ["sector", "level", "time", "frame", "distance", "overlay"]) if rows
+                 else "<p>No level was raised.</p>")
+    lat = record["latency_ms"]
+    parts += ["<h2>Latency (ms)</h2>",
+              _table([[e(s), *(f"{v:.2f}" for v in p.values())] for s, p in lat.items()],
+                     ["stage", "p50", "p95", "p99"])]
+    check = record.get("bus_check")
+    if check is not None:
+        verdict = "the bus carried every onset of the frame log, and no other" if check["agree"] \
+            else "<b>the bus and the frame log DISAGREE</b>"
+        parts += ["<h2>The bus against the frame log</h2>", f"<p>{verdict}.</p>",
+                  _table([[e(n), s["log"], s["bus"], e(", ".join(s["only_in_log"]) or "-"),
+                           e(", ".join(s["only_on_bus"]) or "-")] for n, s in check["sectors"].items()],
+                         ["sector", "onsets in the log", "on the bus", "only in the log", "only on the bus"])]
+    if record["damaged_lines"]:
+        parts += ["<h2>Damaged lines of the frame log</h2>",
+                  _table([[d["line"], e(d["why"])] for d in record["damaged_lines"]], ["line", "why"])]
+    style = ("body{font-family:sans-serif;max-width:1300px;margin:auto}table{border-collapse:collapse;margin:8px 0}"
+             "td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px;text-align:left}")
+    return (f"<!doctype html><html><head><meta charset='utf-8'><title>{e(title)}</title><style>{style}</style>"
+            f"</head><body>{''.join(parts)}</body></html>\n")

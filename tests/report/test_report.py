@@ -1,0 +1,127 @@
+"""bsn-report: the onsets, states and latency of a drive read from its frame log, checked against onsets
+written by hand, against the CAN log decoded with cantools (not the project's decoder), and a damaged log
+still reported with the damage named."""
+
+import json
+
+import can
+import cantools
+import numpy as np
+import pytest
+
+from bsn_edge.alerts.can_codec import DBC_PATH
+from bsn_edge.alerts.senders import CanSender
+from bsn_edge.cli import report as report_cli
+from bsn_edge.report import make_report, read_drive
+from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
+from tests.fakes import long_video, mounted
+
+
+def _line(frame, levels, state="OK", scores=(0.1, 0.1, 0.1), distances=(None, None, None), **extra):
+    return json.dumps({"frame": frame, "t": frame / 10, "levels": list(levels), "scores": list(scores),
+                       "distances": list(distances), "state": state, "latency_ms": 20.0,
+                       "stage_ms": {"decode": 5.0, "inference": 10.0}, **extra})
+
+
+def test_onsets_states_and_damage_as_written_by_hand(tmp_path):
+    """Each rise of a sector's level is an onset (NONE -> CAUTION, CAUTION -> WARNING, NONE -> WARNING), a fall
+    is none; a line cut by a kill and a line that is not UTF-8 are named by number, the rest read."""
+    n, c, w = "NONE", "CAUTION", "WARNING"
+    lines = [_line(0, (n, n, n), "CALIBRATING"), _line(1, (c, n, n), "CALIBRATING", distances=(8.0, None, None)),
+             _line(2, (w, n, w), distances=(6.5, None, 3.0)), '{"frame": 3, "t": 0.3, "lev',
+             _line(4, (n, n, w)), json.dumps({"frame": 5, "t": 0.5, "fault": "decode_errors"}),
+             _line(6, (c, c, n), "DEGRADED")]
+    log = tmp_path / "log.jsonl"
+    log.write_bytes(("\n".join(lines) + "\n").encode() + b"\xff\xfe not text\n")
+    drive = read_drive(log)
+    got = [(o.sector, o.level, o.frame, o.distance_m) for o in drive.onsets]
+    assert got == [("LEFT", c, 1, 8.0), ("LEFT", w, 2, 6.5), ("RIGHT", w, 2, 3.0), ("LEFT", c, 6, None),
+                   ("CENTRE", c, 6, None)]
+    assert [(d.line) for d in drive.damage] == [4, 8]
+    assert [s for _, _, s in drive.states()] == ["CALIBRATING", "OK", "DEGRADED"]
+    assert drive.faults() == [(0.5, 5, "decode_errors")]
+    assert drive.latency()["inference"] == {"p50": 10.0, "p95": 10.0, "p99": 10.0}
+    out = tmp_path / "report"
+    record = make_report(log, out, say=lambda s: None)
+    assert record["damaged_lines"][0]["line"] == 4 and (out / "report.html").read_text().count("<h2>") >= 5
+    assert json.loads((out / "report.json").read_text())["onsets"][1] == {
+        "sector": "LEFT", "level": "WARNING", "t": 0.2, "frame": 2, "distance_m": 6.5}
+
+
+class Blinking(Engine):
+    """After its self-test: a near blind spot over the frame for 30 frames, none for 30, then again."""
+
+    on = False
+    calls = 0
+
+    def infer(self, batch):
+        prob, depth = super().infer(batch)
+        if not self.on:
+            return prob, depth
+        self.calls += 1
+        near = (self.calls - 1) // 30 % 2 == 0
+        return (np.ones_like(prob) if near else np.zeros_like(prob)), np.full_like(depth, 2.0)
+
+
+def test_the_reports_onsets_are_the_buses_decoded_with_cantools(setup, tmp_path):
+    model, clip = setup
+    video = long_video(clip, tmp_path / "long.mp4", 6)         # 90 frames
+    log, can_log = tmp_path / "log.jsonl", tmp_path / "c.log"
+    engine = Blinking(model)
+    engine.on = True
+    with CanSender("virtual", "bsn-report", log_path=str(can_log)) as tx:
+        run(engine, open_source(str(video)), [tx], RuntimeConfig(cycle_s=0.1, warmup=0), log=log,
+            camera=mounted(engine, clip))
+    record = make_report(log, tmp_path / "report", can_log=can_log, say=lambda s: None)
+    # the bus's onsets, decoded here with cantools from the DBC
+    db = cantools.database.load_file(str(DBC_PATH))
+    hazard = db.get_message_by_name("BSN_Hazard")
+    last, bus = {}, []
+    for msg in can.LogReader(str(can_log)):
+        if msg.arbitration_id == hazard.frame_id:
+            values = hazard.decode(bytes(msg.data), decode_choices=False)
+            for side in ("Left", "Centre", "Right"):
+                level = int(values[f"{side}_Level"])
+                if level > last.get(side, 0):
+                    bus.append((side.upper(), ("NONE", "CAUTION", "WARNING")[level]))
+                last[side] = level
+    mine = [(o["sector"], o["level"]) for o in record["onsets"]]
+    assert len(mine) >= 4 and sorted(mine) == sorted(bus)
+    assert record["bus_check"]["agree"]
+
+
+def test_an_existing_report_is_refused_without_force_and_a_missing_log_is_named(tmp_path, capsys):
+    log = tmp_path / "log.jsonl"
+    log.write_text(_line(0, ("NONE",) * 3) + "\n")
+    out = tmp_path / "r"
+    assert report_cli.main([str(log), "--out", str(out)]) == 0
+    assert report_cli.main([str(log), "--out", str(out)]) == 2
+    assert "exists; pass --force" in capsys.readouterr().err
+    assert report_cli.main([str(log), "--out", str(out), "--force"]) == 0
+    assert report_cli.main([str(tmp_path / "nope.jsonl"), "--out", str(tmp_path / "r2")]) == 2
+    assert "nope.jsonl not found" in capsys.readouterr().err and not (tmp_path / "r2").exists()
+
+
+def test_without_matplotlib_it_says_which_install_brings_it(tmp_path, capsys, monkeypatch):
+    import builtins
+
+    real = builtins.__import__
+
+    def no_matplotlib(name, *args, **kw):
+        if name.split(".")[0] == "matplotlib":
+            raise ModuleNotFoundError("No module named 'matplotlib'", name="matplotlib")
+        return real(name, *args, **kw)
+
+    monkeypatch.setattr(builtins, "__import__", no_matplotlib)
+    assert report_cli.main([str(tmp_path / "log.jsonl"), "--out", str(tmp_path / "r")]) == 2
+    assert "bsn-edge[report]" in capsys.readouterr().err
+
+
+@pytest.fixture
+def setup(tmp_path_factory, small_light_onnx):
+    from bsn_edge.synth import SynthConfig, write_clip
+
+    root = tmp_path_factory.mktemp("report")
+    clip = root / "clip"
+    write_clip(SynthConfig(frames=15, height=96, width=192, seed=2), clip)
+    return small_light_onnx((128, 256)), clip
