@@ -29,7 +29,7 @@ from benchmarks import runner
 from benchmarks.common import summary, time_calls
 from benchmarks.runner import Report
 from bsn_edge.export.calib_frames import load_frames
-from bsn_edge.export.pipeline import export_run
+from bsn_edge.export.pipeline import compare, export_run
 from bsn_edge.modelfile.read import session
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,19 +47,6 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="benchmarks/results")
     p.add_argument("--name", default="prune", help="the report's name in --out")
     return p
-
-
-def _compare(a: Any, b: Any, frames: np.ndarray, threshold: float) -> dict[str, float]:
-    dp, agree, rel = 0.0, [], []
-    for f in frames:
-        pa, da = a.run(None, {"frame": f[None]})
-        pb, db = b.run(None, {"frame": f[None]})
-        dp = max(dp, float(np.abs(pa - pb).max()))
-        agree.append(float(((pa >= threshold) == (pb >= threshold)).mean()))
-        rel.append(np.abs(da - db) / np.maximum(da, 1e-3))
-    every = np.concatenate([r.ravel() for r in rel])
-    return {"max_abs_prob": dp, "mask_agreement": float(np.mean(agree)), "max_rel_depth": float(every.max()),
-            "median_rel_depth": float(np.median(every))}
 
 
 def _avx2_model_only(name: str = "shared_light_int8.onnx") -> tuple[float, str] | None:
@@ -90,8 +77,8 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
         card = outs["pruned"]["card"]
         frames = load_frames(drive, tuple(card["input_size"]), args.compare)
         sessions = {k: session(v) for k, v in paths.items()}
-        same = {"int8": _compare(sessions["unpruned"], sessions["pruned"], frames, card["threshold"]),
-                "fp32": _compare(session(fp32["unpruned"]), session(fp32["pruned"]), frames, card["threshold"])}
+        same = {"int8": compare(paths["unpruned"], paths["pruned"], frames, card["threshold"]),
+                "fp32": compare(fp32["unpruned"], fp32["pruned"], frames, card["threshold"])}
         sizes = {k: v.stat().st_size for k, v in paths.items()}
         frame = frames[:1]
         times: dict[str, list[float]] = {k: [] for k in sessions}
@@ -124,7 +111,7 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
         "| pruned vs unpruned | max abs probability | mask agreement | depth rel. difference, median / max |",
         "|---|---|---|---|",
         *(f"| {k} | {v['max_abs_prob']:.2e} | {100 * v['mask_agreement']:.3f} % | "
-          f"{v['median_rel_depth']:.1e} / {v['max_rel_depth']:.1e} |"
+          f"{v['depth_median_rel']:.1e} / {v['depth_max_rel']:.1e} |"
           for k, v in same.items()),
         "", "fp32 differs only by float summation order; int8 also by the calibration ranges, which the removed "
         "channels no longer take part in.",

@@ -19,6 +19,20 @@ SMOKE = str(CHECKOUT / "configs" / "smoke.toml")   # the tests' training config
 SHIPPED = DEFAULT_MODEL                                # the shipped default model
 
 
+class SimClock:
+    """Time that moves only when a heartbeat waits on it; its wait says stop past ``until``."""
+
+    def __init__(self, until: float, start: float = 100.0) -> None:
+        self.now, self.until = start, start + until
+
+    def __call__(self) -> float:
+        return self.now
+
+    def wait(self, seconds: float) -> bool:
+        self.now += seconds
+        return self.now >= self.until
+
+
 class FullBus:
     """A CAN bus whose transmit buffer is always full."""
 

@@ -441,18 +441,10 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
         check_outputs(_output_files(args), args.force)
     except (ValueError, OSError) as e:
         return _refuse_outputs(args, str(e))
-    try:
-        cfg = runtime_settings(args)
-    except ValueError as e:                           # the buses the flags name still hear UNAVAILABLE
-        try:
-            senders = make_senders(args)
-        except ValueError as e2:
-            return fail(PROG, f"{e}; {e2}")
-        return refuse(senders, str(e), args.summary)
-    try:
-        senders = make_senders(args, cfg.bus)
-    except ValueError as e:
-        return fail(PROG, str(e))
+    configured = _configured(args)
+    if isinstance(configured, int):
+        return configured
+    cfg, senders = configured
     try:                                              # from here a refusal is UNAVAILABLE on the bus and,
         # the outputs being free, said in the summary
         engine, camera, source, maps = _start(args, cfg)
@@ -488,12 +480,28 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
         source.close()
         for s in senders:
             s.close()
-    summary["signal"] = stopper.signal
     from bsn_edge.runtime.config_file import digest, to_dict
     from bsn_edge.runtime.run_summary import machine
-    summary["source"], summary["machine"] = args.source, machine()
-    summary["settings"], summary["settings_digest"] = to_dict(cfg), digest(cfg)
+    summary.update(signal=stopper.signal, source=args.source, machine=machine(), settings=to_dict(cfg),
+                   settings_digest=digest(cfg))
     return _report(summary, args, camera, senders, stopper)
+
+
+def _configured(args: argparse.Namespace) -> tuple[RuntimeConfig, list[Sender]] | int:
+    """The settings (``--config``, ``--set``, the shorthands) and the senders the flags or the settings name;
+    an exit code when either is refused (settings refused: UNAVAILABLE to the buses the flags name)."""
+    try:
+        cfg = runtime_settings(args)
+    except ValueError as e:
+        try:
+            senders = make_senders(args)
+        except ValueError as e2:
+            return fail(PROG, f"{e}; {e2}")
+        return refuse(senders, str(e), args.summary)
+    try:
+        return cfg, make_senders(args, cfg.bus)
+    except ValueError as e:
+        return fail(PROG, str(e))
 
 
 def _start(args: argparse.Namespace, cfg: RuntimeConfig):

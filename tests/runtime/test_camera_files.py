@@ -23,6 +23,20 @@ def _edited(clip, tmp_path, **change) -> str:
     return str(out)
 
 
+def _refused_with_unavailable_only(model, clip, camera_file, capsys) -> str:
+    """bsn-run with ``camera_file``: exit 2, only UNAVAILABLE on the bus; what it said."""
+    with can.Bus(interface="virtual", channel="bsn-camfile") as rx:
+        rc = run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--calib", camera_file,
+                           "--can", "virtual:bsn-camfile"])
+        msgs = [decode(m.arbitration_id, bytes(m.data)) for m in iter(lambda: rx.recv(0.2), None)]
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "UNAVAILABLE sent" in err
+    states = [SystemState(int(d.signals["System_State"])) for d in msgs if d is not None and d.name == "BSN_Status"]
+    assert states == [SystemState.UNAVAILABLE]
+    return err
+
+
 @pytest.mark.parametrize(("change", "says"), [
     ({"dist": [float("nan"), 0.0, 0.0, 0.0, 0.0]}, "dist must hold finite numbers"),
     ({"dist": [1e6, 0.0, 0.0, 0.0, 0.0]}, "dist must hold finite numbers within"),
@@ -41,15 +55,8 @@ def test_a_camera_that_cannot_exist_is_refused_with_the_field_named(setup, tmp_p
     bad = _edited(clip, tmp_path, **change)
     with pytest.raises(ValueError, match=says):
         Calibration.read(bad)
-    with can.Bus(interface="virtual", channel="bsn-camfile") as rx:
-        rc = run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--calib", bad,
-                           "--can", "virtual:bsn-camfile"])
-        msgs = [decode(m.arbitration_id, bytes(m.data)) for m in iter(lambda: rx.recv(0.2), None)]
-    assert rc == 2
-    err = capsys.readouterr().err
-    assert says.split()[0] in err and "UNAVAILABLE sent" in err
-    states = [SystemState(int(d.signals["System_State"])) for d in msgs if d is not None and d.name == "BSN_Status"]
-    assert states == [SystemState.UNAVAILABLE]
+    err = _refused_with_unavailable_only(model, clip, bad, capsys)
+    assert says.split()[0] in err
 
 
 def test_a_camera_file_of_a_hood_alone_is_refused_with_how_to_make_the_rest(tmp_path, capsys):
@@ -250,17 +257,21 @@ def test_dist_is_a_list_of_numbers_in_a_count_opencv_takes(setup, tmp_path, dist
 def test_a_camera_file_whose_camera_shows_the_model_almost_nothing_is_refused(setup, tmp_path, capsys):
     """A 10-degree lens pitched 27 degrees: found by the run-level property test running with status OK and
     never a level (nothing it saw was in the model's view). Refused before the first frame, naming the
-    share; the same lens straight ahead shows 1 % and is refused too, a 60-degree one passes."""
+    share; the same lens straight ahead is refused too, a 60-degree one passes."""
     model, clip = setup
     d = json.loads((clip / "calibration.json").read_text())
     narrow = d["width"] / (2 * math.tan(math.radians(5.0)))
     bad = _edited(clip, tmp_path, fx=narrow, fy=narrow, mounting=dict(d["mounting"], pitch_deg=27.0))
-    with can.Bus(interface="virtual", channel="bsn-camview") as rx:
-        rc = run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--calib", bad,
-                           "--can", "virtual:bsn-camview"])
-        msgs = [decode(m.arbitration_id, bytes(m.data)) for m in iter(lambda: rx.recv(0.2), None)]
-    assert rc == 2
-    err = capsys.readouterr().err
-    assert "% of the model's view; at least 10 % is needed" in err and "UNAVAILABLE sent" in err
-    states = [SystemState(int(x.signals["System_State"])) for x in msgs if x is not None and x.name == "BSN_Status"]
-    assert states == [SystemState.UNAVAILABLE]
+    assert "% of the model's view; at least 10 % is needed" in _refused_with_unavailable_only(model, clip, bad, capsys)
+    from bsn_edge.runtime import Engine
+    from bsn_edge.runtime.camera_state import CameraState
+
+    card = Engine(model).card
+    for hfov, refused in ((10.0, True), (60.0, False)):
+        fx = d["width"] / (2 * math.tan(math.radians(hfov / 2)))
+        camera = CameraState(card, Calibration.read(_edited(clip, tmp_path, fx=fx, fy=fx)))
+        if refused:
+            with pytest.raises(ValueError, match="of the model's view"):
+                camera.check_view(d["width"], d["height"])
+        else:
+            assert camera.check_view(d["width"], d["height"]) >= 0.3

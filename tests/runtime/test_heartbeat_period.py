@@ -11,20 +11,7 @@ from bsn_edge.alerts.can_codec import STATUS, decode
 from bsn_edge.alerts.health import Health
 from bsn_edge.alerts.senders import Sender
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
-
-
-class SimClock:
-    """Time that moves only when the heartbeat waits; it says stop past ``until``."""
-
-    def __init__(self, until: float, start: float = 100.0) -> None:
-        self.now, self.until = start, start + until
-
-    def __call__(self) -> float:
-        return self.now
-
-    def wait(self, seconds: float) -> bool:
-        self.now += seconds
-        return self.now >= self.until
+from tests.fakes import SimClock
 
 
 class Stamped(Sender):

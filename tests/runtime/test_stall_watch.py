@@ -19,21 +19,7 @@ from bsn_edge.alerts.health import Health, HealthConfig
 from bsn_edge.alerts.senders import CanSender, Sender
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.cycle import CycleEmitter, StallWatch
-from tests.fakes import long_video, mounted
-
-
-class SimClock:
-    """Time that moves only when the watch waits; it says stop past ``until``."""
-
-    def __init__(self, until: float, start: float = 100.0) -> None:
-        self.now, self.until = start, start + until
-
-    def __call__(self) -> float:
-        return self.now
-
-    def wait(self, seconds: float) -> bool:
-        self.now += seconds
-        return self.now >= self.until
+from tests.fakes import SimClock, long_video, mounted
 
 
 class Stamped(Sender):
