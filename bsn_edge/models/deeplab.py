@@ -6,6 +6,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from bsn_edge.models.encoder_base import Encoder
 from bsn_edge.models.upsample import Upsample
 
 
@@ -85,7 +86,7 @@ class SegmentationHead(nn.Module):
 class EncoderDecoder(nn.Module):
     """Encoder -> DeepLabV3+ decoder -> head. ``forward`` returns ``(logits, decoder features)``."""
 
-    def __init__(self, encoder: nn.Module, classes: int, width: int = 256, separable: bool = False) -> None:
+    def __init__(self, encoder: Encoder, classes: int, width: int = 256, separable: bool = False) -> None:
         super().__init__()
         self.encoder = encoder
         self.decoder = DeepLabV3PlusDecoder(encoder.out_channels, width, separable=separable,

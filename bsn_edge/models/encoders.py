@@ -9,11 +9,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-
-from torch import nn
+from typing import Any
 
 from bsn_edge.models.efficientnet_lite import WEIGHTS_LICENCE, WEIGHTS_ORIGIN, WEIGHTS_PACKAGE, EfficientNetLite0
 from bsn_edge.models.efficientnet_lite import load_imagenet as _load_lite0
+from bsn_edge.models.encoder_base import Encoder
 from bsn_edge.models.resnet import ResNetEncoder
 
 
@@ -23,12 +23,12 @@ class EncoderInfo:
     supports, and its pretrained weights (``None`` when it has none): where they come from, their
     licence, the package that ships them and the function that loads them into a built encoder."""
 
-    build: Callable[[int, int], nn.Module]
+    build: Callable[[int, int], Encoder]
     output_strides: tuple[int, ...]
     weights_origin: str = ""
     weights_licence: str = ""
     weights_package: str = ""
-    load_pretrained: Callable[[nn.Module], object] | None = None
+    load_pretrained: Callable[[Any], object] | None = None
 
 
 ENCODERS: dict[str, EncoderInfo] = {
@@ -45,7 +45,7 @@ def encoder_info(name: str) -> EncoderInfo:
         raise ValueError(f"unknown encoder {name!r}; valid: {', '.join(ENCODERS)}") from None
 
 
-def make_encoder(name: str, in_channels: int = 3, output_stride: int = 32, pretrained: bool = False) -> nn.Module:
+def make_encoder(name: str, in_channels: int = 3, output_stride: int = 32, pretrained: bool = False) -> Encoder:
     """A ``name`` encoder; with ``pretrained``, its published weights loaded (ValueError for an
     encoder that has none)."""
     info = encoder_info(name)

@@ -6,6 +6,7 @@ import hashlib
 import io
 from dataclasses import asdict, dataclass, replace
 from enum import StrEnum
+from typing import Any
 
 import torch
 from torch import nn
@@ -14,6 +15,7 @@ from bsn_edge.camera import Intrinsics
 from bsn_edge.card import ModelCard
 from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, DepthNet
 from bsn_edge.models.deeplab import EncoderDecoder
+from bsn_edge.models.encoder_base import Encoder
 from bsn_edge.models.encoders import ENCODERS, encoder_info, make_encoder
 from bsn_edge.models.resnet import DEPTHS as RESNET_DEPTHS
 from bsn_edge.models.resnet import ResNetEncoder
@@ -74,7 +76,8 @@ class ModelSpec:
 
 # The light variant is what a 2-core CPU runs in real time: a light decoder, encoders at output
 # stride 32, and both networks on the frame at half size (outputs come back at full size).
-_LIGHT = {"decoder_width": 64, "separable": True, "output_stride": 32, "input_scale": 0.5, "depth_width": 32}
+_LIGHT: dict[str, Any] = {"decoder_width": 64, "separable": True, "output_stride": 32, "input_scale": 0.5,
+                          "depth_width": 32}
 MODELS: dict[str, ModelSpec] = {
     "small": ModelSpec(),
     "small-light": ModelSpec(**_LIGHT),
@@ -191,7 +194,7 @@ def create_teacher(encoder: str | int = "resnet18", width: int = 128, pretrained
     encoder starts from its published weights (ImageNet), for a teacher about to be trained."""
     name = teacher_encoder(encoder, pretrained)
     if name.startswith("resnet"):
-        enc: nn.Module = ResNetEncoder(int(name.removeprefix("resnet")), 3)
+        enc: Encoder = ResNetEncoder(int(name.removeprefix("resnet")), 3)
     else:
         enc = make_encoder(name, 3, max(encoder_info(name).output_strides), pretrained=pretrained)
     return EncoderDecoder(enc, NUM_CLASSES, width)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from torch import Tensor, nn
 
+from bsn_edge.models.encoder_base import Encoder
+
 
 def shortcut(cin: int, cout: int, stride: int) -> nn.Module | None:
     """The residual branch's projection when the block changes size or width (else identity)."""
@@ -57,7 +59,7 @@ class Bottleneck(nn.Module):
         return self.relu(self.bn3(self.conv3(y)) + idt)
 
 
-DEPTHS: dict[int, tuple[type[nn.Module], tuple[int, int, int, int]]] = {
+DEPTHS: dict[int, tuple[type[BasicBlock] | type[Bottleneck], tuple[int, int, int, int]]] = {
     18: (BasicBlock, (2, 2, 2, 2)),
     34: (BasicBlock, (3, 4, 6, 3)),
     50: (Bottleneck, (3, 4, 6, 3)),
@@ -65,7 +67,7 @@ DEPTHS: dict[int, tuple[type[nn.Module], tuple[int, int, int, int]]] = {
 }
 
 
-class ResNetEncoder(nn.Module):
+class ResNetEncoder(Encoder):
     """ResNet-{18, 34, 50, 101} with ``in_channels`` inputs.
 
     ``forward`` returns features at strides 4, 8, 16 and ``output_stride``: at 16 the last stage

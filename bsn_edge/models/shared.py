@@ -15,6 +15,7 @@ from torch import Tensor, nn
 
 from bsn_edge.models.bsn import LOG_MAX_DEPTH, LOG_MIN_DEPTH, BlindSpotNet
 from bsn_edge.models.deeplab import DeepLabV3PlusDecoder, SegmentationHead, aspp_rates, conv_bn_relu
+from bsn_edge.models.encoder_base import Encoder
 from bsn_edge.models.resnet import ResNetEncoder
 
 DEPTH_CHANNELS = 16     # B's learnt view of the depth feature, so int8 concatenation keeps its scale
@@ -27,7 +28,7 @@ class SharedDepth(nn.Module):
     Log-depth is held to D's range at the decoder's stride and then interpolated, which keeps it
     in range, so every resizing after that is linear in log-depth."""
 
-    def __init__(self, encoder: nn.Module, width: int, separable: bool = True) -> None:
+    def __init__(self, encoder: Encoder, width: int, separable: bool = True) -> None:
         super().__init__()
         self.encoder = encoder
         self.decoder = DeepLabV3PlusDecoder(encoder.out_channels, width, separable=separable,
@@ -80,9 +81,12 @@ class SharedEncoderBSN(BlindSpotNet):
 
     ``depth_net`` owns the encoder, so freezing it (``bsn-adapt``) leaves B's decoder to learn."""
 
+    depth_net: SharedDepth
+    blindspot: DepthAwareDecoder
+
     def __init__(self, encoder_depth: int = 18, output_stride: int = 32, decoder_width: int = 64,
                  depth_width: int = 32, separable: bool = True, use_depth: bool = True,
-                 input_scale: float = 1.0, oracle_depth: bool = False, encoder: nn.Module | None = None) -> None:
+                 input_scale: float = 1.0, oracle_depth: bool = False, encoder: Encoder | None = None) -> None:
         # ``encoder``: any module publishing out_channels and strides (default: a ResNet of encoder_depth)
         encoder = encoder if encoder is not None else ResNetEncoder(encoder_depth, 3, output_stride)
         d = SharedDepth(encoder, depth_width)       # D's decoder is separable in both layouts
