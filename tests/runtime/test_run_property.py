@@ -13,6 +13,7 @@ import json
 import math
 
 import numpy as np
+import pytest
 
 from bsn_edge.alerts import Level, SystemState
 from bsn_edge.alerts.can_codec import HAZARD, STATUS, decode
@@ -24,8 +25,9 @@ from bsn_edge.runtime.config_file import load_runtime_config
 from tests.fakes import long_video
 
 OCCLUDER_M = 1.0     # metres in the model camera: 3.3 m from the highest camera a file may hold (5 m)
-EXAMPLES = 30       # derandomized, so CI runs the same examples every time (run with more to explore)
-CAMERA_EXAMPLES = 45    # most random camera files are refused: more of them, for as many runs
+# derandomized, so CI runs the same examples every time; the slow-marked runs explore more (pytest -m slow)
+EXAMPLES, THOROUGH = 12, 60
+CAMERA_EXAMPLES, CAMERA_THOROUGH = 25, 120     # most random camera files are refused: more of them
 
 
 class OccluderEngine(Engine):
@@ -160,27 +162,44 @@ def _runs(setup, tmp_path):
     return check, tally
 
 
-def test_random_settings_are_refused_or_a_near_occluder_raises_a_level(setup, tmp_path):
-    """Every runtime key drawn over its range (its ends included) and a little beyond, with the clip's own
-    camera file."""
+def _settings_property(setup, tmp_path, examples: int) -> None:
     from hypothesis import HealthCheck, given, settings
 
     check, tally = _runs(setup, tmp_path)
-    given(_settings())(settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
+    given(_settings())(settings(max_examples=examples, deadline=None, derandomize=True,
                                 suppress_health_check=[HealthCheck.function_scoped_fixture])(
         lambda pairs: check(pairs, None)))()
     print(tally)
-    assert tally["ran"] >= EXAMPLES // 3, tally
+    assert tally["ran"] >= examples // 3, tally
+
+
+def _camera_property(setup, tmp_path, examples: int) -> None:
+    from hypothesis import HealthCheck, given, settings
+
+    check, tally = _runs(setup, tmp_path)
+    given(_camera())(settings(max_examples=examples, deadline=None, derandomize=True,
+                              suppress_health_check=[HealthCheck.function_scoped_fixture])(
+        lambda cam: check([], cam)))()
+    print(tally)
+    assert tally["ran"] >= examples // 5, tally
+
+
+def test_random_settings_are_refused_or_a_near_occluder_raises_a_level(setup, tmp_path):
+    """Every runtime key drawn over its range (its ends included) and a little beyond, with the clip's own
+    camera file."""
+    _settings_property(setup, tmp_path, EXAMPLES)
 
 
 def test_random_camera_files_are_refused_or_a_near_occluder_raises_a_level(setup, tmp_path):
     """Field of view, lens, mounting and hood drawn over what real cameras have and a little beyond, with
     the runtime's default settings."""
-    from hypothesis import HealthCheck, given, settings
+    _camera_property(setup, tmp_path, CAMERA_EXAMPLES)
 
-    check, tally = _runs(setup, tmp_path)
-    given(_camera())(settings(max_examples=CAMERA_EXAMPLES, deadline=None, derandomize=True,
-                              suppress_health_check=[HealthCheck.function_scoped_fixture])(
-        lambda cam: check([], cam)))()
-    print(tally)
-    assert tally["ran"] >= CAMERA_EXAMPLES // 5, tally
+
+@pytest.mark.slow
+def test_many_random_settings_and_camera_files(setup, tmp_path):
+    """The same properties over five times the examples (about 5 minutes)."""
+    for name in ("settings", "camera"):
+        (tmp_path / name).mkdir()
+    _settings_property(setup, tmp_path / "settings", THOROUGH)
+    _camera_property(setup, tmp_path / "camera", CAMERA_THOROUGH)
