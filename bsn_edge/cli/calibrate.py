@@ -82,6 +82,7 @@ def mount(args) -> int:
         return fail(PROG, str(e))
     cal.write(args.out)
     m, r = cal.mounting, cal.mounting_report
+    assert m is not None and cal.hood is not None     # the mounting step gives both, or raises
     sp = r["spread_deg"]
     se = r["standard_error_deg"]
     print(f"{r['used']} of {r['pairs']} frame pairs used ({r['method']}); standard error pitch {se['pitch']:.2f}, "

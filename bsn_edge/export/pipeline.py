@@ -73,6 +73,7 @@ def export_run(checkpoint: str | Path, out: str | Path, size: tuple[int, int] | 
         summary["fp32_bytes"] = fp32.stat().st_size
         final = fp32
         if int8:
+            assert frames is not None           # int8 without calibration frames was refused above
             print(f"quantizing on {len(frames)} calibration frames ({qcfg.scheme()}) ...", file=log)
             q = Path(tmp) / "int8.onnx"
             info = quantize(fp32, q, frames, qcfg)
@@ -88,6 +89,7 @@ def export_run(checkpoint: str | Path, out: str | Path, size: tuple[int, int] | 
 def write_summary(out: Path, summary: dict[str, Any], sealed: ModelCard) -> None:
     """``summary`` with ``sealed``'s card (its self-test answer elided) as ``out`` with ``.json``."""
     card_record = sealed.to_dict()
+    assert sealed.self_test is not None         # a sealed card has its answer
     card_record["self_test"] = dataclasses.asdict(sealed.self_test) | {"prob": "...", "depth": "..."}
     summary["card"] = card_record
     atomic_write_bytes(Path(out).with_suffix(".json"), (json.dumps(summary, indent=1) + "\n").encode())
@@ -151,5 +153,5 @@ def upgrade_integer_input(src: str | Path, out: str | Path, frames: int = 4) -> 
         quant.get("float_nodes", {}).pop(name, None)
     quant.update(scheme=sealed.quantization, integer_input=dataclasses.asdict(done))
     summary["upgraded_from"] = str(src)
-    write_summary(out, summary, sealed)
+    write_summary(Path(out), summary, sealed)
     return summary

@@ -36,8 +36,8 @@ def new_key(path: str | Path, force: bool = False) -> tuple[Path, Path, str]:
                             serialization.NoEncryption())
     priv.parent.mkdir(parents=True, exist_ok=True)
     fd = os.open(priv, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "wb") as f:
-        f.write(pem)
+    with os.fdopen(fd, "wb") as key_file:
+        key_file.write(pem)
     public = key.public_key()
     atomic_write_bytes(pub, public.public_bytes(serialization.Encoding.PEM,
                                                 serialization.PublicFormat.SubjectPublicKeyInfo))
