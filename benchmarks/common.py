@@ -107,11 +107,15 @@ def summary(seconds: list[float]) -> dict[str, float]:
 
 def portable(text: str) -> str:
     """``text`` with this machine's paths made readable anywhere: the working folder's own prefix
-    dropped (paths relative to the checkout) and the home folder written ``~``."""
+    dropped (paths relative to the checkout), what lies beside it written from it (``../shared/...``,
+    the real data) and the home folder written ``~``."""
     cwd, home = os.getcwd().rstrip("/"), os.path.expanduser("~").rstrip("/")
     if cwd:
         text = text.replace(cwd + "/", "")
-    return text.replace(home + "/", "~/") if home else text
+    if home:
+        text = text.replace(home + "/", "~/")
+    beside = os.path.dirname(cwd) if cwd else ""
+    return text.replace(beside + "/", "../") if beside not in ("", "/") else text
 
 
 def models_parser(description: str, name: str) -> argparse.ArgumentParser:

@@ -81,3 +81,4 @@ def test_camvid_counts_road_users_and_open_road_by_the_stated_rule():
     assert not clear[237:325, 200:250].any() and not clear[261:301, 176:274].any(), "within 25 px of the near car"
     assert clear[350, 65], "the pavement is not an obstacle"
     assert not clear[330:332, 100:105].any()
+
