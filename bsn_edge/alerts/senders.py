@@ -65,7 +65,7 @@ class Sender(ABC):
             self.stats.last_error = "sender is closed"
             return False
         try:
-            self._send(self.encoder.encode(frame, messages) if messages is not None else self.encoder.encode(frame))
+            self._send(self.encoder.encode(frame, messages))
         except Exception as e:  # a transmit failure must never stop the loop
             self.stats.errors += 1
             self.stats.last_error = f"{type(e).__name__}: {e}"

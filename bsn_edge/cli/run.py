@@ -128,8 +128,8 @@ class _PrintDefaults(argparse.Action):
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
                  option_string: str | None = None) -> None:
-        from bsn_edge.runtime.config_file import DEFAULTS_FILE
-        shown = DEFAULTS_FILE.with_name("runtime.schema.json") if option_string == "--print-schema" else DEFAULTS_FILE
+        from bsn_edge.runtime.config_file import DEFAULTS_FILE, SCHEMA_FILE
+        shown = SCHEMA_FILE if option_string == "--print-schema" else DEFAULTS_FILE
         sys.stdout.write(shown.read_text(encoding="utf-8"))
         parser.exit()
 

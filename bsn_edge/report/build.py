@@ -22,7 +22,7 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
     exists unless ``force`` (then only the report's two files are replaced); nothing is written until the
     report is whole. ``say`` is told each step."""
     from bsn_edge.report.can_check import bus_onsets, check
-    from bsn_edge.report.page import page, thumbnails, timelines
+    from bsn_edge.report.page import MAX_THUMBS, page, thumbnails, timelines
 
     out = Path(out)
     if out.exists() and not force:
@@ -44,7 +44,7 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
     picture = timelines(drive)
     thumbs = {}
     if overlay is not None:
-        say(f"cutting {min(len(drive.onsets), 40)} onset thumbnails from {overlay}")
+        say(f"cutting {min(len(drive.onsets), MAX_THUMBS)} onset thumbnails from {overlay}")
         thumbs = thumbnails(overlay, drive.onsets)
     html = page(drive, record, picture, thumbs, f"bsn-run drive report: {Path(log).name}")
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -54,9 +55,10 @@ class Drive:
     damage: list[Damage] = field(default_factory=list)
     summary: dict[str, Any] = field(default_factory=dict)
 
-    @property
+    @cached_property
     def onsets(self) -> list[Onset]:
-        """Every level onset, in the order of the frames (a frame without levels changes nothing)."""
+        """Every level onset, in the order of the frames (a frame without levels changes nothing); worked out
+        once, the page, the bus check and the thumbnails all read it."""
         out: list[Onset] = []
         last = [Level.NONE] * len(SECTORS)
         for rec in self.records:

@@ -32,6 +32,7 @@ from bsn_edge.config_toml import build, merge_overrides, read_toml, unknown
 from bsn_edge.runtime.loop import RuntimeConfig
 
 DEFAULTS_FILE = Path(__file__).with_name("runtime.toml")
+SCHEMA_FILE = DEFAULTS_FILE.with_name("runtime.schema.json")     # written by config_schema, checked by a test
 NESTED: dict[str, type] = {"sectors": SectorConfig, "alerts": AlertConfig, "health": HealthConfig,
                            "bus": BusConfig, "messages": MessageRates}
 LOOP = "runtime"

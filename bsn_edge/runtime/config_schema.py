@@ -14,10 +14,10 @@ import re
 from pathlib import Path
 from typing import Any
 
-from bsn_edge.runtime.config_file import DEFAULTS_FILE, LOOP, NESTED
+from bsn_edge.runtime.config_file import DEFAULTS_FILE, LOOP, NESTED, SCHEMA_FILE
 from bsn_edge.runtime.loop import RuntimeConfig
 
-SCHEMA_FILE = DEFAULTS_FILE.with_name("runtime.schema.json")
+__all__ = ["SCHEMA_FILE", "comments", "reference_page", "schema"]
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
 _TABLE = re.compile(r"^\[([\w.]+)\]\s*(?:#\s?(.*))?$")
 KINDS = {"boolean": "true or false", "integer": "whole number", "string": "text"}     # as the docs say them

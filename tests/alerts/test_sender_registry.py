@@ -12,7 +12,7 @@ from bsn_edge.alerts.senders import SENDERS, CanSender, SerialSender, open_sende
 class Fixed:
     """An encoder of another protocol: one frame of its own, whatever the alert."""
 
-    def encode(self, frame):
+    def encode(self, frame, messages=None):
         return [(0x7AB, b"\x01\x02\x03")]
 
 
