@@ -6,10 +6,10 @@ caller); ``health`` tracks the system state and fault counters; ``senders`` put 
 a CAN bus (DBC ``bsn_alerts.dbc``, alive counter and CRC in every frame) or a serial line.
 """
 
-from bsn_edge.alerts.frame import AlertFrame, SectorAlert
-from bsn_edge.alerts.health import Fault, Health, HealthConfig, SystemState
+from bsn_edge.alerts.frame import AlertFrame, Hazard, SectorAlert
+from bsn_edge.alerts.health import Fault, Health, HealthConfig, Status, SystemState
 from bsn_edge.alerts.sectors import SECTORS, SectorConfig, SectorGeometry, SectorReading
 from bsn_edge.alerts.state_machine import AlertConfig, Level, LevelRule, SectorState
 
-__all__ = ["SECTORS", "AlertConfig", "AlertFrame", "Fault", "Health", "HealthConfig", "Level", "LevelRule",
-           "SectorAlert", "SectorConfig", "SectorGeometry", "SectorReading", "SectorState", "SystemState"]
+__all__ = ["SECTORS", "AlertConfig", "AlertFrame", "Fault", "Hazard", "Health", "HealthConfig", "Level", "LevelRule",
+           "SectorAlert", "SectorConfig", "SectorGeometry", "SectorReading", "SectorState", "Status", "SystemState"]

@@ -1,10 +1,15 @@
-"""What the runtime sends each cycle: per-sector hazard and the system's health."""
+"""What the runtime sends each cycle: per-sector hazard and the system's health.
+
+Two records, each decided once by its owner: the loop's :class:`Hazard` (what the model saw in a frame, smoothed
+per sector) and the send cycle's :class:`~bsn_edge.alerts.health.Status`; an :class:`AlertFrame` is the two at
+one cycle, what the encoders put on a bus and the listeners read back.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from bsn_edge.alerts.health import SystemState
+from bsn_edge.alerts.health import Status, SystemState
 from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
 
@@ -16,9 +21,31 @@ class SectorAlert:
     distance_m: float | None
 
 
+def _one_per_sector(sectors: tuple[SectorAlert, ...]) -> None:
+    if len(sectors) != len(SECTORS):
+        raise ValueError(f"an alert has one reading per sector {SECTORS}, got {len(sectors)}")
+
+
+@dataclass(frozen=True)
+class Hazard:
+    """The loop's word on one frame (``BSN_Hazard``): its time and one smoothed reading per sector."""
+
+    t: float
+    sectors: tuple[SectorAlert, ...]     # one per sector of ``SECTORS``, in its order
+
+    def __post_init__(self) -> None:
+        _one_per_sector(self.sectors)
+
+    @classmethod
+    def none(cls, t: float) -> Hazard:
+        """Nothing to warn of: what goes with an UNAVAILABLE status, whatever the last frame saw."""
+        return cls(t, (SectorAlert(0.0, Level.NONE, None),) * len(SECTORS))
+
+
 @dataclass(frozen=True)
 class AlertFrame:
-    """One cycle's content; senders encode it, listeners decode it back."""
+    """One cycle's content (a :class:`Hazard` and a :class:`Status` at ``t``); senders encode it, listeners
+    decode it back."""
 
     t: float
     sectors: tuple[SectorAlert, ...]     # one per sector of ``SECTORS``, in its order
@@ -27,10 +54,23 @@ class AlertFrame:
     faults: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if len(self.sectors) != len(SECTORS):
-            raise ValueError(f"an alert frame has one reading per sector {SECTORS}, got {len(self.sectors)}")
+        _one_per_sector(self.sectors)
+
+    @classmethod
+    def of(cls, t: float, hazard: Hazard, status: Status) -> AlertFrame:
+        """The cycle at ``t`` carrying ``hazard`` and ``status``: an UNAVAILABLE status carries no hazard."""
+        if status.state == SystemState.UNAVAILABLE:
+            hazard = Hazard.none(t)
+        return cls(t, hazard.sectors, status.state, status.fps, dict(status.faults))
 
     @classmethod
     def unavailable(cls, t: float, faults: dict[str, int] | None = None) -> AlertFrame:
-        none = SectorAlert(0.0, Level.NONE, None)
-        return cls(t, (none,) * len(SECTORS), SystemState.UNAVAILABLE, 0.0, dict(faults or {}))
+        return cls.of(t, Hazard.none(t), Status(SystemState.UNAVAILABLE, 0.0, dict(faults or {})))
+
+    @property
+    def hazard(self) -> Hazard:
+        return Hazard(self.t, self.sectors)
+
+    @property
+    def status(self) -> Status:
+        return Status(self.state, self.fps, dict(self.faults))

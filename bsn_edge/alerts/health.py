@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import threading
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum, StrEnum
 
 from bsn_edge.config_toml import check_fields, setting
@@ -42,6 +42,16 @@ class Fault(StrEnum):
 FAULTS = tuple(Fault)
 # faults that degrade the system for the rest of the run, whatever the frame rate
 DEGRADING = (Fault.SINK_ERRORS,)
+
+
+@dataclass(frozen=True)
+class Status:
+    """The system's word at one send cycle (``BSN_Status``): decided once, by the send cycle, from
+    :meth:`Health.snapshot`; the frame log and the overlay show the one that went on the bus."""
+
+    state: SystemState
+    fps: float                                   # valid inferences a second on the processing clock
+    faults: dict[str, int] = field(default_factory=dict)     # the counters, by :class:`Fault`'s names
 
 
 @dataclass(frozen=True)
@@ -158,9 +168,9 @@ class Health:
         with self._lock:
             return self._state(t, t if wall is None else wall)
 
-    def snapshot(self, t: float, wall: float | None = None) -> tuple[SystemState, float, dict[str, int]]:
-        """State, frame rate and a copy of the counters at ``t`` (``wall`` on the processing clock), read
-        together."""
+    def snapshot(self, t: float, wall: float | None = None) -> Status:
+        """The :class:`Status` at ``t`` (``wall`` on the processing clock): state, frame rate and a copy of
+        the counters, read together."""
         w = t if wall is None else wall
         with self._lock:
-            return self._state(t, w), self._fps(w), {str(f): n for f, n in self._faults.items()}
+            return Status(self._state(t, w), self._fps(w), {str(f): n for f, n in self._faults.items()})

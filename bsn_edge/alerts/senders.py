@@ -1,6 +1,6 @@
 """Senders: where AlertFrames go. A sender that cannot send says so: every failure is counted in
-``stats`` (and reaches the status message through the runtime's fault counters), retried with
-back-off where that helps, and never raised into the caller's loop."""
+``stats`` and reported by the send that met it (:class:`Sent`, which the send cycle adds to the status
+message's fault counters), retried with back-off where that helps, and never raised into the caller's loop."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import errno
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 from bsn_edge.alerts.bus_config import BusConfig
@@ -30,6 +30,19 @@ class SenderStats:
     log_error: str = ""
 
 
+@dataclass(frozen=True)
+class Sent:
+    """What one :meth:`Sender.send` did, as the sender saw it: whether the cycle went out, and the faults it
+    met on the way, by :class:`Fault` (a failed transmit, a full transmit queue, the sender's log given up:
+    the last can happen to a cycle that went out). True when the cycle went out."""
+
+    ok: bool
+    faults: dict[Fault, int] = field(default_factory=dict)
+
+    def __bool__(self) -> bool:
+        return self.ok
+
+
 class Encoder(Protocol):
     """How an AlertFrame becomes the frames a transport carries: ``(id, payload)`` pairs. The encoding is
     the bus protocol's (:class:`~bsn_edge.alerts.can_codec.CanEncoder`: the DBC's hazard and status
@@ -48,6 +61,7 @@ class Sender(ABC):
 
     def __init__(self, encoder: Encoder | None = None) -> None:
         self.stats = SenderStats()
+        self._met: dict[Fault, int] = {}     # the faults met by the send in progress
         self.encoder: Encoder = encoder if encoder is not None else CanEncoder()
         self._closed = False
 
@@ -57,21 +71,29 @@ class Sender(ABC):
     def _close(self) -> None:  # noqa: B027 - optional hook
         pass
 
-    def send(self, frame: AlertFrame, messages: tuple[str, ...] | None = None) -> bool:
-        """Encode and send one cycle (``messages``: the ones due, by name; None: every one); False (and
-        counted) when it could not go out."""
+    def send(self, frame: AlertFrame, messages: tuple[str, ...] | None = None) -> Sent:
+        """Encode and send one cycle (``messages``: the ones due, by name; None: every one); what it did and
+        the faults it met (counted in ``stats`` too). Never raises."""
+        self._met = {}
         if self._closed:
-            self.stats.errors += 1
-            self.stats.last_error = "sender is closed"
-            return False
+            self._failed("sender is closed")
+            return Sent(False, dict(self._met))
         try:
             self._send(self.encoder.encode(frame, messages))
         except Exception as e:  # a transmit failure must never stop the loop
-            self.stats.errors += 1
-            self.stats.last_error = f"{type(e).__name__}: {e}"
-            return False
+            self._failed(f"{type(e).__name__}: {e}")
+            return Sent(False, dict(self._met))
         self.stats.sent += 1
-        return True
+        return Sent(True, dict(self._met))
+
+    def _met_fault(self, fault: Fault) -> None:
+        """Count ``fault`` against the send in progress (a subclass's hook for what its transport meets)."""
+        self._met[fault] = self._met.get(fault, 0) + 1
+
+    def _failed(self, why: str) -> None:
+        self.stats.errors += 1
+        self.stats.last_error = why
+        self._met_fault(self.tx_fault)
 
     def close(self) -> None:
         if not self._closed:
@@ -123,6 +145,7 @@ class CanSender(Sender):
             except self._can.CanOperationError as e:
                 if transmit_buffer_full(e):
                     self.stats.full += 1
+                    self._met_fault(Fault.TX_FULL)
                 raise
             self._log(msg)
         self._flush_log()
@@ -148,6 +171,7 @@ class CanSender(Sender):
     def _log_failed(self, e: Exception) -> None:
         self.stats.log_errors += 1
         self.stats.log_error = f"{type(e).__name__}: {e}"
+        self._met_fault(Fault.SINK_ERRORS)
         logger, self.logger = self.logger, None
         if logger is not None:
             with contextlib.suppress(Exception):

@@ -8,28 +8,19 @@ at any moment of start-up ends the run cleanly.
 from __future__ import annotations
 
 import argparse
-import functools
-import json
-import signal
 import sys
-import threading
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING
 
 from bsn_edge.cli.common import fail
 from bsn_edge.cli.outputs import OutputKind, check_outputs
+from bsn_edge.cli.run_report import PROG, early_summary, report
+from bsn_edge.cli.stop_signal import StopOnSignal, exit_code
 from bsn_edge.default_model import DEFAULT_MODEL
 
 if TYPE_CHECKING:
     from bsn_edge.alerts.bus_config import BusConfig
     from bsn_edge.alerts.senders import Sender
-    from bsn_edge.runtime.camera_state import CameraState
     from bsn_edge.runtime.loop import RuntimeConfig
-
-T = TypeVar("T")
-
-PROG = "bsn-run"
-LOG_CHANNEL = "bsn-can-log"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -174,29 +165,6 @@ def _speed(p: argparse.ArgumentParser) -> None:
 
 CAN_LOG_EXTS = (".log", ".asc", ".blf")   # what python-can writes and bsn-listen reads back
 OVERLAY_EXTS = (".mp4", ".avi", ".mov", ".mkv")   # what OpenCV's mp4v writer fills
-OPEN_DEADLINE_S = 1.0     # a bus or CAN log that has not opened by then never will (a FIFO nobody reads, a hung mount)
-
-
-def open_within(opener: Callable[[], T], seconds: float, what: str) -> T:
-    """``opener()`` on a thread of its own, waited for ``seconds`` at most: its result or its exception;
-    ``TimeoutError`` naming ``what`` when it is still blocked (the thread is left behind, a daemon)."""
-    result: list[Any] = []
-
-    def attempt() -> None:
-        try:
-            result.append((True, opener()))
-        except BaseException as e:  # handed to the caller's thread
-            result.append((False, e))
-
-    t = threading.Thread(target=attempt, name="bsn-open", daemon=True)
-    t.start()
-    t.join(seconds)
-    if not result:
-        raise TimeoutError(f"{what} did not open within {seconds:g} s (a FIFO nobody reads, a hung disk or mount?)")
-    ok, value = result[0]
-    if not ok:
-        raise value
-    return value
 
 
 def runtime_settings(args: argparse.Namespace) -> RuntimeConfig:
@@ -221,41 +189,11 @@ def _output_files(args: argparse.Namespace) -> list[tuple[OutputKind, str | None
 
 def make_senders(args: argparse.Namespace, bus: BusConfig | None = None) -> list[Sender]:
     """The configured senders: the buses the flags name, else the vehicle file's (``bus``, which also
-    gives baud rate and timeouts); ``ValueError`` names the bad option (a sender already opened is
-    closed again)."""
-    from bsn_edge.alerts.bus_config import BusConfig
-    from bsn_edge.alerts.frame import AlertFrame
-    from bsn_edge.alerts.senders import open_sender
+    gives baud rate and timeouts); ``ValueError`` names the bad option (a sender already opened has said
+    UNAVAILABLE and is closed again)."""
+    from bsn_edge.alerts.bus_outputs import bus_outputs, open_senders
 
-    bus = bus or BusConfig()
-    can_bus, serial_port = args.can or bus.can or None, args.serial or bus.serial or None
-    outputs: list[tuple[str, str | None, str]] = []        # (SCHEME:TARGET, its log, what to call it)
-    if can_bus or args.can_log:
-        can = can_bus or f"virtual:{LOG_CHANNEL}"
-        if ":" not in can:
-            raise ValueError(f"--can needs IFACE:CHANNEL, got {args.can!r}")
-        iface, _, channel = can.partition(":")
-        what = f"CAN interface {iface!r} channel {channel!r}" + (f" with its log {args.can_log}" if args.can_log
-                                                                 else "")
-        outputs.append((f"can:{can}", args.can_log, what))
-    if serial_port:
-        outputs.append((f"serial:{serial_port}", None, f"serial port {serial_port!r} at {bus.serial_baud} baud"))
-    senders: list[Sender] = []
-    try:
-        for output, log_path, what in outputs:
-            try:
-                senders.append(open_within(functools.partial(open_sender, output, log_path=log_path, bus=bus),
-                                           OPEN_DEADLINE_S, what))
-            except Exception as e:
-                raise ValueError(f"cannot open {what}: {type(e).__name__}: {e}") from None
-    except BaseException:
-        # a second output that cannot be opened (or Ctrl-C meanwhile): what is open already says so
-        frame = AlertFrame.unavailable(0.0)
-        for s in senders:
-            s.send(frame)
-            s.close()
-        raise
-    return senders
+    return open_senders(bus_outputs(args.can, args.serial, args.can_log, bus), bus)
 
 
 def _refuse_outputs(args: argparse.Namespace, message: str) -> int:
@@ -271,124 +209,11 @@ def _refuse_outputs(args: argparse.Namespace, message: str) -> int:
 def refuse(senders: list[Sender], message: str, summary: str | None = None) -> int:
     """The runtime cannot start: say UNAVAILABLE on every bus first, then the reason, in the summary too
     when one is asked for (``summary``: its path, already checked as an output)."""
-    from bsn_edge.alerts.frame import AlertFrame
+    from bsn_edge.alerts.bus_outputs import last_word
 
-    frame = AlertFrame.unavailable(0.0)
-    for s in senders:
-        s.send(frame)
-        s.close()
-    if summary:
-        from bsn_edge.sequence.images import atomic_write_bytes
-        record = {"frames": 0, "valid_frames": 0, "refused": message, "phase": "start-up"}
-        try:
-            atomic_write_bytes(summary, (json.dumps(record, indent=1) + "\n").encode())
-        except OSError as e:
-            print(f"{PROG}: error: cannot write the summary {summary}: {e}", file=sys.stderr)
+    last_word(senders)
+    early_summary(summary, refused=message)
     return fail(PROG, message + (" (UNAVAILABLE sent)" if senders else ""))
-
-
-STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGINT", "SIGHUP", "SIGQUIT")
-                     if hasattr(signal, name))
-
-
-def exit_code(signame: str | None) -> int:
-    """The exit code of a run a signal ended: 0 for SIGTERM (a service manager's stop), 128 + N for the
-    others (130 SIGINT, 129 SIGHUP, 131 SIGQUIT)."""
-    if signame is None or signame == "SIGTERM":
-        return 0
-    return 128 + int(signal.Signals[signame])
-
-
-class StopOnSignal:
-    """The terminating signals (TERM, as a service manager stops a process; INT, HUP when the terminal
-    or SSH session closes; QUIT) all end the run cleanly: the loop finishes its frame, logs are closed,
-    the summary is written, UNAVAILABLE is sent. The first signal names the stop; any after it change
-    nothing (they are counted). ``keep``: once a signal came, the signals are ignored after the run, so
-    a late one cannot kill the process while it writes its last words or shuts down (the command line);
-    in a program that calls :func:`main` itself the handlers it had come back."""
-
-    def __init__(self, source=None, keep: bool = False) -> None:
-        self.source, self.event = source, threading.Event()
-        self.signal: str | None = None
-        self.later = 0
-        self.keep = keep
-        self._old: dict[int, Any] = {}
-
-    def _handle(self, signum, _frame) -> None:
-        if self.event.is_set():
-            self.later += 1
-            return
-        self.signal = signal.Signals(signum).name
-        self.event.set()
-        if self.source is not None:
-            self.source.stop()
-
-    def watch(self, source) -> None:
-        """The source to stop on a signal (start-up is watched before there is one)."""
-        self.source = source
-        if self.event.is_set():
-            source.stop()
-
-    def __enter__(self) -> StopOnSignal:
-        if threading.current_thread() is threading.main_thread():
-            for sig in STOP_SIGNALS:
-                self._old[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self.keep and self.event.is_set():
-            # ignored, not handled: Python puts back the default action of the signals it handles while it
-            # shuts down, and a late signal would then kill the process after its clean stop
-            for sig in self._old:
-                signal.signal(sig, signal.SIG_IGN)
-            return
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-
-
-def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: CameraState) -> str:
-    """The end of a run in a few lines (the whole record goes to ``--summary``)."""
-    lines = [f"{PROG}: {summary['frames']} frames ({summary['valid_frames']} valid) in {summary['seconds']:.1f} s: "
-             f"{summary['fps']:.1f} frames/s, latency p50 {summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms"
-             + (f", {summary['dropped']} dropped" if summary["dropped"] else "")]
-    from bsn_edge.alerts.health import Fault
-
-    # an unsigned model is said on its own line below, not as a fault
-    faults = {k: v for k, v in summary["faults"].items() if v and k != Fault.UNSIGNED_MODEL}
-    lines.append("  faults: " + (", ".join(f"{k} {v}" for k, v in faults.items()) if faults else "none"))
-    model = summary["model"]
-    lines.append(f"  model: signed by key {model['signer']}" if model["authentic"]
-                 else f"  model: UNSIGNED ({model['trust_note']}; run by --allow-unsigned)")
-    m = summary["camera"]["mounting"]
-    if summary["camera"]["cameras"]["cameras"] != "one camera":
-        lines.append(f"  camera: {camera.progress()}")
-    elif camera.calibrating:
-        lines.append(f"  camera: still {camera.progress()}; online calibration needs a few seconds of straight "
-                     "forward driving, longer with turns, stops or little texture (or run bsn-calibrate --mount once "
-                     "and pass --calib)")
-        lines.append(f"  levels computed meanwhile with: {camera.assumed()}")
-    elif m is not None:
-        report = summary["camera"]["calibration"]
-        source = report.get("source", "camera file")
-        at = report.get("converged_at")
-        if at:
-            source += f", converged at frame {at['frame']}" + (f", {at['seconds']:g} s in" if at["seconds"] else "")
-        lines.append(f"  camera: height {m['height_m']:.2f} m, pitch {m['pitch_deg']:+.2f}, yaw {m['yaw_deg']:+.2f}, "
-                     f"roll {m['roll_deg']:+.2f} deg ({source})")
-    guess = summary["camera"].get("first_guess")
-    if guess:
-        lines.append("  first guess: " + (f"pitch {guess['pitch_deg']:+.2f} yaw {guess['yaw_deg']:+.2f} deg from the "
-                                          f"road's vanishing point ({guess['frames_found']} frames agree)"
-                                          if guess["used"] else f"the model camera's mounting (vanishing point "
-                                          f"{guess['state']})"))
-    lines.append(f"  hood: {camera.hood.describe() if camera.hood is not None else camera.hood_progress()}")
-    outputs = [(name, getattr(args, key)) for name, key in (("overlay", "overlay"), ("frame log", "log"),
-                                                               ("CAN log", "can_log"), ("maps", "save_maps"),
-                                                               ("camera file", "save_calib"), ("summary", "summary"))
-               if getattr(args, key)]
-    if outputs:
-        lines.append("  outputs: " + ", ".join(f"{name} {path}" for name, path in outputs))
-    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -406,28 +231,19 @@ def main(argv: list[str] | None = None) -> int:
 def _stopped_early(args: argparse.Namespace, stopper: StopOnSignal, senders: list[Sender] | None = None) -> int:
     """A signal before the first frame: UNAVAILABLE on every bus asked for (opened now if need be), the
     summary written, the signal's exit code (1 when the summary could not be written)."""
+    from bsn_edge.alerts.bus_outputs import last_word
+
     if senders is None:
         try:
             senders = make_senders(args)
         except ValueError:
             senders = []
-    for s in senders:
-        from bsn_edge.alerts.frame import AlertFrame
-        s.send(AlertFrame.unavailable(0.0))
-        s.close()
-    summary_failed = False
-    if args.summary:
-        from bsn_edge.sequence.images import atomic_write_bytes
-        early = {"frames": 0, "valid_frames": 0, "stopped": True, "signal": stopper.signal, "phase": "start-up"}
-        try:
-            atomic_write_bytes(args.summary, (json.dumps(early, indent=1) + "\n").encode())
-        except OSError as e:
-            print(f"{PROG}: error: cannot write the summary {args.summary}: {e}", file=sys.stderr)
-            summary_failed = True
+    last_word(senders)
+    written = early_summary(args.summary, stopped=True, signal=stopper.signal)
     print(f"{PROG}: stopped by {stopper.signal} during start-up" + (" (UNAVAILABLE sent)" if senders else ""),
           file=sys.stderr)
     code = exit_code(stopper.signal)
-    return 1 if summary_failed and code == 0 else code
+    return 1 if not written and code == 0 else code
 
 
 def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
@@ -484,7 +300,7 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     from bsn_edge.runtime.run_summary import machine
     summary.update(signal=stopper.signal, source=args.source, machine=machine(), settings=to_dict(cfg),
                    settings_digest=digest(cfg))
-    return _report(summary, args, camera, senders, stopper)
+    return report(summary, args, camera, senders, stopper.signal)
 
 
 def _configured(args: argparse.Namespace) -> tuple[RuntimeConfig, list[Sender]] | int:
@@ -550,52 +366,6 @@ def _start(args: argparse.Namespace, cfg: RuntimeConfig):
         if camera.size_note:
             print(f"{PROG}: note: {camera.size_note}", file=sys.stderr)
     return engine, camera, source, maps
-
-
-def _report(summary: dict[str, Any], args: argparse.Namespace, camera: CameraState, senders: list[Sender],
-            stopper: StopOnSignal) -> int:
-    """The summary written and printed, warnings for what failed; the exit code."""
-    from bsn_edge.sequence.images import atomic_write_bytes
-
-    summary_error = ""
-    if args.summary:
-        try:
-            atomic_write_bytes(args.summary, (json.dumps(summary, indent=1) + "\n").encode())
-        except OSError as e:
-            summary_error = f"cannot write the summary {args.summary}: {e}"
-    print(human_summary(summary, args, camera))
-    if summary_error:
-        print(f"{PROG}: error: {summary_error}", file=sys.stderr)
-    for name, sink in summary["sinks"].items():
-        if sink["failure"]:
-            f = sink["failure"]
-            where = "when it was opened" if f["frame"] is None else f"at frame {f['frame']}"
-            print(f"{PROG}: warning: the {name} output failed {where} ({f['error']}); the alerts went on, DEGRADED",
-                  file=sys.stderr)
-        if sink.get("dropped"):
-            print(f"{PROG}: note: {sink['dropped']} frames left out of the {name} output, which fell behind the "
-                  "camera (the alerts had them)", file=sys.stderr)
-    for s in senders:
-        if s.stats.errors:
-            print(f"{PROG}: warning: {s.name} failed {s.stats.errors} times ({s.stats.last_error})", file=sys.stderr)
-        if s.stats.log_errors:
-            print(f"{PROG}: warning: the CAN log failed ({s.stats.log_error}); the bus went on, DEGRADED",
-                  file=sys.stderr)
-    if summary.get("senders_down"):
-        print(f"{PROG}: error: {', '.join(summary['senders_down'])} could not send at the end of the run "
-              "(DEGRADED while it was down)", file=sys.stderr)
-        return 1
-    if summary["source_failure"]:
-        print(f"{PROG}: error: the source failed: {summary['source_failure']}", file=sys.stderr)
-        return 1
-    if summary["frames"] and not summary["valid_frames"]:
-        print(f"{PROG}: error: none of the {summary['frames']} frames gave a valid inference (see the faults)",
-              file=sys.stderr)
-        return 1
-    if stopper.signal not in (None, "SIGTERM"):
-        print(f"{PROG}: stopped by {stopper.signal}", file=sys.stderr)
-        return exit_code(stopper.signal)
-    return 1 if summary_error else 0
 
 
 if __name__ == "__main__":

@@ -62,9 +62,9 @@ class Drive:
         out: list[Onset] = []
         last = [Level.NONE] * len(SECTORS)
         for rec in self.records:
-            if rec.alert is None:
+            if rec.hazard is None:
                 continue
-            for k, (name, s) in enumerate(zip(SECTORS, rec.alert.sectors, strict=True)):
+            for k, (name, s) in enumerate(zip(SECTORS, rec.hazard.sectors, strict=True)):
                 if s.level > last[k]:
                     out.append(Onset(name, s.level.name, rec.t, rec.frame, s.distance_m))
                 last[k] = s.level
@@ -85,9 +85,9 @@ class Drive:
         """The system state over the drive as spans ``(from t, to t, state)``, from the frames that carried one."""
         spans: list[tuple[float, float, str]] = []
         for rec in self.records:
-            if rec.alert is None:
+            if rec.status is None:
                 continue
-            state = rec.alert.state.name
+            state = rec.status.state.name
             if spans and spans[-1][2] == state:
                 spans[-1] = (spans[-1][0], rec.t, state)
             else:
@@ -100,7 +100,7 @@ class Drive:
 
     def to_dict(self) -> dict[str, Any]:
         """Every number the report shows."""
-        return {"frames": len(self.records), "valid_frames": sum(r.alert is not None for r in self.records),
+        return {"frames": len(self.records), "valid_frames": sum(r.hazard is not None for r in self.records),
                 "damaged_lines": [vars(d) for d in self.damage],
                 "onsets": [o.to_dict() for o in self.onsets], "latency_ms": self.latency(),
                 "states": [{"from_t": a, "to_t": b, "state": s} for a, b, s in self.states()],

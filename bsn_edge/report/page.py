@@ -48,7 +48,7 @@ def timelines(drive: Drive) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    recs = [r for r in drive.records if r.alert is not None]
+    recs = [r for r in drive.records if r.hazard is not None]
     t = np.array([r.t for r in recs])
     on = _thresholds(drive.summary)
     converged = (drive.summary.get("camera") or {}).get("calibration", {}).get("converged_at") or {}
@@ -56,8 +56,9 @@ def timelines(drive: Drive) -> str:
     fig, axes = plt.subplots(len(SECTORS) + 2, 1, figsize=(12, 2.0 * (len(SECTORS) + 2)), sharex=True,
                              gridspec_kw={"height_ratios": [3] * len(SECTORS) + [1, 3]})
     for k, (name, ax) in enumerate(zip(SECTORS, axes, strict=False)):
-        score = np.array([r.alert.sectors[k].score for r in recs])     # type: ignore[union-attr]
-        levels = [r.alert.sectors[k].level.name for r in recs]          # type: ignore[union-attr]
+        sectors = [r.hazard.sectors[k] for r in recs if r.hazard is not None]
+        score = np.array([s.score for s in sectors])
+        levels = [s.level.name for s in sectors]
         for level, colour in LEVEL_COLOURS.items():
             mask = np.array([lv == level for lv in levels])
             if mask.any():
@@ -67,8 +68,7 @@ def timelines(drive: Drive) -> str:
         ax.plot(t, score, color="#333", lw=1, label="score (smoothed)")
         ax.set_ylim(0, 1.02)
         ax.set_ylabel(f"{name}\nscore")
-        dist = np.array([np.nan if r.alert.sectors[k].distance_m is None     # type: ignore[union-attr]
-                         else r.alert.sectors[k].distance_m for r in recs], np.float64)   # type: ignore[union-attr]
+        dist = np.array([np.nan if s.distance_m is None else s.distance_m for s in sectors], np.float64)
         twin = ax.twinx()
         twin.plot(t, dist, ".", ms=2, color="#4e79a7", label="distance")
         twin.set_ylabel("m", color="#4e79a7")

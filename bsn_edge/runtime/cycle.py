@@ -6,20 +6,22 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import replace
 
 from bsn_edge.alerts.bus_config import BusConfig, MessageRates
-from bsn_edge.alerts.frame import AlertFrame
-from bsn_edge.alerts.health import Fault, Health, SystemState
+from bsn_edge.alerts.frame import AlertFrame, Hazard
+from bsn_edge.alerts.health import Fault, Health
 from bsn_edge.alerts.senders import Sender
 
 
 class CycleEmitter:
-    """Sends the latest alert frame to every sender at each cycle boundary up to ``t``.
+    """Sends the latest hazard the loop published, with the status of the cycle, to every sender at each
+    cycle boundary up to ``t``.
 
-    The state, frame rate and fault counters are those of ``t`` itself, so a stalled pipeline
-    shows up as UNAVAILABLE on the bus within one cycle past the deadline. Sender failures are
-    counted into the health's fault counters, which the next status message carries; a sender whose
+    The status (state, frame rate and fault counters) is decided here, once per cycle, at ``t`` itself, so a
+    stalled pipeline shows up as UNAVAILABLE on the bus within one cycle past the deadline; :meth:`last_sent`
+    is the cycle as it went out, what the frame log and the overlay show. The faults each sender reports
+    (:class:`~bsn_edge.alerts.senders.Sent`) are counted into the health's fault counters, which the next
+    status message carries; a sender whose
     every send has failed for ``down_after_s`` is down (DEGRADED) until one goes through. Each message
     goes every so many cycles (``rates``, the vehicle file's ``[messages]``).
     """
@@ -38,7 +40,8 @@ class CycleEmitter:
         self.rates.check(cycle_s)
         self.down_after_s = down_after_s
         self.ticks = 0                  # cycles of the schedule sent: which messages are due
-        self.latest: AlertFrame | None = None
+        self.latest: Hazard | None = None
+        self._last: AlertFrame | None = None       # the last cycle as it went out
         self.next_t: float | None = None
         self.sent_cycles = 0
         self.stall_cycles = 0           # of them, sent by the stall watch while the loop was stuck on a frame
@@ -47,9 +50,15 @@ class CycleEmitter:
         self._failing_since: dict[str, float] = {}     # a sender's first failed send of its current run
         self._lock = threading.Lock()
 
-    def publish(self, frame: AlertFrame) -> None:
+    def publish(self, hazard: Hazard) -> None:
+        """The loop's latest word on the sectors, for the cycles to come."""
         with self._lock:
-            self.latest = frame
+            self.latest = hazard
+
+    def last_sent(self) -> AlertFrame | None:
+        """The last cycle as it went out (None before the first)."""
+        with self._lock:
+            return self._last
 
     def emit(self, t: float) -> int:
         """Send every cycle due by ``t``; returns how many."""
@@ -100,23 +109,18 @@ class CycleEmitter:
     def _send(self, t: float, messages: tuple[str, ...] | None = None) -> None:
         """Send ``messages`` (every one by default: a stall's or the last word) of the frame at ``t``."""
         h = self.health
-        state, fps, faults = h.snapshot(t) if self.clock is None else h.snapshot(t, self.clock())
-        base = self.latest if self.latest is not None and state != SystemState.UNAVAILABLE \
-            else AlertFrame.unavailable(t)
-        frame = replace(base, t=t, state=state, fps=fps, faults=faults)
+        status = h.snapshot(t) if self.clock is None else h.snapshot(t, self.clock())
+        frame = AlertFrame.of(t, self.latest if self.latest is not None else Hazard.none(t), status)
         for s in self.senders:
-            before_err, before_full, before_log = s.stats.errors, s.stats.full, s.stats.log_errors
-            if s.send(frame, messages):
+            sent = s.send(frame, messages)
+            if sent.ok:
                 self._failing_since.pop(s.name, None)
                 h.sender_down(s.name, False)
             elif t - self._failing_since.setdefault(s.name, t) >= self.down_after_s:
                 h.sender_down(s.name, True)
-            if s.stats.errors > before_err:
-                h.fault(s.tx_fault, s.stats.errors - before_err)
-            if s.stats.full > before_full:
-                h.fault(Fault.TX_FULL, s.stats.full - before_full)
-            if s.stats.log_errors > before_log:
-                h.fault(Fault.SINK_ERRORS, s.stats.log_errors - before_log)
+            for fault, n in sent.faults.items():
+                h.fault(fault, n)
+        self._last = frame
         self.sent_cycles += 1
         if self.clock is not None:
             self.last_sent_at = self.clock()

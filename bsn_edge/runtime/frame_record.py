@@ -5,8 +5,9 @@ Fields, in the order written (a field that does not apply to the frame is left o
 with this frame, by the names of :class:`~bsn_edge.alerts.health.Fault`: ``decode_errors``,
 ``size_changes``, ``nan_outputs``), ``levels`` (LEFT, CENTRE, RIGHT: ``NONE``, ``CAUTION`` or
 ``WARNING``), ``scores`` (smoothed, 0-1), ``distances`` (metres to the nearest blind spot, null for
-none), ``state`` (the system state sent with it), ``latency_ms`` and ``stage_ms`` (this frame's milliseconds
-in each stage it went through: ``decode``, ``preprocess``, ``inference``, ``postprocess``, ``send``).
+none), ``state`` (the system state the bus carried when the frame's hazard was made: the last status
+sent), ``latency_ms`` and ``stage_ms`` (this frame's milliseconds in each stage it went through:
+``decode``, ``preprocess``, ``inference``, ``postprocess``, ``send``).
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from bsn_edge.alerts.frame import AlertFrame, SectorAlert
-from bsn_edge.alerts.health import Fault, SystemState
+from bsn_edge.alerts.frame import Hazard, SectorAlert
+from bsn_edge.alerts.health import Fault, Status, SystemState
 from bsn_edge.alerts.state_machine import Level
 
 
@@ -26,7 +27,8 @@ class FrameRecord:
     frame: int
     t: float
     fault: Fault | None = None
-    alert: AlertFrame | None = None
+    hazard: Hazard | None = None        # the loop's word on this frame
+    status: Status | None = None        # the bus's, at the last cycle sent (None before the first)
     latency_ms: float | None = None
     stage_ms: dict[str, float] = field(default_factory=dict)
 
@@ -35,11 +37,12 @@ class FrameRecord:
         out: dict[str, Any] = {"frame": self.frame, "t": round(self.t, 4)}
         if self.fault is not None:
             out["fault"] = self.fault.value
-        if self.alert is not None:
-            sectors = self.alert.sectors
+        if self.hazard is not None:
+            sectors = self.hazard.sectors
             out.update(levels=[s.level.name for s in sectors], scores=[round(s.score, 3) for s in sectors],
-                       distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in sectors],
-                       state=self.alert.state.name)
+                       distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in sectors])
+            if self.status is not None:
+                out["state"] = self.status.state.name
         if self.latency_ms is not None:
             out["latency_ms"] = round(self.latency_ms, 2)
         if self.stage_ms:
@@ -49,14 +52,16 @@ class FrameRecord:
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> FrameRecord:
         """A line of the frame log read back (``KeyError`` / ``ValueError`` for one that is not a line of it);
-        the alert's frame rate and counters, which the log does not keep, are 0 and empty."""
+        the status's frame rate and counters, which the log does not keep, are 0 and empty."""
         rec = cls(int(d["frame"]), float(d["t"]))
         if "fault" in d:
             rec.fault = Fault(d["fault"])
         if "levels" in d:
             sectors = tuple(SectorAlert(float(s), Level[lv], None if m is None else float(m))
                             for lv, s, m in zip(d["levels"], d["scores"], d["distances"], strict=True))
-            rec.alert = AlertFrame(rec.t, sectors, SystemState[d["state"]], 0.0)
+            rec.hazard = Hazard(rec.t, sectors)
+            if "state" in d:
+                rec.status = Status(SystemState[d["state"]], 0.0)
         if "latency_ms" in d:
             rec.latency_ms = float(d["latency_ms"])
         rec.stage_ms = {str(k): float(v) for k, v in d.get("stage_ms", {}).items()}

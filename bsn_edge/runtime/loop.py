@@ -19,8 +19,10 @@ from typing import Any
 import numpy as np
 
 from bsn_edge.alerts import (
+    SECTORS,
     AlertConfig,
     AlertFrame,
+    Hazard,
     HealthConfig,
     SectorAlert,
     SectorConfig,
@@ -28,7 +30,7 @@ from bsn_edge.alerts import (
     SectorState,
 )
 from bsn_edge.alerts.bus_config import BusConfig, MessageRates
-from bsn_edge.alerts.health import Fault, Health
+from bsn_edge.alerts.health import Fault, Health, Status, SystemState
 from bsn_edge.alerts.sectors import blind_spots
 from bsn_edge.alerts.senders import Sender
 from bsn_edge.config_toml import check_fields, setting
@@ -48,6 +50,9 @@ from bsn_edge.runtime.stats import LatencyStats
 from bsn_edge.sequence.folder import frame_name
 
 STAGES = ("decode", "preprocess", "inference", "postprocess", "send")
+# what the outputs show of a frame before the bus has carried anything (a camera's first frames, before the
+# heartbeat's first cycle): the bus has said nothing, so nothing is available
+NOT_SENT = Status(SystemState.UNAVAILABLE, 0.0)
 MAX_IN_FLIGHT = 4
 
 
@@ -113,8 +118,9 @@ class FramePipeline:
     Per frame: :meth:`warp` (into the model camera, an input buffer; on the feeder's thread when
     reading overlaps the model, :class:`~bsn_edge.runtime.feeder.Feeder`), then on the caller's
     thread :meth:`read` (the source's frame and its faults), :meth:`infer`, :meth:`sectors` (mask and
-    depth -> smoothed levels -> the alert published to the send cycle), :meth:`emit` (cycles due by
-    the frame's time, for files) and :meth:`write` (the outputs beside the bus, each a
+    depth -> smoothed levels -> the :class:`Hazard` published to the send cycle, which alone decides the
+    status), :meth:`emit` (cycles due by the frame's time, for files) and :meth:`write` (the frame's hazard
+    with the status the bus carried, into the outputs beside the bus, each a
     :class:`GuardedSink`). Only :meth:`warp` runs on the feeder's thread: health, the alert state and
     the outputs belong to the caller's; the overlay and the maps are drawn and encoded on threads of
     their own, at most ``SINK_BEHIND`` frames behind.
@@ -128,7 +134,7 @@ class FramePipeline:
         self.engine, self.source, self.senders, self.cfg, self.camera = engine, source, senders, cfg, camera
         self.outputs = outputs
         self.geometry = SectorGeometry(engine.card.camera, cfg.sectors)
-        self.machines = [SectorState(cfg.alerts) for _ in range(3)]
+        self.machines = [SectorState(cfg.alerts) for _ in SECTORS]
         self.health = Health(cfg.health)
         self.wall = None if source.live else clock    # a live source's frame times are the processing clock
         if not engine.authentic:        # said on every cycle: nobody trusted vouches for this model
@@ -221,21 +227,20 @@ class FramePipeline:
         return prob, depth
 
     def sectors(self, cap: Captured, mf: ModelFrame, prob: np.ndarray,
-                depth: np.ndarray) -> tuple[AlertFrame, np.ndarray]:
-        """Mask and depth -> sector readings -> smoothed levels -> the alert, published to the send cycle."""
+                depth: np.ndarray) -> tuple[Hazard, np.ndarray]:
+        """Mask and depth -> sector readings -> smoothed levels -> the hazard, published to the send cycle
+        (which decides the status it goes out with), and the mask."""
         mask = blind_spots(prob, self.engine.threshold, mf)
         readings = self.geometry.read(mask, mf.depth_to_metres(depth))
         sectors = []
         for m, r in zip(self.machines, readings, strict=True):
             score, level = m.update(cap.t, r.score)
             sectors.append(SectorAlert(score, level, r.distance_m))
-        now = None if self.wall is None else self.wall()
-        self.health.valid(cap.t, now)
+        self.health.valid(cap.t, None if self.wall is None else self.wall())
         self.valid += 1
-        state, fps_now, faults = self.health.snapshot(cap.t, now)
-        alert = AlertFrame(cap.t, tuple(sectors), state, fps_now, faults)
-        self.emitter.publish(alert)
-        return alert, mask
+        hazard = Hazard(cap.t, tuple(sectors))
+        self.emitter.publish(hazard)
+        return hazard, mask
 
     def emit(self, cap: Captured) -> None:
         """Send the cycles due by the frame's time (a live source's heartbeat sends its own)."""
@@ -299,29 +304,20 @@ class FramePipeline:
         rec = FrameRecord(cap.index, cap.t)
         self.timer.add("preprocess", item.warp_s)
         rec.stage_ms.update(decode=1e3 * cap.decode_s, preprocess=1e3 * item.warp_s)
+        drawn = None
         if self.read(cap, rec) and item.mf is not None and item.buf is not None:
-            self.health.calibrating(item.calibrating)
-            prob, depth, began, seconds = self.infer(item.buf) if inflight is None else inflight.result()
+            began, drawn = self.answer(item, item.mf, item.buf, inflight, rec)
             t0 = min(t0, began)          # the frame's path began with its inference at the latest
-            out = self.checked(prob, depth)
-            if self.feeder is not None:
-                self.feeder.release(item.buf)
-            t2 = time.perf_counter()
-            self.timer.add("inference", seconds)
-            rec.stage_ms["inference"] = 1e3 * seconds
-            if out is None:
-                rec.fault = Fault.NAN_OUTPUTS
-            else:
-                prob, depth = out
-                rec.alert, mask = self.sectors(cap, item.mf, prob, depth)
-                self.timer.add("postprocess", time.perf_counter() - t2)
-                rec.stage_ms["postprocess"] = 1e3 * (time.perf_counter() - t2)
-                self.write(cap, item.mf, mask, rec.alert, prob, depth)
         t4 = time.perf_counter()
         self.emit(cap)
         t5 = time.perf_counter()
         self.timer.add("send", t5 - t4)
         rec.stage_ms["send"] = 1e3 * (t5 - t4)
+        if rec.hazard is not None and item.mf is not None and drawn is not None:
+            # what the outputs show is what the bus carried: the frame's hazard with the last status sent
+            on_bus = self.emitter.last_sent()
+            rec.status = on_bus.status if on_bus is not None else None
+            self.write(cap, item.mf, drawn[0], AlertFrame.of(cap.t, rec.hazard, rec.status or NOT_SENT), *drawn[1:])
         # a camera's frame: from its capture (the read returned) to its alert, waiting included; a
         # file's: its own path, decode to alert (the time it waited for the model is counted apart)
         latency = time.monotonic() - cap.t if self.source.live else t5 - t0 + item.warp_s + cap.decode_s
@@ -331,6 +327,28 @@ class FramePipeline:
         if log is not None:
             rec.latency_ms = 1e3 * latency
             log.write(cap.index, rec.to_json())
+
+    def answer(self, item: Prepared, mf: ModelFrame, buf: np.ndarray, inflight: Future | None,
+               rec: FrameRecord) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
+        """The model's answer on a frame read whole (``mf`` and ``buf``: its model frame and input) and its
+        hazard (into ``rec``): when its inference began,
+        and the mask, probability and depth the outputs draw (None for an answer that is not finite)."""
+        self.health.calibrating(item.calibrating)
+        prob, depth, began, seconds = self.infer(buf) if inflight is None else inflight.result()
+        out = self.checked(prob, depth)
+        if self.feeder is not None:
+            self.feeder.release(buf)
+        t2 = time.perf_counter()
+        self.timer.add("inference", seconds)
+        rec.stage_ms["inference"] = 1e3 * seconds
+        if out is None:
+            rec.fault = Fault.NAN_OUTPUTS
+            return began, None
+        prob, depth = out
+        rec.hazard, mask = self.sectors(item.cap, mf, prob, depth)
+        self.timer.add("postprocess", time.perf_counter() - t2)
+        rec.stage_ms["postprocess"] = 1e3 * (time.perf_counter() - t2)
+        return began, (mask, prob, depth)
 
     def close(self) -> None:
         """Whatever ended the run (the source, a signal, an exception): the outputs are finished, then

@@ -10,7 +10,7 @@ import can
 import pytest
 import serial
 
-from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+from bsn_edge.alerts import AlertFrame, Fault, Level, SectorAlert, SystemState
 from bsn_edge.alerts.can_codec import HAZARD, STATUS, decode
 from bsn_edge.alerts.e2e import counter_gap
 from bsn_edge.alerts.senders import CanSender, SerialSender
@@ -58,11 +58,14 @@ def test_corrupted_crc_is_rejected():
 
 def test_a_failing_bus_is_counted_never_raised():
     tx = CanSender("virtual", "unused", bus=FullBus())
-    assert tx.send(frame()) is False and tx.send(frame()) is False
+    for _ in range(2):   # each send reports what it met, not a running total
+        sent = tx.send(frame())
+        assert not sent.ok and sent.faults == {Fault.TX_FULL: 1, Fault.TX_ERRORS: 1}
     assert tx.stats.errors == 2 and tx.stats.full == 2 and "buffer full" in tx.stats.last_error
     tx.close()
     tx.close()  # idempotent
-    assert tx.send(frame()) is False and "closed" in tx.stats.last_error
+    sent = tx.send(frame())
+    assert not sent.ok and sent.faults == {Fault.TX_ERRORS: 1} and "closed" in tx.stats.last_error
 
 
 def test_serial_round_trip_on_loop():
@@ -93,8 +96,10 @@ def test_serial_decoder_resyncs_after_garbage():
 
 def test_a_vanished_serial_port_is_counted_and_reopened():
     tx = SerialSender("loop://", port=GonePort(), retry_s=0.0)
-    assert tx.send(frame()) is False and "disconnected" in tx.stats.last_error
-    assert tx.send(frame()) is True and tx.stats.reconnects == 1   # loop:// opens again
+    sent = tx.send(frame())
+    assert not sent.ok and sent.faults == {Fault.SERIAL_ERRORS: 1} and "disconnected" in tx.stats.last_error
+    sent = tx.send(frame())
+    assert sent.ok and not sent.faults and tx.stats.reconnects == 1   # loop:// opens again
 
 
 @pytest.mark.skipif(shutil.which("socat") is None, reason="socat is not installed")

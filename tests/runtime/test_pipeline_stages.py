@@ -163,3 +163,46 @@ def test_a_camera_that_reconnects_at_another_size_runs_at_its_new_size(pipeline)
     rec = FrameRecord(6, 0.6)
     assert not p.read(Captured(0.6, old, 6), rec) and rec.fault is Fault.SIZE_CHANGES
     assert p.health.faults[Fault.SIZE_CHANGES] == 2
+
+
+def test_the_frame_log_and_the_overlay_say_the_state_that_went_on_the_bus(setup):
+    """The status is decided once, by the send cycle. A processing clock that now and then runs on past the
+    deadline between one look and the next made the loop's own look say one state while the cycle sent
+    another; now every log line and overlay frame carries the state of the last status on the bus."""
+    import itertools
+    import time
+
+    from bsn_edge.runtime.feeder import Prepared
+
+    class Keep:
+        ok = True
+
+        def __init__(self):
+            self.got = []
+
+        def check(self):
+            return True
+
+        def write(self, frame, *args):
+            self.got.append(args)
+
+    model, clip = setup
+    engine = Engine(model)
+    camera = CameraState(engine.card, Calibration.read(clip / "calibration.json"))
+    sender = Collect()
+    steps = itertools.cycle([0.01, 0.01, 0.01, 0.6])    # seconds the processing clock moves at each look
+    now = itertools.accumulate(steps)
+    p = FramePipeline(engine, ImageFolderSource(clip / "rgb"), [sender], RuntimeConfig(cycle_s=0.1), camera,
+                      Outputs(), clock=lambda: next(now))
+    p.sinks = {"log": Keep(), "overlay": Keep()}
+    seen = set()
+    for cap in itertools.islice(p.source, 12):
+        buf = np.empty_like(engine.buf)
+        mf, calibrating = p.warp(cap, buf)
+        p.step(Prepared(cap, mf, buf, calibrating, 0.0, time.perf_counter()))
+        on_bus = SystemState([d for d in sender.got if d.name == "BSN_Status"][-1].signals["System_State"])
+        (line,), (*_, alert) = p.sinks["log"].got[-1], p.sinks["overlay"].got[-1]
+        assert line["state"] == on_bus.name and alert.state is on_bus, cap.index
+        seen.add(on_bus)
+    camera.close()
+    assert SystemState.UNAVAILABLE in seen and len(seen) > 1, "the clock made the state change on the way"
