@@ -22,7 +22,7 @@ import matplotlib.pyplot as plt
 
 from benchmarks.runner import RefusedError, Report, run
 from bsn_edge.train import Run
-from bsn_edge.train.run import trained_precision
+from bsn_edge.train.run_record import trained_precision
 
 FLAT_IOU = 0.01
 

@@ -162,6 +162,8 @@ def moving_seconds(seq: Path, fps: float) -> float:
     prev, moving = None, 0
     for i in frames:
         img = cv2.imread(str(s.rgb(i)), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise ValueError(f"{s.rgb(i)}: not a picture OpenCV can read")
         g = cv2.resize(img, (FLOW_WIDTH, round(img.shape[0] * FLOW_WIDTH / img.shape[1])),
                        interpolation=cv2.INTER_AREA)
         if prev is not None:

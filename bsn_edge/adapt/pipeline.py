@@ -256,7 +256,10 @@ def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, repo
     after = agreement(model, held_ds)
     threshold, best = after.best()
     b_th, b_best = before.best()
-    as_trained = at_threshold(before, card.threshold)
+    source_threshold = card.threshold
+    if source_threshold is None:
+        raise ValueError("the source model's card has no threshold: nothing to compare the adapted one with")
+    as_trained = at_threshold(before, source_threshold)
     if best["iou"] < as_trained["iou"] or best["iou"] <= b_best["iou"]:
         # never hand out a model that the user's own held-out labels score below the one it came from,
         # nor one that only beats it by a threshold: both are measured at their best threshold, and a
@@ -268,13 +271,13 @@ def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, repo
                                  "source model as it was (more or longer clips may help)")
         report["fine_tuned_agreement"] = {"threshold": threshold, **best}
         model, _ = src.load_model()
-        threshold, best = card.threshold, as_trained
+        threshold, best = source_threshold, as_trained
     report["split"] = {"train_frames": len(train_ds), "held_out_frames": len(held_ds),
                        "train": [f"{c.path.name}[{c.frames[0]}..{c.frames[-1]}]" for c in train],
                        "held_out": [f"{c.path.name}[{c.frames[0]}..{c.frames[-1]}]" for c in held]}
     report["agreement"] = {
         "measure": "IoU inside V against the held-out T-frame labels of the user's clips",
-        "before": at_threshold(before, card.threshold), "before_at_its_best_threshold": {"threshold": b_th, **b_best},
+        "before": at_threshold(before, source_threshold), "before_at_its_best_threshold": {"threshold": b_th, **b_best},
         "after": {"threshold": threshold, **best}}
     report["fine_tune"] = {"steps": cfg.steps, "seed": cfg.seed, "loss_first_last": [losses[0], losses[-1]],
                            "trained": "B (D frozen)"}

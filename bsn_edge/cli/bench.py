@@ -1,21 +1,33 @@
-"""``bsn-bench``: run the project's benchmarks (from a checkout) and write the report."""
+"""``bsn-bench``: run the project's benchmarks and write the report.
+
+The benchmarks are scripts of the source tree (``benchmarks/``), not of the wheel: from a checkout they are
+found beside the package; an installed wheel runs those of a checkout or an unpacked source distribution
+named by ``--checkout`` (or ``$BSN_EDGE_CHECKOUT``, or the current folder), against the installed package.
+"""
 
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from bsn_edge.cli.common import CHECKOUT, REAL_DATA, fail
+from bsn_edge.cli.common import CHECKOUT, fail
 from bsn_edge.default_model import DEFAULT_MODEL
 
 PROG = "bsn-bench"
+CHECKOUT_ENV = "BSN_EDGE_CHECKOUT"
+MARK = Path("benchmarks") / "report.py"      # what makes a folder a source tree with the benchmarks
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "footprint",
-         "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive", "prune")
+         "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive", "prune",
+         "calibration", "first_guess", "optimizer", "label_classes")
+# the campaign's own benchmarks: they judge a leg's run folder against held-out sets the campaign makes
+# (models/campaign/judge*.sh run them), so they have nothing to measure outside it
+CAMPAIGN_TOOLS = ("bench_cameras", "bench_tradeoff", "bench_campaign")
 ADAPT_SOURCE, ADAPT_TARGET = "suburb", "urban"
 ADAPT_EVAL_SEEDS = (1300, 1301)   # held-out target clips: seeds no training clip has
 SEEDS = (0, 1, 2)                 # training seeds of the paper's tables
@@ -37,37 +49,61 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--work", default="benchmarks/scratch", help="clips, runs and models made for the benchmarks")
     p.add_argument("--synth-frames", type=int, default=100, metavar="N",
                    help="frames per style timed by 'synth' (default 100; fewer only to check the plumbing)")
+    p.add_argument("--checkout", metavar="DIR",
+                   help=f"the source tree whose benchmarks/ to run (default: ${CHECKOUT_ENV}, else the checkout the "
+                        "package was installed from, else the current folder); an installed wheel runs them against "
+                        "itself")
     return p
 
 
-def _py(*args: str) -> None:
+def find_checkout(given: str | None, cwd: Path | None = None) -> Path:
+    """The source tree with the benchmarks: ``given``, else ``$BSN_EDGE_CHECKOUT``, else the package's own
+    checkout, else ``cwd``; ``FileNotFoundError`` saying where it looked."""
+    cwd = cwd or Path.cwd()
+    named = given or os.environ.get(CHECKOUT_ENV)
+    if named:
+        root = Path(named).expanduser().resolve()
+        if not (root / MARK).is_file():
+            raise FileNotFoundError(f"{named}: no {MARK} there: not a bsn-edge source tree (a checkout or an "
+                                    "unpacked source distribution)")
+        return root
+    for root in (CHECKOUT, cwd.resolve()):
+        if (root / MARK).is_file():
+            return root
+    raise FileNotFoundError(f"the benchmarks are scripts of the source tree, not of the installed package: none "
+                            f"beside it ({CHECKOUT}) nor here ({cwd}); give one with --checkout DIR (a checkout or "
+                            f"an unpacked source distribution) or ${CHECKOUT_ENV}")
+
+
+def _py(root: Path, *args: str) -> None:
+    """``python ARGS`` in the source tree ``root`` (where ``-m benchmarks.X`` is found)."""
     cmd = [sys.executable, *args]
     print("+", " ".join(cmd), flush=True)
-    subprocess.run(cmd, cwd=CHECKOUT, check=True)
+    subprocess.run(cmd, cwd=root, check=True)
 
 
-def _prepare_data(work: Path) -> Path:
+def _prepare_data(root: Path, work: Path) -> Path:
     """Labelled clips of every style, made once and reused."""
     data = work / "data"
     # the shipped default's recipe (models/README.md): every style, seeds apart per style
     if not (data / f"{DEFAULT_STYLES[-1]}_{DEFAULT_SEEDS - 1}" / "labels").is_dir():
         for k, style in enumerate(DEFAULT_STYLES):
             for s in range(DEFAULT_SEEDS):
-                _py("-m", "bsn_edge.cli.synth", str(data / f"{style}_{s}"), "--frames", "200", "--style", style,
+                _py(root, "-m", "bsn_edge.cli.synth", str(data / f"{style}_{s}"), "--frames", "200", "--style", style,
                     "--seed", str(s + 100 * k), "--no-video", "--force")
-        _py("-m", "bsn_edge.cli.label", *[str(p) for p in sorted(data.iterdir())])
+        _py(root, "-m", "bsn_edge.cli.label", *[str(p) for p in sorted(data.iterdir())])
     return data
 
 
-def _prepare(work: Path) -> tuple[Path, Path, Path]:
+def _prepare(root: Path, work: Path) -> tuple[Path, Path, Path]:
     """Labelled clips, a trained run and its int8 export, made once and reused."""
-    data, run, model = _prepare_data(work), work / "run_quick", work / "bsn_int8.onnx"
+    data, run, model = _prepare_data(root, work), work / "run_quick", work / "bsn_int8.onnx"
     from bsn_edge.train.run import Run
 
     if not Run(run).checkpoint_path.is_file():
-        _py("-m", "bsn_edge.cli.train", "--config", "configs/quick.toml", "--data", str(data), "--out", str(run))
+        _py(root, "-m", "bsn_edge.cli.train", "--config", "configs/quick.toml", "--data", str(data), "--out", str(run))
     if not model.is_file():
-        _py("-m", "bsn_edge.cli.export", "--checkpoint", str(run), "--out", str(model), "--int8", "--int8-frames",
+        _py(root, "-m", "bsn_edge.cli.export", "--checkpoint", str(run), "--out", str(model), "--int8", "--int8-frames",
             str(data / "town_0"), "--force")
     return data, run, model
 
@@ -79,72 +115,94 @@ BY_OUT_ONLY = {"labels": "benchmarks.bench_labels", "realcam": "benchmarks.bench
                "vanishing": "benchmarks.bench_vanishing",
                "floor": "benchmarks.bench_floor", "int8_cpu": "benchmarks.bench_int8_cpu",
                "footprint": "benchmarks.bench_footprint", "alive": "benchmarks.bench_alive",
-               "prune": "benchmarks.bench_prune"}
+               "prune": "benchmarks.bench_prune", "first_guess": "benchmarks.bench_first_guess",
+               "optimizer": "benchmarks.bench_optimizer"}
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if not (CHECKOUT / "benchmarks" / "report.py").is_file():
-        return fail(PROG, f"benchmarks/ not found beside the package ({CHECKOUT}); bsn-bench runs from a checkout")
+    try:
+        root = find_checkout(args.checkout)
+    except FileNotFoundError as e:
+        return fail(PROG, str(e))
     names = args.only or list(NAMES)
     out, work = str(Path(args.out).resolve()), Path(args.work).resolve()
     t0 = time.perf_counter()
     try:
         for name in names:       # in the order asked (all: the order of NAMES)
-            _one(name, args, out, work)
-        _py("-m", "benchmarks.report", "--results", out)
+            _one(root, name, args, out, work)
+        _py(root, "-m", "benchmarks.report", "--results", out)
     except subprocess.CalledProcessError as e:
         return fail(PROG, f"a benchmark failed: {' '.join(map(str, e.cmd))}", 1)
     print(f"{PROG}: done in {time.perf_counter() - t0:.0f} s; report {Path(out) / 'REPORT.md'}")
     return 0
 
 
-def _one(name: str, args: argparse.Namespace, out: str, work: Path) -> None:
+def _one(root: Path, name: str, args: argparse.Namespace, out: str, work: Path) -> None:
     if name in BY_OUT_ONLY:
-        _py("-m", BY_OUT_ONLY[name], "--out", out)
+        _py(root, "-m", BY_OUT_ONLY[name], "--out", out)
     elif name == "synth":
-        _py("-m", "benchmarks.bench_synth", "--out", out, "--frames", str(args.synth_frames))
+        _py(root, "-m", "benchmarks.bench_synth", "--out", out, "--frames", str(args.synth_frames))
     elif name == "train_step":
-        _py("-m", "benchmarks.bench_train_step", "--data", str(_prepare_data(work)), "--out", out)
+        _py(root, "-m", "benchmarks.bench_train_step", "--data", str(_prepare_data(root, work)), "--out", out)
     elif name == "quant":
-        data, run, _ = _prepare(work)
-        _py("-m", "benchmarks.bench_quant", "--run", str(run), "--data", str(data), "--calib", str(data / "town_0"),
-            "--out", out)
+        data, run, _ = _prepare(root, work)
+        _py(root, "-m", "benchmarks.bench_quant", "--run", str(run), "--data", str(data), "--calib",
+            str(data / "town_0"), "--out", out)
     elif name == "arch":
-        data, run, _ = _prepare(work)
-        _py("-m", "benchmarks.bench_arch", "--out", out, "--runs", f"small-light={run}", "--data", str(data),
+        data, run, _ = _prepare(root, work)
+        _py(root, "-m", "benchmarks.bench_arch", "--out", out, "--runs", f"small-light={run}", "--data", str(data),
             "--train-steps", str(ARCH_STEPS), "--teacher-steps", str(ARCH_STEPS), "--seeds", *map(str, SEEDS),
             "--work", str(work / "arch"))
     elif name == "runtime":
-        _runtime(out, work)
+        _runtime(root, out, work)
     elif name == "adapt":
-        _adapt(out, work)
+        _adapt(root, out, work)
+    elif name == "calibration":
+        _calibration(root, out, work)
+    elif name == "label_classes":
+        campaign = Path("~/.cache/bsn-edge/campaign/data").expanduser()
+        data = campaign if campaign.is_dir() else _prepare_data(root, work)
+        _py(root, "-m", "benchmarks.bench_label_classes", "--data", str(data), "--out", out)
     elif name == "accuracy":
-        _py("-m", "benchmarks.bench_bsn_accuracy", "--out", out, "--work", str(work / "accuracy"), "--seeds",
+        _py(root, "-m", "benchmarks.bench_bsn_accuracy", "--out", out, "--work", str(work / "accuracy"), "--seeds",
             *map(str, SEEDS))
 
 
-def _runtime(out: str, work: Path) -> None:
+def _real_data(root: Path) -> Path:
+    """The real development data beside the source tree ``root``."""
+    return root.parent / "shared" / "data" / "real"
+
+
+def _calibration(root: Path, out: str, work: Path) -> None:
+    """The real clips that are at hand (no truth) and five synthetic drives (with their truth)."""
+    real = [str(_real_data(root) / name) for name in ("udacity_test_video.mp4", "dashcam_highway.mp4",
+                                                  "mountain_highway.mp4") if (_real_data(root) / name).is_file()]
+    _py(root, "-m", "benchmarks.bench_calibration", *[a for c in real for a in ("--clip", c)], "--cache",
+        str(work / "calibration"), "--out", out)
+
+
+def _runtime(root: Path, out: str, work: Path) -> None:
     """The real clips when at hand, else a synthetic one with its camera."""
     source: list[str] = []
-    if not (REAL_DATA / "udacity_test_video.mp4").is_file():
+    if not (_real_data(root) / "udacity_test_video.mp4").is_file():
         clip = work / "clip" / "video.mp4"
         if not clip.is_file():
-            _py("-m", "bsn_edge.cli.synth", str(work / "clip"), "--frames", "300", "--seed", "42", "--force")
+            _py(root, "-m", "bsn_edge.cli.synth", str(work / "clip"), "--frames", "300", "--seed", "42", "--force")
         source = ["--source", str(clip)]
-    _py("-m", "benchmarks.bench_runtime", "--model", str(DEFAULT_MODEL), *source, "--repeats", "3", "--out", out)
+    _py(root, "-m", "benchmarks.bench_runtime", "--model", str(DEFAULT_MODEL), *source, "--repeats", "3", "--out", out)
 
 
-def _adapt(out: str, work: Path) -> None:
-    data = _prepare_data(work)
+def _adapt(root: Path, out: str, work: Path) -> None:
+    data = _prepare_data(root, work)
     held = work / "adapt_eval"
     for seed in ADAPT_EVAL_SEEDS:
         clip = held / f"{ADAPT_TARGET}_{seed}"
         if not (clip / "labels").is_dir():
-            _py("-m", "bsn_edge.cli.synth", str(clip), "--frames", "120", "--style", ADAPT_TARGET, "--seed", str(seed),
-                "--no-video", "--force")
-            _py("-m", "bsn_edge.cli.label", str(clip))
-    _py("-m", "benchmarks.bench_adapt", "--data", str(data), "--eval", str(held), "--source", ADAPT_SOURCE,
+            _py(root, "-m", "bsn_edge.cli.synth", str(clip), "--frames", "120", "--style", ADAPT_TARGET, "--seed",
+                str(seed), "--no-video", "--force")
+            _py(root, "-m", "bsn_edge.cli.label", str(clip))
+    _py(root, "-m", "benchmarks.bench_adapt", "--data", str(data), "--eval", str(held), "--source", ADAPT_SOURCE,
         "--target", ADAPT_TARGET, "--work", str(work / "adapt"), "--out", out)
 
 

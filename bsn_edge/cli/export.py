@@ -117,7 +117,7 @@ def rethresholded(card: ModelCard, threshold: float | None, chosen_on: str | Non
         return card
     if card.training is None:
         raise ValueError("the model's card has no training record to say where its new threshold was chosen")
-    if not (chosen_on or "").strip():
+    if chosen_on is None or not chosen_on.strip():
         raise ValueError("a new threshold needs where it was chosen: a card without it says its run's validation "
                          "clips chose it")
     return card.replace(threshold=threshold, training=dataclasses.replace(card.training, threshold_from=chosen_on))
@@ -248,7 +248,9 @@ def _ship(args: argparse.Namespace) -> int:
     from bsn_edge.train.run import Run
 
     try:
-        shipped = Run(args.checkpoint).ship(args.ship_run, force=args.force)
+        from bsn_edge.train.ship import ship_run
+
+        shipped = ship_run(Run(args.checkpoint), args.ship_run, force=args.force)
     except (FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     size = sum(f.stat().st_size for f in shipped.path.rglob("*") if f.is_file())

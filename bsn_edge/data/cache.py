@@ -141,10 +141,10 @@ class SampleCache:
             arrays["semantic"][k] = a["semantic"]
             arrays["masks"][k] = ((a["blindspot"] > 0) * BLINDSPOT_BIT | (a["visibility"] > 0) * VISIBILITY_BIT)
         items = [(str(c.path), int(f)) for c, f in ds.items]
-        if tmp is None:
+        if folder is None or tmp is None:
             return cls(arrays, items, key)
-        for a in arrays.values():
-            a.flush()
+        for arr in arrays.values():
+            arr.flush()  # type: ignore[attr-defined]  # open_memmap arrays: np.memmap
         del arrays
         (tmp / cls.INDEX).write_text(json.dumps({"key": key, "size": [h, w], "items": items}))
         try:
@@ -188,6 +188,8 @@ class SampleCache:
                     out = np.empty((len(self), 2, *f.shape[1:]), np.float16)
                 out[idx, 0], out[idx, 1] = f[:len(idx)], f[len(idx):]
         teacher.train(was_training)
+        if out is None:
+            raise ValueError("the sample cache is empty: no teacher features to compute")
         if path is not None:
             tmp = path.with_suffix(f".tmp{os.getpid()}.npy")
             np.save(tmp, out)
@@ -214,9 +216,9 @@ class SampleCache:
         if any(p is not None for p in (*paints, *throughs)) and semantic is None:
             raise ValueError("repainting or seeing through objects needs the samples' semantics "
                              "(which pixels are objects)")
-        if any(p is not None for p in paints):
+        if semantic is not None and any(p is not None for p in paints):
             x = repaint(x, semantic, paints)
-        if any(t is not None for t in throughs):
+        if semantic is not None and any(t is not None for t in throughs):
             x = see_through(x, semantic, throughs)
         if any(look is not None for look in looks):
             x = camera_look(x, looks)

@@ -46,7 +46,8 @@ class CameraLook:
     def draw(cls, rng: np.random.Generator, size: tuple[int, int]) -> CameraLook:
         """A camera for an image of ``size`` (H, W; every image gets the same kind of camera), drawn
         from ``rng`` in a fixed order."""
-        wb = tuple(float(g) for g in rng.uniform(*WHITE_BALANCE, 3))
+        r, g, b = (float(x) for x in rng.uniform(*WHITE_BALANCE, 3))
+        wb = (r, g, b)
         return cls(wb, float(rng.uniform(*CONTRAST)), float(rng.uniform(*SATURATION)), float(rng.uniform(*GAMMA)),
                    float(rng.uniform(*BLUR)), float(rng.uniform(*NOISE)), int(rng.integers(2**31 - 1)))
 

@@ -105,23 +105,25 @@ class ClipWarps:
                  camera: ClipCamera = ClipCamera.OWN) -> None:
         meta = SequenceMeta.read(path)
         own = clip_camera(path, model_mounting)
+        own_mounting = own.mounting or model_mounting     # clip_camera gives every clip one
         lab_cam = (label_camera(SequenceFolder(path).labels(label_name)) or own.intrinsics).scaled(meta.width,
                                                                                                    meta.height)
         self.guess: Guess | None = None
         self._onto_raw: ModelFrame | None = None
+        self.labels: ModelFrame | None
         if camera is ClipCamera.OWN:
             cam = own
-            self.labels = ModelFrame(lab_cam, (), cam.mounting, model, model_mounting)
+            self.labels = ModelFrame(lab_cam, (), own_mounting, model, model_mounting)
         else:
             cam, self.guess = guessed_camera(path, own, meta.width, meta.height, model, model_mounting)
             self.labels = None
             if own.has_distortion or lab_cam != own.intrinsics.scaled(meta.width, meta.height):
-                self._onto_raw = ModelFrame(own.intrinsics.scaled(meta.width, meta.height), own.dist, own.mounting,
-                                            lab_cam, own.mounting)
+                self._onto_raw = ModelFrame(own.intrinsics.scaled(meta.width, meta.height), own.dist, own_mounting,
+                                            lab_cam, own_mounting)
         self.frames = cam.model_frame(meta.width, meta.height, model, model_mounting)
         # the clip camera's pose turned into the model camera's: T_wc_model = T_wc_raw [R_raw<-model]
         self.pose_fix = np.eye(4)
-        self.pose_fix[:3, :3] = cam.mounting.rotation() @ model_mounting.rotation().T
+        self.pose_fix[:3, :3] = (cam.mounting or model_mounting).rotation() @ model_mounting.rotation().T
 
     def labels_to_model(self, mask: np.ndarray) -> np.ndarray:
         """A label mask of the clip (bsn-label's camera) in the model camera, nearest."""
@@ -162,7 +164,7 @@ class BlindSpotDataset(Dataset):
             raise ValueError("dataset is empty")
         self.size = size
         if camera is None or mounting is None:
-            camera, mounting = model_camera(tuple(size))
+            camera, mounting = model_camera((size[0], size[1]))
         self.camera, self.mounting = camera, mounting
         if (self.camera.height, self.camera.width) != tuple(size):
             raise ValueError(f"model camera is {self.camera.height}x{self.camera.width}, the size {size[0]}x{size[1]}")

@@ -63,11 +63,13 @@ def online_mounting(own: Calibration, assumed: Intrinsics, roll_deg: float = 0.0
     put the true focus of expansion (the car's forward axis in the true camera) where a camera with
     the assumed intrinsics would see it. Lens distortion is left out: at the focus of expansion,
     near the picture's centre, it moves little. The true height is kept (it changes no picture)."""
-    true = own.intrinsics
-    forward = own.mounting.rotation() @ np.array([0.0, 0.0, 1.0])
+    true, mounting = own.intrinsics, own.mounting
+    if mounting is None:
+        raise ValueError("the camera file gives no mounting: no online calibration to imitate")
+    forward = mounting.rotation() @ np.array([0.0, 0.0, 1.0])
     pixel = true.K @ (forward / forward[2])
     seen = np.linalg.solve(assumed.K, pixel)
-    return Mounting.from_forward(seen, own.mounting.height_m, roll_deg)
+    return Mounting.from_forward(seen, mounting.height_m, roll_deg)
 
 
 def guessed_camera(clip: str | Path, own: Calibration, width: int, height: int, model: Intrinsics,

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol, TypeVar
+from typing import Protocol, Self, TypeVar
 
 import numpy as np
 import torch
@@ -53,7 +53,8 @@ class Repaint:
     @classmethod
     def draw(cls, rng: np.random.Generator, size: tuple[int, int]) -> Repaint:
         """A repaint for an image of ``size`` (H, W), drawn from ``rng`` in a fixed order."""
-        gain = tuple(float(g) for g in rng.uniform(*GAIN, 3))
+        r, g, b = (float(x) for x in rng.uniform(*GAIN, 3))
+        gain = (r, g, b)
         gamma = float(rng.uniform(*GAMMA))
         amp = rng.uniform(0.0, STAIN)
         cells = rng.standard_normal((size[0] // STAIN_CELL + 1, size[1] // STAIN_CELL + 1))
@@ -62,7 +63,8 @@ class Repaint:
 
     def apply(self, img: torch.Tensor) -> torch.Tensor:
         """The whole image ``[3, H, W]`` in [0, 1] as repainted (the caller keeps it on objects only)."""
-        stain = _field(self.stain, *img.shape[-2:], img.dtype)
+        h, w = img.shape[-2:]
+        stain = _field(self.stain, h, w, img.dtype)
         gain = torch.tensor(self.gain, dtype=img.dtype)[:, None, None]
         return (img.clamp(0.0, 1.0) ** self.gamma * gain * stain).clamp_(0.0, 1.0)
 
@@ -92,7 +94,8 @@ class SeeThrough:
     def apply(self, img: torch.Tensor) -> torch.Tensor:
         """The whole image ``[3, H, W]`` in [0, 1] with the shifted scene blended in (the caller keeps
         it on objects only)."""
-        alpha = _field(self.alpha, *img.shape[-2:], img.dtype)
+        h, w = img.shape[-2:]
+        alpha = _field(self.alpha, h, w, img.dtype)
         shown = torch.roll(img, shifts=self.shift, dims=(-2, -1)) * self.tint
         return img * (1.0 - alpha) + shown * alpha
 
@@ -104,7 +107,7 @@ class Drawable(Protocol):
     """A sample's look, drawn for an image size from a generator in a fixed order."""
 
     @classmethod
-    def draw(cls, rng: np.random.Generator, size: tuple[int, int]) -> Drawable: ...
+    def draw(cls, rng: np.random.Generator, size: tuple[int, int]) -> Self: ...
 
 
 def draw_share(kind: type[Look], rng: np.random.Generator, share: float, size: tuple[int, int]) -> Look | None:

@@ -40,7 +40,7 @@ def _ground_plane(depth: np.ndarray, trav: np.ndarray, K: np.ndarray) -> tuple[n
         r = np.abs(P @ a - 1)
         keep = r < max(3 * np.median(r[keep]), 1e-6)
     n = np.linalg.norm(a)
-    return a / n, 1.0 / n
+    return a / n, float(1.0 / n)
 
 
 def traversable_hidden(sem: np.ndarray, depth: np.ndarray, intr: Intrinsics) -> np.ndarray:
@@ -76,7 +76,7 @@ def detection_3d(boxes: np.ndarray, T_wc: np.ndarray, intr: Intrinsics, det2d: n
     mask = np.zeros(det2d.shape, np.uint8)
     C = T_wc[:3, 3]
     R_cw = T_wc[:3, :3].T
-    keep = np.isin(boxes[:, 0].astype(int), sm.ROAD_USERS) if len(boxes) else []
+    keep = np.isin(boxes[:, 0].astype(int), sm.ROAD_USERS) if len(boxes) else np.zeros(0, bool)
     for b in boxes[keep]:
         lo, hi = b[1:4], b[4:7]
         corners = np.array([[hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]]

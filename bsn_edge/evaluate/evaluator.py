@@ -25,7 +25,7 @@ METHODS = ("BSN", "Traversable", "Detection-2D", "Detection-3D")
 def _scored(counts: dict[str, Counts], ranked: ScoreHistogram, sweep: ThresholdSweep | None) -> dict[str, Any]:
     """Each method's metrics; BSN's with its average precision (and, over all clips, the sweep's best
     threshold and IoU)."""
-    scored = {m: c.metrics() for m, c in counts.items() if c.tp + c.fp + c.fn}
+    scored: dict[str, dict[str, Any]] = {m: c.metrics() for m, c in counts.items() if c.tp + c.fp + c.fn}
     if "BSN" in scored:
         scored["BSN"]["ap"] = ranked.average_precision()
         if sweep is not None:
@@ -47,7 +47,7 @@ def _baselines(item: dict[str, Any], x: torch.Tensor, depth: np.ndarray, teacher
     else:
         sem = item["semantic"].numpy().astype(np.uint8)
     preds = {"Traversable": traversable_hidden(sem, depth, intr), "Detection-2D": detection_2d(sem)}
-    if boxes_at is not None:
+    if boxes_at is not None and pose is not None:
         preds["Detection-3D"] = detection_3d(np.load(boxes_at), pose, intr, preds["Detection-2D"])
     return preds
 
@@ -93,7 +93,7 @@ def evaluate(model, card: ModelCard, clips: list[Clip], size: tuple[int, int], l
             preds = {"BSN": prob >= threshold}
             if baselines:
                 boxes_at = seq.boxes(ds.items[k][1]) if seq.dir(seq.BOXES).is_dir() and poses is not None else None
-                pose = poses[ds.items[k][1]] if boxes_at is not None else None
+                pose = poses[ds.items[k][1]] if boxes_at is not None and poses is not None else None
                 preds |= _baselines(item, x, d, teacher, teacher_scale, intr, boxes_at, pose)
             for h in (clip_ranked, sweep):
                 h.add(prob, label_m, vis)

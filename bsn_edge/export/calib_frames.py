@@ -70,7 +70,8 @@ def _from_folder(folder: Path, size: tuple[int, int], count: int, card: ModelCar
     model camera when the folder is a sequence folder with a camera file, else resized."""
     h, w = size
     files = _images(folder)
-    picks = np.unique(np.linspace(0, len(files) - 1, min(count, len(files))).round().astype(int)) if files else []
+    picks: list[int] = np.unique(np.linspace(0, len(files) - 1, min(count, len(files))).round().astype(int)).tolist() \
+        if files else []
     frames = [img for k in picks if (img := cv2.imread(str(files[k]), cv2.IMREAD_COLOR)) is not None]
     if not frames:
         return []

@@ -10,6 +10,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 import onnx
@@ -41,7 +42,7 @@ def normalisation(mean: np.ndarray, std: np.ndarray) -> nn.Conv2d:
     for rgb in range(3):
         w[rgb, 2 - rgb] = 1.0 / (255.0 * float(std[rgb]))
     conv.weight.data.copy_(w)
-    conv.bias.data.copy_(torch.from_numpy(-mean / std))
+    cast(Tensor, conv.bias).data.copy_(torch.from_numpy(-mean / std))
     conv.requires_grad_(False)
     return conv
 
@@ -60,15 +61,16 @@ class FusedModel(nn.Module):
 
     def __init__(self, model: nn.Module, size: tuple[int, int] | None = None) -> None:
         super().__init__()
-        self.model = with_shuffle_upsampling(model.eval())
+        # Any: the model families answer through methods of their own (predict_coarse, forward_scaled)
+        self.model: Any = with_shuffle_upsampling(model.eval())
         setattr(self, NORMALISE, normalisation(IMAGENET_MEAN, IMAGENET_STD))
         scale = getattr(model, "input_scale", 1.0)
         up = getattr(model, "upsample", None)
-        self.to_frame = None
+        self.to_frame: ShuffleUpsample | None = None
         if hasattr(model, "predict_coarse") and (up is not None or scale == 1.0):
-            self.to_frame = ShuffleUpsample(model.coarse_stride, *((up.factor,) if up is not None else ()))
-        self.size = tuple(size) if size is not None else None
-        encoder = getattr(self.model, "frame_encoder", None)
+            self.to_frame = ShuffleUpsample(cast(int, model.coarse_stride), *((up.factor,) if up is not None else ()))
+        self.size: tuple[int, ...] | None = tuple(size) if size is not None else None
+        encoder: Any = getattr(self.model, "frame_encoder", None)
         self.blocks = (self.size is not None and self.to_frame is not None and encoder is not None
                        and fits(encoder.stem[0]) and all(s % self.to_frame.factor == 0 for s in self.size))
         if self.blocks:
@@ -80,7 +82,7 @@ class FusedModel(nn.Module):
     def forward(self, frame: Tensor) -> tuple[Tensor, Tensor]:
         x = frame.permute(0, 3, 1, 2).to(torch.float32)
         size = tuple(x.shape[2:])
-        if self.blocks and size != self.size:
+        if self.blocks and self.size is not None and size != self.size:
             raise ValueError(f"this fused model reads {self.size[0]}x{self.size[1]} frames, "
                              f"got {size[0]}x{size[1]}")
         scale = getattr(self.model, "input_scale", 1.0)

@@ -12,6 +12,8 @@ the normalisation and the block layout, followed by the zero padding the stem ha
 
 from __future__ import annotations
 
+from typing import cast
+
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
@@ -79,10 +81,10 @@ class SpaceToDepthInput(nn.Module):
                 for dx in range(BLOCK):
                     ch = (c * BLOCK + dy) * BLOCK + dx       # pixel_unshuffle's channel order
                     w[ch, :, dy * shrink:(dy + 1) * shrink, dx * shrink:(dx + 1) * shrink] = gain[c][:, None, None]
-                    b[ch] = normalise.bias.detach()[c]
+                    b[ch] = cast(Tensor, normalise.bias).detach()[c]
         self.conv = nn.Conv2d(3, 3 * BLOCK * BLOCK, side, side)
         self.conv.weight.data.copy_(w)
-        self.conv.bias.data.copy_(b)
+        cast(Tensor, self.conv.bias).data.copy_(b)
         self.requires_grad_(False)
         self.shrink = int(shrink)
         before, after = block_padding(kernel)

@@ -74,6 +74,7 @@ class ShuffleUpsample(nn.Module):
             raise ValueError(f"ShuffleUpsample needs factors whose product is >= 2, got {factors}")
         t = chained_taps(*factors)
         kernel = np.einsum("ra,sb->rsab", t, t).reshape(factor * factor, 1, 3, 3)
+        self.kernel: Tensor
         self.register_buffer("kernel", torch.from_numpy(kernel.astype(np.float32)))
         self.factor = factor
 

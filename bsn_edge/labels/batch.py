@@ -98,11 +98,11 @@ def label_many(seqs: list[str | Path], cfg: LabelConfig, sources: Sources, jobs:
                on_total: Callable[[int], None] | None = None, force: bool = False) -> list[ClipResult]:
     """Label ``seqs`` with ``jobs`` worker processes (1: in this process); results in input order.
     Workers end with this process."""
-    seqs = [str(s) for s in seqs]
-    if jobs <= 1 or len(seqs) == 1:
-        return [label_clip(s, cfg, sources, progress, on_total, force) for s in seqs]
+    names = [str(s) for s in seqs]
+    if jobs <= 1 or len(names) == 1:
+        return [label_clip(s, cfg, sources, progress, on_total, force) for s in names]
     with worker_pool(jobs) as (pool, q):
-        futures = [pool.submit(_worker, s, cfg, sources, q, force) for s in seqs]
+        futures = [pool.submit(_worker, s, cfg, sources, q, force) for s in names]
         while True:
             try:
                 kind, n = q.get(timeout=0.2)
@@ -134,7 +134,7 @@ def label_many_ray(seqs: list[str | Path], cfg: LabelConfig, sources: Sources, a
         else:
             ray.init(address=address, include_dashboard=False, log_to_driver=False)
     try:
-        task = ray.remote(label_clip)
+        task: Any = ray.remote(label_clip)     # Any: ray's stubs miscount a function's arguments
         refs = {task.remote(str(s), cfg, sources, None, None, force): i for i, s in enumerate(seqs)}
         out: list[ClipResult | None] = [None] * len(seqs)
         pending = list(refs)

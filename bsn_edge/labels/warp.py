@@ -69,8 +69,10 @@ class Points:
 
     @staticmethod
     def concat(parts: list[Points]) -> Points:
-        grey = None if any(p.grey is None for p in parts) else np.concatenate([p.grey for p in parts])
-        return Points(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("x", "y", "z", "depth")), grey)
+        greys = [p.grey for p in parts if p.grey is not None]
+        grey = np.concatenate(greys) if len(greys) == len(parts) else None
+        x, y, z, depth = (np.concatenate([getattr(p, f) for p in parts]) for f in ("x", "y", "z", "depth"))
+        return Points(x, y, z, depth, grey)
 
 
 @dataclass(frozen=True)
@@ -117,8 +119,8 @@ class Warper:
         x_c, y_c = self._rx[m] * d, self._ry[m] * d
         R = T_wc[:3, :3].astype(np.float32)
         t = (T_wc[:3, 3] - self.origin).astype(np.float32)
-        world = [R[i, 0] * x_c + R[i, 1] * y_c + R[i, 2] * d + t[i] for i in range(3)]
-        points = Points(*world, d, None if grey is None else smooth_grey(grey)[m])
+        x, y, z = (R[i, 0] * x_c + R[i, 1] * y_c + R[i, 2] * d + t[i] for i in range(3))
+        points = Points(x, y, z, d, None if grey is None else smooth_grey(grey)[m])
         lvl = self._level[m]
         levels = []
         for k in range(LEVELS):
@@ -171,7 +173,7 @@ class Warper:
             zc = R_cw[2, 0] * x + R_cw[2, 1] * y + R_cw[2, 2] * z
             ok = zc > 0.05
             x, y, z, zc = x[ok], y[ok], z[ok], zc[ok]
-            grey = pts.grey[ok] if want_grey else None
+            grey = pts.grey[ok] if want_grey and pts.grey is not None else None
             inv = 1.0 / zc
             u = (self.intr.fx * (R_cw[0, 0] * x + R_cw[0, 1] * y + R_cw[0, 2] * z) * inv + self.intr.cx)
             v = (self.intr.fy * (R_cw[1, 0] * x + R_cw[1, 1] * y + R_cw[1, 2] * z) * inv + self.intr.cy)
@@ -180,10 +182,10 @@ class Warper:
             ok = (ui >= 0) & (ui < w) & (vi >= 0) & (vi < h)
             keys.append(j * n_px + vi[ok] * w + ui[ok])
             depths.append(zc[ok])
-            if want_grey:
+            if grey is not None:
                 greys.append(grey[ok])
-        zbuf = np.full(len(clouds) * n_px, np.inf, np.float32)
-        gbuf = None
+        zbuf: np.ndarray = np.full(len(clouds) * n_px, np.inf, np.float32)
+        gbuf: np.ndarray | None = None
         if keys:
             all_keys, all_depths = np.concatenate(keys), np.concatenate(depths)
             np.minimum.at(zbuf, all_keys, all_depths)
@@ -267,7 +269,8 @@ def label_frame(warper: Warper, clouds: list[Cloud], depth: np.ndarray, traversa
     omega = s & ~traversable & ~sky
     agree = omega & depth_agrees(depth, d_a, cfg.depth_tol) if cfg.depth_tol > 0 else np.zeros_like(omega)
     omega &= ~agree
-    looks = omega & look_agrees(grey, warped_grey, cfg.look_tol) if by_look else np.zeros_like(omega)
+    looks = omega & look_agrees(grey, warped_grey, cfg.look_tol) if grey is not None and warped_grey is not None \
+        else np.zeros_like(omega)
     omega &= ~looks
     kept = remove_small_components(omega, cfg.min_area_px(*depth.shape))
     vis = sky | ((depth > 0) & (depth < cfg.vis_range))

@@ -6,7 +6,7 @@ import hashlib
 import io
 from dataclasses import asdict, dataclass, replace
 from enum import StrEnum
-from typing import Any
+from typing import Any, cast
 
 import torch
 from torch import nn
@@ -164,7 +164,7 @@ def start_from(model: BlindSpotNet, name: str, source: BlindSpotNet, source_name
     if what is Carried.ALL:
         model.load_state_dict(source.state_dict())
     else:
-        model.depth_net.load_state_dict(source.depth_net.net.state_dict())
+        model.depth_net.load_state_dict(cast(nn.Module, source.depth_net.net).state_dict())
     return what
 
 

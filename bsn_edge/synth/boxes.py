@@ -71,6 +71,11 @@ class Boxes:
     def __len__(self) -> int:
         return len(self.lo)
 
+    @property
+    def fronts(self) -> np.ndarray:
+        """``facing`` as made: never None once the boxes exist (no front is 0)."""
+        return self.facing if self.facing is not None else np.zeros(len(self), np.int8)
+
     @classmethod
     def empty(cls) -> Boxes:
         return cls(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.uint8), np.zeros(0, np.uint8),
@@ -163,18 +168,24 @@ class Agents:
         parts = [p for p in parts if len(p)]
         if not parts:
             return Agents.empty()
-        return Agents(Boxes.concat([p.boxes for p in parts]), *(np.concatenate([getattr(p, f) for p in parts])
-                                                               for f in ("velocity", "wrap_lo", "wrap_hi", "anchor")))
+        velocity, wrap_lo, wrap_hi, anchor = (np.concatenate([getattr(p, f) for p in parts])
+                                              for f in ("velocity", "wrap_lo", "wrap_hi", "anchor"))
+        return Agents(Boxes.concat([p.boxes for p in parts]), velocity, wrap_lo, wrap_hi, anchor)
+
+    @property
+    def anchors(self) -> np.ndarray:
+        """``anchor`` as made: never None once the agents exist (each box its own object by default)."""
+        return self.anchor if self.anchor is not None else 0.5 * (self.boxes.lo[:, :2] + self.boxes.hi[:, :2])
 
     def take(self, idx: np.ndarray) -> Agents:
         return Agents(self.boxes.take(idx), self.velocity[idx], self.wrap_lo[idx], self.wrap_hi[idx],
-                      self.anchor[idx])
+                      self.anchors[idx])
 
     def centres_at(self, t: np.ndarray | float) -> np.ndarray:
         """``[N, T, 2]`` x-y centres of the boxes at the times ``t`` (seconds)."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         c0 = 0.5 * (self.boxes.lo[:, :2] + self.boxes.hi[:, :2])
-        a = self.anchor[:, None, :] + self.velocity[:, None, :] * t[None, :, None]
+        a = self.anchors[:, None, :] + self.velocity[:, None, :] * t[None, :, None]
         axis = np.abs(self.velocity).argmax(axis=1)
         span = (self.wrap_hi - self.wrap_lo)[:, None]
         rows = np.arange(len(self))

@@ -114,6 +114,8 @@ def _init_worker(clip: Clip) -> None:
 
 
 def _render_list(indices: list[int]) -> list[Frame]:
+    if _WORKER is None:
+        raise RuntimeError("a render worker's pipeline is made by its initialiser (_init_worker)")
     return [_WORKER.frame(i) for i in indices]
 
 
@@ -177,7 +179,7 @@ def write_clip(cfg: SynthConfig, out: str | Path, force: bool = False, video: bo
         seq.dir(sub).mkdir()
     writer = None
     if video:
-        writer = cv2.VideoWriter(str(seq.video_path), cv2.VideoWriter_fourcc(*"mp4v"), cfg.fps,
+        writer = cv2.VideoWriter(str(seq.video_path), cv2.VideoWriter.fourcc(*"mp4v"), cfg.fps,
                                  (cfg.width, cfg.height))
         if not writer.isOpened():
             raise OSError(f"OpenCV cannot write {seq.video_path} (no mp4v encoder?)")

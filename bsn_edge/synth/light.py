@@ -49,7 +49,8 @@ class GroundMaps:
         self.occ = np.zeros((n, n), np.uint8)
         self.ao = np.zeros((n, n), np.uint8)
         self.light = np.zeros((n, n), np.uint8)
-        self.top = self.owner = None
+        self.top: np.ndarray | None = None     # the static objects' tops and owners, once drawn
+        self.owner: np.ndarray | None = None
 
     # -- drawing ------------------------------------------------------------------------------
     def _px(self, xy: np.ndarray, origin: np.ndarray) -> np.ndarray:
@@ -104,8 +105,8 @@ class GroundMaps:
                 cv2.fillPoly(ao, list(self._px(rects, origin)), val, cv2.LINE_8, SHIFT)
 
     def _draw_beams(self, light: np.ndarray, boxes: Boxes, origin: np.ndarray) -> None:
-        for k in np.flatnonzero((boxes.kind == KIND_VEHICLE) & (boxes.facing != 0)):
-            axis, sign = FACING_AXES[int(boxes.facing[k])]
+        for k in np.flatnonzero((boxes.kind == KIND_VEHICLE) & (boxes.fronts != 0)):
+            axis, sign = FACING_AXES[int(boxes.fronts[k])]
             front = 0.5 * (boxes.lo[k, :2] + boxes.hi[k, :2])
             front[axis] = boxes.hi[k, axis] if sign > 0 else boxes.lo[k, axis]
             fwd = np.zeros(2)
@@ -129,11 +130,12 @@ class GroundMaps:
         # the window depends on the position alone (not on the frames before), so frames can be
         # rendered in any order or in several processes and come out the same
         origin = (np.floor(centre / REUSE) + 0.5) * REUSE - HALF
-        if self._static_key != tuple(origin):
-            self._static = self._draw_static(_near(static, origin + HALF, HALF + 60.0), origin)
+        drawn = self._static
+        if drawn is None or self._static_key != tuple(origin):
+            drawn = self._static = self._draw_static(_near(static, origin + HALF, HALF + 60.0), origin)
             self._static_key, self.origin = tuple(origin), origin
-            self.top, self.owner = self._static[0], self._static[1]
-        _, _, occ, ao, light = self._static
+            self.top, self.owner = drawn[0], drawn[1]
+        _, _, occ, ao, light = drawn
         np.copyto(self.occ, occ)
         np.copyto(self.ao, ao)
         moving = _near(moving, self.origin + HALF, HALF + 30.0)
@@ -163,15 +165,16 @@ class GroundMaps:
         out = cv2.remap(m, uu, vv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         return out.reshape(-1)[:n].astype(np.float32) * np.float32(1 / 255)
 
-    def ground_light(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """At ground points: sun visibility (0 shadow - 1 lit), contact darkness and night light, 0-1."""
+    def ground_light(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """At ground points: sun visibility (0 shadow - 1 lit), contact darkness and night light, 0-1 (None by
+        day)."""
         lit = 1.0 - self._bilinear(self.occ, x, y) if self.shadows else np.ones(x.shape, np.float32)
         return lit, self._bilinear(self.ao, x, y), self._bilinear(self.light, x, y) if self.night else None
 
     def object_lit(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, track: np.ndarray) -> np.ndarray:
         """1 where an object point at ``(x, y, z)`` sees the sun past other objects, else 0."""
-        if not self.shadows:
-            return np.ones(x.shape, np.float32)
+        if not self.shadows or self.top is None or self.owner is None:
+            return np.ones(x.shape, np.float32)      # no sun, or nothing drawn yet to cast a shadow
         t = z / self.sun[2]
         u, v = self._cells(x - self.sun[0] * t, y - self.sun[1] * t)
         iu = np.clip(np.rint(u).astype(np.int32), 0, self.n - 1)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -140,7 +141,7 @@ def _segments(layout: RoadLayout, bounds):
 
 
 def _parked(rng, style: Style, layout: RoadLayout, bounds, density: float) -> Boxes:
-    parts = []
+    parts: list[Boxes] = []
     for axis, c, lanes, a0, a1 in _segments(layout, bounds):
         off = lanes * layout.lane_width + layout.parking_width / 2
         for side in (-1.0, 1.0):
@@ -173,7 +174,12 @@ class _Parts:
     """Collects boxes of objects, one track id per object."""
 
     def __init__(self) -> None:
-        self.lo, self.hi, self.cls, self.kind, self.color, self.track = ([] for _ in range(6))
+        self.lo: list[Any] = []
+        self.hi: list[Any] = []
+        self.cls: list[Any] = []
+        self.kind: list[Any] = []
+        self.color: list[Any] = []
+        self.track: list[Any] = []
         self.objects = 0
 
     def add(self, lo, hi, cls, kind, color, obj=None) -> int:
@@ -363,7 +369,7 @@ def _platoon(rng: np.random.Generator, style: Style, route: Route, speed: float,
     v = speed * float(rng.uniform(*LEAD_SPEED))
     lo_b, hi_b = (bounds[1], bounds[3]) if axis == 1 else (bounds[0], bounds[2])
     # the lane's own traffic would drive through the platoon
-    lane = (np.sign(agents.velocity[:, axis]) == sign) & (np.abs(agents.anchor[:, 1 - axis] - across)
+    lane = (np.sign(agents.velocity[:, axis]) == sign) & (np.abs(agents.anchors[:, 1 - axis] - across)
                                                           < 0.5 * style.lane_width)
     agents = agents.take(np.flatnonzero(~lane))
     parts = [agents]
@@ -406,7 +412,7 @@ def _clear_of_ego(rng, agents: Agents, ego_xy: np.ndarray, times: np.ndarray, tr
         shift = shift_obj[inv]
         axis = np.abs(agents.velocity).argmax(axis=1)
         rows = np.arange(len(agents))
-        lo, hi, anc = cur.boxes.lo.copy(), cur.boxes.hi.copy(), cur.anchor.copy()
+        lo, hi, anc = cur.boxes.lo.copy(), cur.boxes.hi.copy(), cur.anchors.copy()
         lo[rows, axis] += shift
         hi[rows, axis] += shift
         anc[rows, axis] += shift

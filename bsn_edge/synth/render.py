@@ -161,16 +161,14 @@ class Renderer:
                 sl = (slice(v0, v1), slice(u0, u1))
                 tb = t[sl]
                 if tb.max() > zmin_l[k]:
-                    tn = tf = None
                     lo_k, hi_k = lo_l[k], hi_l[k]
-                    for a in range(3):
+                    p, q = lo_k[0] * inv[0][sl], hi_k[0] * inv[0][sl]
+                    tn, tf = np.minimum(p, q), np.maximum(p, q)
+                    for a in (1, 2):
                         ia = inv[a][sl]
                         p, q = lo_k[a] * ia, hi_k[a] * ia
-                        if tn is None:
-                            tn, tf = np.minimum(p, q), np.maximum(p, q)
-                        else:
-                            np.maximum(tn, np.minimum(p, q), out=tn)
-                            np.minimum(tf, np.maximum(p, q), out=tf)
+                        np.maximum(tn, np.minimum(p, q), out=tn)
+                        np.minimum(tf, np.maximum(p, q), out=tf)
                     hit = (tn <= tf) & (tn > near) & (tn < tb)
                     np.copyto(tb, tn, where=hit)
                     np.copyto(box[sl], np.int32(idx[k]), where=hit)
@@ -206,12 +204,14 @@ class Renderer:
         with np.errstate(invalid="ignore"):
             in_range = dist <= self.bs_range
         bsgt = obj & g & sm.is_traversable(ground_cls) & ~tr.under & in_range
-        if self._maps_world is not world:
-            self._maps, self._maps_world = GroundMaps(world.look.sun, world.look.night), world
+        maps = self._maps
+        if maps is None or self._maps_world is not world:
+            maps = self._maps = GroundMaps(world.look.sun, world.look.night)
+            self._maps_world = world
         ns = len(world.static)
         fwd = T_wc[:2, 2] / max(float(np.linalg.norm(T_wc[:2, 2])), 1e-6)
-        self._maps.update(world.static, boxes.take(np.arange(ns, len(boxes))), C[:2], fwd)
-        rgb = self.shader.shade(world, boxes, tr, ground_cls, marking, curb, obj, T_wc, self._maps)
+        maps.update(world.static, boxes.take(np.arange(ns, len(boxes))), C[:2], fwd)
+        rgb = self.shader.shade(world, boxes, tr, ground_cls, marking, curb, obj, T_wc, maps)
         if not radiance:
             rgb = np.clip(rgb * np.float32(255.0) + 0.5, 0, 255).astype(np.uint8)
         return Frame(rgb, depth, semantic, bsgt, boxes)

@@ -48,9 +48,10 @@ class Sensor:
     def draw(cls, rng: np.random.Generator, dark: bool = False) -> Sensor:
         """A random dashcam; ``dark`` scenes get longer shutters, more gain and more noise."""
         wb = rng.uniform(0.9, 1.1, 3)
+        r, g, b = (float(v) for v in wb / wb.mean())
         return cls(
             exposure=float(rng.uniform(2.2, 4.0) if dark else rng.uniform(0.8, 1.25)),
-            white_balance=tuple(float(v) for v in wb / wb.mean()),
+            white_balance=(r, g, b),
             gamma=float(rng.uniform(0.85, 1.25)),
             vignette=float(rng.uniform(0.0, 0.35)),
             shutter_s=float(rng.uniform(1 / 60, 1 / 25) if dark else rng.uniform(1 / 1000, 1 / 120)),
@@ -91,7 +92,7 @@ class SensorModel:
         u0, v0 = self.foe
         for k in range(1, BLUR_TAPS):
             s = 1.0 + scale * k / (BLUR_TAPS - 1)
-            m = np.float32([[s, 0, u0 * (1 - s)], [0, s, v0 * (1 - s)]])
+            m = np.array([[s, 0, u0 * (1 - s)], [0, s, v0 * (1 - s)]], np.float32)
             acc += cv2.warpAffine(img, m, (self.w, self.h), flags=cv2.INTER_LINEAR,
                                   borderMode=cv2.BORDER_REPLICATE)
         return acc / np.float32(BLUR_TAPS)

@@ -117,15 +117,17 @@ class Shader:
         # fog over the whole frame at once: the sky keeps its own colour
         fog = np.exp(np.minimum(tr.t, np.float32(1e4)) * np.float32(-1.0 / look.fog_distance))
         fog[~(obj | tr.ground)] = 1.0
-        out = out.reshape(h, w, 3)
+        img = out.reshape(h, w, 3)
         haze = np.asarray(look.haze, np.float32)
-        out -= haze
-        out *= fog[..., None]
-        out += haze
-        return out
+        img -= haze
+        img *= fog[..., None]
+        img += haze
+        return img
 
     # -- sky ----------------------------------------------------------------------------------
     def _sky(self, look, tr, si, T_wc) -> np.ndarray:
+        if self._ray_norm is None:
+            raise RuntimeError("the shader has no camera rays: set_rays first")
         n = self._ray_norm.reshape(-1)[si]
         dx, dy, dz = (tr.dirs[a].reshape(-1)[si] / n for a in range(3))
         mix = np.clip(dz * 2.5, 0.0, 1.0)[:, None]
@@ -230,7 +232,7 @@ class Shader:
         k = np.flatnonzero(spec)
         if len(k):
             rad[k] += _mirror(look, sun, [d[a][k] for a in range(3)], nx[k], ny[k], nz[k], spec[k],
-                              lit[k] if np.ndim(lit) else lit)
+                              np.asarray(lit)[k] if np.ndim(lit) else lit)
         return rad if glow is None else rad + glow
 
     def _paint(self, look, boxes: Boxes, bi, kind, track, on_x, on_y, side_face, nx, ny, u, ulen, z, height, tex,
@@ -299,7 +301,7 @@ class Shader:
                  look) -> None:
         """Paint, glass, lamps, plates and bumpers of the vehicle pixels ``k`` (in place; the other
         arguments are already taken at ``k``)."""
-        facing = boxes.facing[bi]
+        facing = boxes.fronts[bi]
         axis = np.full(len(bi), -1)
         sign = np.zeros(len(bi), np.float32)
         for code, (a, s) in FACING_AXES.items():

@@ -121,7 +121,8 @@ class Placed:
 
 def draw_size(rng: np.random.Generator, vt: VehicleType) -> tuple[float, float, float]:
     """Length, width and height of one vehicle of type ``vt``."""
-    return tuple(float(rng.uniform(*r)) for r in (vt.length, vt.width, vt.height))
+    length, width, height = (float(rng.uniform(*r)) for r in (vt.length, vt.width, vt.height))
+    return length, width, height
 
 
 def vehicle_parts(rng: np.random.Generator, vt: VehicleType, at: Placed, size: tuple[float, float, float],
@@ -138,12 +139,12 @@ def vehicle_parts(rng: np.random.Generator, vt: VehicleType, at: Placed, size: t
         for a in at_along:
             parts.append((a - r, a + r, -W2, W2, 0.0, 2 * r, vt.cls, KIND_WHEEL, DARK))
     if vt.two_wheeler:
-        frame_col = col if vt.cls == sm.MOTORCYCLE else np.float32((0.12, 0.12, 0.12))
+        frame_col = col if vt.cls == sm.MOTORCYCLE else np.array((0.12, 0.12, 0.12), np.float32)
         parts.append((-L2, L2, -W2 * 0.35, W2 * 0.35, 0.0, height * 0.85, vt.cls, KIND_VEHICLE, frame_col))
         top = height * 0.85
         cloth = CLOTHES[rng.integers(len(CLOTHES))]
         parts.append((-0.35, 0.15, -0.24, 0.24, top, top + 0.62, sm.RIDER, KIND_RIDER, cloth))
-        head = HELMET[rng.integers(len(HELMET))] if vt.cls == sm.MOTORCYCLE else np.float32((0.5, 0.62, 0.78))
+        head = HELMET[rng.integers(len(HELMET))] if vt.cls == sm.MOTORCYCLE else np.array((0.5, 0.62, 0.78), np.float32)
         parts.append((-0.2, 0.05, -0.12, 0.12, top + 0.62, top + 0.88, sm.RIDER, KIND_HEAD, head))
     elif vt.name == "truck":
         cab = 2.2

@@ -119,7 +119,8 @@ def save_checkpoint(run: Run, model, cfg: Config, data: Datasets, step: int, thr
 def finish(run: Run, model: BlindSpotNet, cfg: Config, data, loss_first_last) -> dict[str, Any]:
     """The threshold chosen on the validation clips and the final card written; what the summary adds."""
     out: dict[str, Any] = {}
-    threshold, val = UNCHOSEN_THRESHOLD, {}
+    threshold = UNCHOSEN_THRESHOLD
+    val: dict[str, Any] = {}
     if data.val_ds is not None:
         threshold, val = choose_threshold(model, data.val_ds)
     else:

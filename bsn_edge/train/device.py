@@ -50,6 +50,12 @@ def layout(x: torch.Tensor, channels_last: bool) -> torch.Tensor:
     return x.contiguous(memory_format=torch.channels_last) if channels_last else x
 
 
+def module_layout(m: torch.nn.Module, channels_last: bool) -> torch.nn.Module:
+    """``m``'s weights in channels-last memory (or back to contiguous), in place."""
+    # torch's stubs lack Module.to's memory_format, which the function takes
+    return m.to(memory_format=torch.channels_last if channels_last else torch.contiguous_format)  # type: ignore[call-overload]
+
+
 def train_device(cfg: Config) -> torch.device:
     """Where training runs: ``train.device``, with "auto" meaning CUDA when torch sees a GPU."""
     want = cfg.train.device

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Any
 
 import torch
 
@@ -26,7 +27,7 @@ class Optimizer:
                  t: TrainConfig, fused: bool = False) -> None:
         """``params``: parameters, or parameter groups as :func:`param_groups` makes them; ``fused``:
         torch's one-kernel Adam (the same update; the state is interchangeable with the per-tensor one's)."""
-        groups = decay_groups(params, t.weight_decay) if t.optimizer == ADAMW else list(params)
+        groups: list[Any] = decay_groups(params, t.weight_decay) if t.optimizer == ADAMW else list(params)
         if t.optimizer == ADAMW:
             self.opt: torch.optim.Optimizer = torch.optim.AdamW(groups, lr=lr, betas=t.betas, eps=t.eps,
                                                                 fused=fused or None)
@@ -65,12 +66,11 @@ def decays(p: torch.nn.Parameter) -> bool:
     return p.ndim >= 2
 
 
-def decay_groups(params: Iterable[torch.nn.Parameter] | Iterable[dict], weight_decay: float) -> list[dict]:
+def decay_groups(params: Iterable[torch.nn.Parameter] | Iterable[dict], weight_decay: float) -> list[dict[str, Any]]:
     """Each parameter group split in two: its weights decayed by ``weight_decay``, its normalisation
     scales and biases not (``decays``); the group's other settings (its learning rate) kept by both."""
-    groups = list(params)
-    if groups and not isinstance(groups[0], dict):
-        groups = [{"params": groups}]
+    given: list[Any] = list(params)
+    groups: list[dict[str, Any]] = given if given and isinstance(given[0], dict) else [{"params": given}]
     out = []
     for g in groups:
         ps = list(g["params"])

@@ -24,29 +24,25 @@ import hashlib
 import io
 import json
 import pickle
-from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import torch
 
-from bsn_edge.card import UNRECORDED, ModelCard, TrainingRecord
+from bsn_edge.card import ModelCard
 from bsn_edge.fields import read_json_object
-from bsn_edge.models import BlindSpotNet, Carried, ModelSpec, build, carried_over, create_teacher, weights_bytes
+from bsn_edge.models import BlindSpotNet, ModelSpec, build, create_teacher, weights_bytes
 from bsn_edge.sequence.images import atomic_write, atomic_write_bytes, torn_writes
 from bsn_edge.train.config import TeacherConfig
-
-
-def _last_parts(path: str) -> str:
-    """A folder's last two parts ("models/campaign"): no one's directory layout in what is handed out."""
-    return "/".join(Path(path).parts[-2:]) if path else ""
+from bsn_edge.train.run_record import training_record
 
 
 class RunError(ValueError):
     """A run folder that cannot be used as asked (damaged, unfinished, or in the way)."""
 
 
-def _to_bytes(obj: Any) -> bytes:
+def to_bytes(obj: Any) -> bytes:
+    """``obj`` as a torch file's bytes (weights only: tensors and numbers)."""
     buf = io.BytesIO()
     torch.save(obj, buf)
     return buf.getvalue()
@@ -85,12 +81,6 @@ def _read_state(path: Path, what: str) -> dict[str, Any]:
     if hashlib.sha256(state["weights"]).hexdigest() != state["weights_sha256"]:
         raise RunError(f"{path}: damaged (its weights' sha256 differs); --force starts the run again")
     return state
-
-
-def trained_precision(records: Iterable[dict[str, Any]]) -> set[str]:
-    """The arithmetic a run's history records name, step 0 left out (the start's own score, not a
-    piece of the run's training); ``UNRECORDED`` for records written before the trainer named it."""
-    return {r.get("precision", UNRECORDED) for r in records if r.get("step")}
 
 
 class Run:
@@ -172,56 +162,9 @@ class Run:
             d["card"] = ModelCard.from_dict(d["card"], str(p))
         else:
             d = {"card": ModelCard.from_legacy(d, str(p)), **{k: v for k, v in d.items() if k != "card"}}
-        if d["card"].training is None and (record := self._training_record(d)) is not None:
+        if d["card"].training is None and (record := training_record(self, d)) is not None:
             d["card"] = d["card"].replace(training=record)
         return d
-
-    def _training_record(self, info: dict[str, Any]) -> TrainingRecord | None:
-        """How the run was trained: samples and seconds summed over every piece, as the trainer
-        recorded them with the checkpoint (runs from before that: the history's last training record,
-        scaled to the run's last step); the clips from the checkpoint; the start and the teacher from
-        the config; the arithmetic of every piece as the trainer recorded it (runs from before that:
-        as the history's training records name it). Counted from scratch: a run that started from
-        another run's weights (``train.init``) adds that run's record, and ``init`` names it with its
-        own count. None for a run with neither."""
-        steps = int(info.get("step") or 0)
-        trained = info.get("trained")
-        # step 0 is the start's own score, not a piece of this run's training
-        recs = [r for r in self.history() if r.get("phase") == "train" and r.get("step")]
-        kinds = set((trained or {}).get("precision", [])) or trained_precision(recs)
-        if trained is None:
-            if not recs or not steps:
-                return None
-            scale = steps / recs[-1]["step"]
-            trained = {"samples": recs[-1]["samples"] * scale, "seconds": recs[-1].get("seconds", 0.0) * scale}
-        cfg = self.config()
-        teacher = _last_parts(cfg.get("teacher", {}).get("checkpoint", ""))
-        if not teacher and self.teacher_path.is_file():
-            teacher = f"trained in the run, {cfg.get('teacher', {}).get('steps', '?')} steps"
-            if t_init := cfg.get("teacher", {}).get("init", ""):
-                teacher += f" on from {_last_parts(t_init)}"
-        built = self.teacher_config()
-        if teacher and built.encoder != TeacherConfig().encoder:
-            teacher += f" ({built.encoder}{' from ImageNet' if built.pretrained else ''})"
-        samples, hours = float(trained["samples"]), trained["seconds"] / 3600
-        init = str(cfg.get("train", {}).get("init", ""))
-        start = _last_parts(init)
-        # the start as it was when this run began (runs from before that record: as it is now)
-        frozen = info.get(self.INIT_RECORD) or self.init_record(init)
-        if frozen is not None:
-            before = TrainingRecord.from_dict(frozen["training"])
-            steps, samples, hours = steps + before.steps, samples + before.samples, hours + before.hours
-            kinds |= set(before.precision) or {UNRECORDED}
-            d_only = carried_over(cfg.get("model", {}).get("name", frozen["variant"]), frozen["variant"]) is Carried.D
-            start += f" ({'its D, ' if d_only else ''}after {before.steps} steps)"
-        counted = [r for r in recs if "alive_share" in r]
-        alive = "" if not counted else (f"{100 * counted[-1]['alive_share']:.1f} % of "
-                                        f"{counted[-1]['channels']:,} convolution channels alive at step "
-                                        f"{counted[-1]['step']}")
-        return TrainingRecord(steps=steps, samples=round(samples), hours=round(hours, 2),
-                              train_clips=len(info.get("train_clips", [])), val_clips=len(info.get("val_clips", [])),
-                              init=start, teacher=teacher,
-                              precision=() if kinds <= {UNRECORDED} else tuple(sorted(kinds)), alive=alive)
 
     @classmethod
     def init_record(cls, init: str | Path) -> dict[str, Any] | None:
@@ -352,53 +295,6 @@ class Run:
         teacher.load_state_dict(state)
         return teacher.eval()
 
-    def ship(self, dest: str | Path, dtype: torch.dtype = torch.float16, force: bool = False) -> Run:
-        """A copy of this run to hand out: the weights and the teacher in ``dtype`` (half the size in
-        fp16), the card re-digested for them and the teacher's sha256 recorded, the config and the
-        history; no optimizer state. Fine-tuning (``train.init``), ``bsn-adapt``, ``bsn-eval`` and
-        ``bsn-export`` take it as they take the run."""
-        out = Run(dest)
-        if out.path.resolve() == self.path.resolve():
-            raise RunError(f"{dest}: shipping a run onto itself")
-        if out.exists() and not force:
-            raise RunError(f"{out.path} already holds a run; pass force to replace it")
-        # everything read before anything is written: the destination may be where this run started
-        # from or where its teacher is (the next leg of a campaign shipped over the last)
-        info = self.info()
-        model, card = self.load_model()
-        teacher = self.load_teacher_state()
-
-        def cast(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-            return {k: (v.detach().to(dtype) if v.is_floating_point() else v.detach()).contiguous()
-                    for k, v in state.items()}
-
-        out.path.mkdir(parents=True, exist_ok=True)
-        if force:
-            out.teacher_path.unlink(missing_ok=True)
-        weights = _to_bytes(cast(model.state_dict()))
-        record = {k: v for k, v in info.items() if k != "card"}
-        record.update(card=card.replace(weights_sha256=hashlib.sha256(weights).hexdigest()).to_dict(),
-                      weights_dtype=str(dtype).removeprefix("torch."), shipped_from=self.path.name)
-        if teacher is not None:
-            tdata = _to_bytes(cast(teacher))
-            out.teacher_path.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_bytes(out.teacher_path, tdata)
-            record["teacher_sha256"] = hashlib.sha256(tdata).hexdigest()
-        atomic_write_bytes(out.model_path, weights)
-        if self.history_path.is_file():
-            atomic_write_bytes(out.history_path, self.history_path.read_bytes())
-        if self.config_path.is_file():
-            # no path of this machine in a run handed out: the teacher travels with it, the start is named
-            cfg = self.config()
-            if teacher is not None and "teacher" in cfg:
-                cfg["teacher"]["checkpoint"] = ""
-            if cfg.get("train", {}).get("init"):
-                cfg["train"]["init"] = _last_parts(cfg["train"]["init"])
-            out.write_config(cfg)
-        out.state_path.unlink(missing_ok=True)
-        atomic_write_bytes(out.checkpoint_path, (json.dumps(record, indent=2) + "\n").encode())
-        return out
-
     # -- writing ---------------------------------------------------------------------------------
 
     def write_config(self, config: dict[str, Any]) -> None:
@@ -419,14 +315,14 @@ class Run:
     def save_teacher(self, state: dict[str, torch.Tensor]) -> None:
         """The finished teacher's weights; its training state goes (nothing is left to resume)."""
         self.teacher_path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(self.teacher_path, _to_bytes(state))
+        atomic_write_bytes(self.teacher_path, to_bytes(state))
         self.teacher_state_path.unlink(missing_ok=True)
 
     def save_teacher_progress(self, weights: dict[str, torch.Tensor], resume_state: dict[str, Any]) -> None:
         """The unfinished teacher's weights and what resuming it needs (optimizer, scheduler, step...), in
         one atomic file with the weights' sha256."""
         self.teacher_state_path.parent.mkdir(parents=True, exist_ok=True)
-        data = _to_bytes({k: v.detach().cpu().contiguous() for k, v in weights.items()})
+        data = to_bytes({k: v.detach().cpu().contiguous() for k, v in weights.items()})
         _write_state(self.teacher_state_path, data, hashlib.sha256(data).hexdigest(), resume_state)
 
     def load_teacher_progress(self) -> dict[str, Any] | None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -20,7 +20,16 @@ from bsn_edge.progress import progress_bar
 from bsn_edge.train.batches import datasets, sample_cache, skipped_and_torn, training_batches
 from bsn_edge.train.checkpoints import open_run
 from bsn_edge.train.config import Config
-from bsn_edge.train.device import autocast, autocast_dtype, distributed, layout, precision_name, scaled, train_device
+from bsn_edge.train.device import (
+    autocast,
+    autocast_dtype,
+    distributed,
+    layout,
+    module_layout,
+    precision_name,
+    scaled,
+    train_device,
+)
 from bsn_edge.train.optim import Optimizer, param_groups
 from bsn_edge.train.run import Run
 
@@ -116,10 +125,11 @@ def train_teacher(cfg: Config, ds, run: Run, rank: int, world: int, progress: bo
     if saved is not None:
         teacher.load_state_dict(saved["weights"])
     cl = cfg.train.channels_last
-    teacher.to(dev).to(memory_format=torch.channels_last if cl else torch.contiguous_format)
+    module_layout(teacher.to(dev), cl)
     dtype = autocast_dtype(cfg, dev)
     model = torch.nn.parallel.DistributedDataParallel(teacher) if world > 1 else teacher
-    optim = Optimizer(param_groups(teacher, teacher.encoder, t.lr, t.encoder_lr if t.pretrained else 1.0), t.lr,
+    encoder = cast(torch.nn.Module, teacher.encoder)
+    optim = Optimizer(param_groups(teacher, encoder, t.lr, t.encoder_lr if t.pretrained else 1.0), t.lr,
                       t.steps, cfg.train)
     start, seconds_before = 0, 0.0
     if saved is not None:

@@ -29,7 +29,16 @@ from bsn_edge.progress import progress_bar
 from bsn_edge.train.batches import datasets, sample_cache, skipped_and_torn, training_batches
 from bsn_edge.train.checkpoints import carried, checkpoint, finish, open_run
 from bsn_edge.train.config import Config
-from bsn_edge.train.device import autocast, autocast_dtype, distributed, layout, precision_name, scaled, train_device
+from bsn_edge.train.device import (
+    autocast,
+    autocast_dtype,
+    distributed,
+    layout,
+    module_layout,
+    precision_name,
+    scaled,
+    train_device,
+)
 from bsn_edge.train.encoder_norm import EncoderNorm, freeze_norm_stats
 from bsn_edge.train.losses import depth_loss, distillation_loss, masked_bce, visible_out_to
 from bsn_edge.train.optim import Optimizer, param_groups
@@ -127,7 +136,7 @@ def train(cfg: Config, data_dir: str | Path, out: str | Path, resume: bool = Fal
     seconds_before = float(state.get("seconds", 0.0)) if state is not None else 0.0
     # the arithmetic of every piece so far, this one's included (a state from before it was kept: unrecorded)
     kinds = sorted({precision_name(dtype)} | (set(state.get("precision", [UNRECORDED])) if state else set()))
-    model.to(memory_format=torch.channels_last if cl else torch.contiguous_format)
+    module_layout(model, cl)
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
     batches = _batches(cfg, data, cache, state, start, rank, world, dev)
     if rank == 0:
@@ -174,13 +183,13 @@ def _caches_and_teacher(cfg: Config, data, run: Run, rank: int, world: int, prog
     show = progress and rank == 0
     cache = sample_cache(cfg, data.train_ds, show, "caching training samples")
     val_caches: dict[str, SampleCache] = {}
-    if data.val_ds is not None and cfg.data.cache != "off":
-        val_caches["val_"] = sample_cache(cfg, data.val_ds, show, "caching validation samples")
+    for prefix, ds, desc in (("val_", data.val_ds, "caching validation samples"),
+                             ("val_guessed_", data.val_guessed_ds, "caching validation samples, guessed cameras")):
+        got = sample_cache(cfg, ds, show, desc) if ds is not None else None
+        if got is not None:
+            val_caches[prefix] = got
     guessed = sample_cache(cfg, data.train_guessed_ds, show, "caching samples, guessed cameras") \
         if data.train_guessed_ds is not None else None
-    if data.val_guessed_ds is not None:
-        val_caches["val_guessed_"] = sample_cache(cfg, data.val_guessed_ds, show,
-                                                  "caching validation samples, guessed cameras")
     teacher = (train_teacher(cfg, data.train_ds, run, rank, world, progress, cache, val_caches.get("val_"),
                              resume=resume) if cfg.distill_weight > 0 else None)
     cl = cfg.train.channels_last
@@ -188,8 +197,8 @@ def _caches_and_teacher(cfg: Config, data, run: Run, rank: int, world: int, prog
         if teacher is not None and c is not None:
             c.attach_teacher(teacher, cfg.teacher.scale, cfg.train.distill_grid, progress=show,
                              resize=lambda x, sc: layout(scaled(x, sc), cl), dtype=dtype)
-    if guessed is not None:
-        cache = CameraMix(cache, guessed, cfg.data.guessed_camera)
+    if guessed is not None and cache is not None:
+        return CameraMix(cache, guessed, cfg.data.guessed_camera), val_caches, teacher
     return cache, val_caches, teacher
 
 

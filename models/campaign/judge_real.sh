@@ -34,7 +34,7 @@ models=(--model "default=$SHIPPED" --model "$LABEL=$MODEL")
 cd "$REPO"
 "$B/python" -m benchmarks.bench_realboxes --out "$OUT/realboxes" "${models[@]}"
 "$B/python" -m benchmarks.bench_realboxes --out "$OUT/withheld" --name withheld --withhold-camera "${models[@]}"
-"$B/python" -m benchmarks.bench_camvid --out "$OUT/camvid" "${models[@]}"
+"$B/python" -m benchmarks.bench_camvid --out "$OUT/camvid" --like-area "${models[@]}"
 sets=()
 for s in highway suburb town urban; do sets+=(--set "$s=$HERE/bystyle/$s"); done
 "$B/python" -m benchmarks.bench_cameras --out "$OUT/cameras" "${sets[@]}" "${models[@]}"

@@ -35,6 +35,6 @@ if [ -f "$RUN/state.pt" ]; then resume=(--resume); elif [ -d "$RUN" ]; then resu
   --set "train.encoder_lr=$ENCODER_LR" --set "train.encoder_bn=\"$BN\"" --set "train.seed=$SEED" \
   --set "data.object_repaint=$OBJECTS" --set "data.object_see_through=$OBJECTS" --set "data.camera_look=$LOOK"
 if [ -n "$SHIP" ] && [ ! -e "$SHIP" ]; then
-  "$BIN/python" -c "import sys; from bsn_edge.train.run import Run; Run(sys.argv[1]).ship(sys.argv[2])" "$RUN" "$SHIP"
+  "$BIN/python" -c "import sys; from bsn_edge.train.run import Run; from bsn_edge.train.ship import ship_run; ship_run(Run(sys.argv[1]), sys.argv[2])" "$RUN" "$SHIP"
   echo "shipped $RUN to $SHIP"
 fi

@@ -23,6 +23,7 @@ from bsn_edge.train.batches import datasets
 from bsn_edge.train.checkpoints import save_checkpoint
 from bsn_edge.train.config import SECTIONS, Config
 from bsn_edge.train.run import Run
+from bsn_edge.train.ship import ship_run
 from bsn_edge.train.validation import choose_threshold
 
 
@@ -59,12 +60,12 @@ def main(argv: list[str] | None = None) -> int:
     data = datasets(cfg, a.data)
     threshold, val = choose_threshold(leg_model, data.val_ds)
     with tempfile.TemporaryDirectory() as tmp:
-        work = leg_run.ship(Path(tmp) / "soup")
+        work = ship_run(leg_run, Path(tmp) / "soup")
         save_checkpoint(work, leg_model, cfg, data, cfg.train.steps, threshold=threshold, val=val)
         record = json.loads(work.checkpoint_path.read_text())
         record["soup"] = {"start": Path(a.start).name, "leg": Path(a.leg).name, "alpha": a.alpha}
         work.checkpoint_path.write_text(json.dumps(record, indent=2) + "\n")
-        work.ship(a.out)
+        ship_run(work, a.out)
     print(f"{a.out}: alpha {a.alpha}, threshold {threshold:.2f}, val {val}")
     return 0
 

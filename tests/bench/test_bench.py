@@ -82,3 +82,24 @@ def test_camvid_counts_road_users_and_open_road_by_the_stated_rule():
     assert clear[350, 65], "the pavement is not an obstacle"
     assert not clear[330:332, 100:105].any()
 
+
+
+def test_camvid_says_where_the_flagged_pixels_fall_and_finds_the_threshold_of_a_like_area():
+    """Where flagged pixels fall, counted by hand on a two-class label; the like-area threshold flags the
+    share asked for, whatever the distribution (uniform ramp: the share's complement), and nothing for 0."""
+    import numpy as np
+
+    from benchmarks.bench_camvid import like_area_threshold, score_masks
+    lab = np.zeros((100, 200), np.uint8)           # sky
+    lab[50:] = 1                                   # building below
+    prob = np.zeros((100, 200), np.float16)
+    prob[40:60, :100] = 0.9                        # 1,000 px on sky, 1,000 on the building
+    prob[60:70, :100] = 0.9                        # 1,000 more on the building
+    r = score_masks([prob], [lab], 0.5)
+    assert r["flagged"] == 0.15 and r["falls"]["sky"] == round(1 / 3, 4)
+    assert r["falls"]["buildings and trees"] == round(2 / 3, 4) and r["falls"]["road users"] == 0
+    ramp = [np.linspace(0, 1, 10_000, dtype=np.float32).reshape(100, 100)]
+    for share in (0.05, 0.25, 0.5):
+        t = like_area_threshold(ramp, share)
+        assert abs(float((ramp[0] >= t).mean()) - share) < 1e-3
+    assert not (ramp[0] >= like_area_threshold(ramp, 0.0)).any()

@@ -25,6 +25,7 @@ from bsn_edge.models.alive import alive_channels
 from bsn_edge.train import Run, RunError, load_config
 from bsn_edge.train.device import cpu_has_native_bf16
 from bsn_edge.train.losses import masked_bce
+from bsn_edge.train.ship import ship_run
 from tests.fakes import SMOKE
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -621,11 +622,11 @@ def test_a_shipped_run_is_half_the_size_and_every_tool_takes_it(data, taught, tm
     assert (ft.card().training.steps, ft.card().training.samples) == (3, 6)
     # a run whose teacher came from elsewhere still has it (bsn-adapt and shipping need it)
     assert not ft.teacher_path.exists() and ft.load_teacher() is not None
-    ft.ship(tmp_path / "ft_shipped")
+    ship_run(ft, tmp_path / "ft_shipped")
     assert Run(tmp_path / "ft_shipped").teacher_path.is_file()
     # shipped over the run it started from, whose teacher it uses: nothing lost, no path of this machine
     before = Run(shipped).teacher_path.read_bytes()
-    ft.ship(shipped, force=True)
+    ship_run(ft, shipped, force=True)
     assert Run(shipped).teacher_path.read_bytes() == before and Run(shipped).config()["teacher"]["checkpoint"] == ""
     # its start's folder now holds it: its record still counts the start as it was (a release
     # replacing models/default must not change what the runs trained from it say)
@@ -730,7 +731,7 @@ def test_a_student_of_another_runs_teacher_says_what_that_teacher_is(data, tmp_p
     assert Run(third).card().training.teacher == (f"trained in the run, 1 steps on from {tmp_path.name}/a "
                                                    f"(efficientnet-lite0{origin})")
     assert isinstance(Run(second).load_teacher().encoder, EfficientNetLite0)
-    shipped = Run(second).ship(tmp_path / "shipped")
+    shipped = ship_run(Run(second), tmp_path / "shipped")
     assert shipped.config()["teacher"]["checkpoint"] == "" and isinstance(shipped.load_teacher().encoder,
                                                                            EfficientNetLite0)
     assert Run(tmp_path / "d").teacher_holder() is None

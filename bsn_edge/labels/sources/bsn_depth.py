@@ -13,6 +13,7 @@ from bsn_edge.sequence.frames import read_rgb
 
 if TYPE_CHECKING:
     from bsn_edge.labels.config import LabelConfig
+    from bsn_edge.mounting import Mounting
 
 
 class BsnDepth(AlignedDepth):
@@ -25,6 +26,9 @@ class BsnDepth(AlignedDepth):
     Pixels the model camera does not see are unknown (0)."""
 
     name = "bsn"
+    model_path: str
+    variant: str
+    mounting: Mounting
 
     @classmethod
     def for_clip(cls, model: str, clip: ClipData, poses: np.ndarray, cfg: LabelConfig,
@@ -45,7 +49,7 @@ class BsnDepth(AlignedDepth):
             return np.where(raw > 0, raw, np.nan).astype(np.float32)   # unseen: left out of the fit
 
         obj = cls(predict, "metric_depth", clip, poses, frames, cfg.min_corr, window)
-        obj.model_path, obj.variant, obj.mounting = model, card.variant, cal.mounting
+        obj.model_path, obj.variant, obj.mounting = model, card.variant, mf.mounting
         return obj
 
     def __call__(self, i: int) -> np.ndarray:

@@ -78,6 +78,8 @@ class GroundDepth(AlignedDepth):
     the landmarks with the same rule as a depth model's; the scale fit takes the odometry's units
     (the plane is metric already)."""
 
+    mounting: Mounting
+
     name = "ground"
 
     @staticmethod

@@ -114,6 +114,7 @@ class OnnxDepth(AlignedDepth):
     metadata: ``depth`` or ``inverse_depth``; MiDaS-style ``inverse_depth`` by default)."""
 
     name = "onnx"
+    model: OnnxImageModel
 
     @classmethod
     def for_clip(cls, model: str, clip: ClipData, poses: np.ndarray, cfg: LabelConfig,

@@ -17,12 +17,13 @@ class RelFilesDepth(AlignedDepth):
     inverse depth (MiDaS-style disparity). Scale and shift are unknown and found from landmarks."""
 
     name = "relative files"
+    folder: Path
 
     @classmethod
     def from_spec(cls, spec: str, clip: ClipData, poses: np.ndarray, min_corr: float,
                   frames: list[int], window: int | None = None) -> RelFilesDepth:
-        folder, _, kind = spec.partition(":")
-        kind = {"": "depth", "depth": "depth", "inverse": "inverse_depth"}.get(kind)
+        folder, _, suffix = spec.partition(":")
+        kind = {"": "depth", "depth": "depth", "inverse": "inverse_depth"}.get(suffix)
         if kind is None:
             raise ValueError(f"rel:{spec}: the suffix must be ':inverse' or nothing")
         root = Path(folder)
