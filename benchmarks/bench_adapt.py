@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.runner import Report, run
 from bsn_edge.adapt.config import LABEL_DEPTHS, AdaptConfig
 from bsn_edge.adapt.finetune import agreement, at_threshold
 from bsn_edge.adapt.pipeline import label_clips, tune
@@ -37,6 +36,8 @@ from bsn_edge.adapt.workspace import AdaptFolder
 from bsn_edge.data.dataset import BlindSpotDataset, find_clips
 from bsn_edge.train import Run, load_config
 from bsn_edge.train.trainer import train
+
+from .runner import Report, run
 
 CHECKOUT = Path(__file__).resolve().parents[1]
 

@@ -14,10 +14,11 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from benchmarks.common import machine
-from benchmarks.runner import Report, run
 from bsn_edge.models.alive import Alive, alive_channels
 from bsn_edge.train.run import Run
+
+from .common import machine
+from .runner import Report, run
 
 CHECKOUT = Path(__file__).resolve().parents[1]
 DEFAULT_RUNS = CHECKOUT / "models" / "default"

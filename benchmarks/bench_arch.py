@@ -41,10 +41,6 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from benchmarks.bench_campaign import run_curve
-from benchmarks.common import cpu_named, eval_run, machine, records, summary, time_calls, train_run
-from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
-from benchmarks.runner import RefusedError, Report, run
 from bsn_edge.camera import Intrinsics
 from bsn_edge.card import UNRECORDED
 from bsn_edge.cli.common import parse_size
@@ -54,6 +50,11 @@ from bsn_edge.models import create_model, describe
 from bsn_edge.train.config import load_config
 from bsn_edge.train.device import autocast_dtype, precision_name
 from bsn_edge.train.run import Run
+
+from .bench_campaign import run_curve
+from .common import cpu_named, eval_run, machine, records, summary, time_calls, train_run
+from .ledger import Ledger, exceeds_spread, fmt, mean_std
+from .runner import RefusedError, Report, run
 
 ARCHS = ("unet", "small", "small-light", "shared-light", "medium", "large")
 

@@ -30,13 +30,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.bench_campaign import run_curve
-from benchmarks.common import eval_run, records, train_run, write_result
-from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
 from bsn_edge.cli import label as label_cli
 from bsn_edge.cli.common import parse_size
 from bsn_edge.synth import SynthConfig, write_clip
 from bsn_edge.train import Run
+
+from .bench_campaign import run_curve
+from .common import eval_run, records, train_run, write_result
+from .ledger import Ledger, exceeds_spread, fmt, mean_std
 
 FAMILIES = ("small-light", "shared-light")   # an architecture with its -d and -kd ablations in the registry
 

@@ -29,7 +29,6 @@ from typing import Any
 
 import cv2
 
-from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.default_model import DEFAULT_MODEL
@@ -38,6 +37,8 @@ from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth import SynthConfig, write_clip
+
+from .runner import Report, run
 
 SYNTH_FRAMES = 500
 SYNTH_FPS = 25.0                # a dashcam's rate: the runtime then feeds one frame in 2

@@ -22,15 +22,16 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks import runner
-from benchmarks.bench_realboxes import MARKED_SHARE, frac, score, summary
-from benchmarks.common import load_engine, named
-from benchmarks.road_users import NEAR_M, road_users
-from benchmarks.runner import RefusedError, Report
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.metrics import Counts, DepthBins
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.semantics import ROAD, VEHICLES
+
+from . import runner
+from .bench_realboxes import MARKED_SHARE, frac, score, summary
+from .common import load_engine, named
+from .road_users import NEAR_M, road_users
+from .runner import RefusedError, Report
 
 DEPTH_BINS_M = ((5.0, 10.0), (10.0, 20.0), (20.0, 40.0))
 DEPTH_CLASSES = {"vehicle": VEHICLES, "road": (ROAD,)}

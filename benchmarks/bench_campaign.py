@@ -20,9 +20,10 @@ import matplotlib
 matplotlib.use("Agg")  # headless: before pyplot is imported
 import matplotlib.pyplot as plt
 
-from benchmarks.runner import RefusedError, Report, run
 from bsn_edge.train import Run
 from bsn_edge.train.run_record import trained_precision
+
+from .runner import RefusedError, Report, run
 
 FLAT_IOU = 0.01
 

@@ -28,14 +28,15 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.bench_realboxes import frac
-from benchmarks.bench_realcam import REAL, licence
-from benchmarks.common import engines, models_parser
-from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration
 from bsn_edge.labels import camvid
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
+
+from .bench_realboxes import frac
+from .bench_realcam import REAL, licence
+from .common import engines, models_parser
+from .runner import Report, run
 
 MARKED_SHARE = 0.15
 NEAR_PIXELS = 1500

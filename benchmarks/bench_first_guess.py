@@ -29,17 +29,18 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks import bench_camvid, bench_realboxes
-from benchmarks.bench_realboxes import frac
-from benchmarks.bench_realcam import REAL
-from benchmarks.common import engines, models_parser
-from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration
 from bsn_edge.labels import camvid
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.frames import read_rgb
 from bsn_edge.synth import SynthConfig, write_clip
+
+from . import bench_camvid, bench_realboxes
+from .bench_realboxes import frac
+from .bench_realcam import REAL
+from .common import engines, models_parser
+from .runner import Report, run
 
 MODES = ("guess", "assumed", "true")
 STYLES = ("town", "suburb", "highway", "urban")

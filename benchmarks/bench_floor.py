@@ -38,15 +38,16 @@ import torch
 from onnxruntime.quantization import QuantFormat, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
-from benchmarks.bench_arch import count_gmacs
-from benchmarks.bench_quant import kernel_times, latency
-from benchmarks.common import class_name, machine
-from benchmarks.runner import Report, run
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
 from bsn_edge.export.seal import read_card
 from bsn_edge.modelfile.read import session
 from bsn_edge.models import create_model
+
+from .bench_arch import count_gmacs
+from .bench_quant import kernel_times, latency
+from .common import class_name, machine
+from .runner import Report, run
 
 CHECKOUT = Path(__file__).resolve().parents[1]
 # (channels, stride below the input) of dense 3x3 stacks: ResNet stages at 1/4 to 1/32

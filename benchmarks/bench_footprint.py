@@ -28,9 +28,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.runner import Report, run
 from bsn_edge.cli.common import CHECKOUT
 from bsn_edge.default_model import DEFAULT_MODEL
+
+from .runner import Report, run
 
 BASE_MODULES = "numpy, cv2, onnxruntime, can, cantools, serial, tqdm"
 OLD_PATH = "torch, onnx, onnxruntime.quantization"

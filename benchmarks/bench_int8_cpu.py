@@ -23,9 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks import runner
-from benchmarks.common import summary, time_calls
-from benchmarks.runner import Report
 from bsn_edge.card import ModelCard
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.export import quantize, to_onnx
@@ -33,6 +30,10 @@ from bsn_edge.export.quantize import QuantConfig
 from bsn_edge.modelfile import selftest
 from bsn_edge.modelfile.read import ModelFile, session
 from bsn_edge.models import create_model
+
+from . import runner
+from .common import summary, time_calls
+from .runner import Report
 
 SHIPPED = DEFAULT_MODEL
 ROUNDS, CALLS = 6, 20

@@ -20,12 +20,13 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.common import machine
-from benchmarks.runner import RefusedError, Report, run
 from bsn_edge import semantics as sm
 from bsn_edge.data.dataset import find_clips
 from bsn_edge.sequence import read_mask
 from bsn_edge.sequence.folder import SequenceFolder
+
+from .common import machine
+from .runner import RefusedError, Report, run
 
 GROUPS: dict[str, tuple[int, ...]] = {
     "people and cyclists": sm.PEOPLE_AND_CYCLES,

@@ -18,14 +18,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks import runner
-from benchmarks.oracle import revealed_share
-from benchmarks.runner import Report
 from bsn_edge.labels import LabelConfig, Sources, label_sequence, labels_dir
 from bsn_edge.labels.batch import label_many
 from bsn_edge.sequence import read_mask
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.synth import SynthConfig, write_clip
+
+from . import runner
+from .oracle import revealed_share
+from .runner import Report
 
 PAPER = {"a": {"recall": 0.372}, "b": {"recall": 0.297}}
 BAR_RECALL_A = 0.30
@@ -67,7 +68,7 @@ def _score_world(work: Path, cfg: LabelConfig, world: str, clips, seeds, realist
     rows = []
     settings = {"a": Sources()}
     if realistic:
-        from benchmarks.realistic import prepare_realistic
+        from .realistic import prepare_realistic
         settings["b"] = None
     for setting in settings:
         for style in ("town", "suburb"):

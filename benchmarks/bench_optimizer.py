@@ -23,12 +23,13 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
-from benchmarks.common import machine
-from benchmarks.runner import Report, run
 from bsn_edge.models import create_model
 from bsn_edge.models.alive import alive_channels
 from bsn_edge.train.config import ADAM, ADAMW, TrainConfig
 from bsn_edge.train.optim import Optimizer
+
+from .common import machine
+from .runner import Report, run
 
 LR = 1e-3
 SIZE = (64, 128)

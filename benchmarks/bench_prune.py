@@ -25,12 +25,13 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks import runner
-from benchmarks.common import summary, time_calls
-from benchmarks.runner import Report
 from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.export.pipeline import compare, export_run
 from bsn_edge.modelfile.read import session
+
+from . import runner
+from .common import summary, time_calls
+from .runner import Report
 
 ROOT = Path(__file__).resolve().parents[1]
 DRIVE = ROOT.parent / "shared" / "data" / "real" / "udacity_test_video.mp4"

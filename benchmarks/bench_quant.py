@@ -19,8 +19,6 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.common import summary, time_calls
-from benchmarks.runner import Report, run
 from bsn_edge.data import find_clips
 from bsn_edge.export import QuantConfig, quantize, to_onnx
 from bsn_edge.export.calib_frames import load_frames
@@ -30,6 +28,9 @@ from bsn_edge.sequence import read_mask
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.frames import read_rgb
 from bsn_edge.train.run import Run
+
+from .common import summary, time_calls
+from .runner import Report, run
 
 BAR_IOU_DROP = 0.01
 BAR_SPEEDUP, BAR_FPS, GOAL_FPS = 2.5, 60.0, 100.0

@@ -30,10 +30,6 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_camera
-from benchmarks.bench_realview import city_pair_camera
-from benchmarks.common import engines, models_parser
-from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.exif import from_exif
 from bsn_edge.card import ModelCard
@@ -41,6 +37,11 @@ from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.media import read_video
+
+from .bench_realcam import REAL, ddad_samples, licence, udacity_camera
+from .bench_realview import city_pair_camera
+from .common import engines, models_parser
+from .runner import Report, run
 
 BOXES = Path(__file__).resolve().parent / "realboxes" / "boxes.json"
 MARKED_SHARE = 0.15          # of an occluder's box at the threshold: marked

@@ -40,8 +40,6 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.common import load_engine, named
-from benchmarks.runner import Report, run
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.calibration.mounting_step import calibrate_mounting
@@ -53,6 +51,9 @@ from bsn_edge.mounting import Mounting
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.media import read_video
 from bsn_edge.synth.sheet import tint
+
+from .common import load_engine, named
+from .runner import Report, run
 
 REAL = REAL_DATA
 BINS = ((5, 10), (10, 20), (20, 40), (5, 40))

@@ -26,7 +26,15 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from benchmarks.bench_realboxes import (
+from bsn_edge import semantics as sm
+from bsn_edge.card import ModelCard
+from bsn_edge.cli.common import CHECKOUT
+from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
+from bsn_edge.default_model import DEFAULT_MODEL
+from bsn_edge.export.seal import read_card
+from bsn_edge.train.run import Run
+
+from .bench_realboxes import (
     BOXES,
     GROUPS,
     MARKED_SHARE,
@@ -37,16 +45,9 @@ from benchmarks.bench_realboxes import (
     load_frames,
     model_frame,
 )
-from benchmarks.bench_realcam import REAL
-from benchmarks.common import named
-from benchmarks.runner import Report, run
-from bsn_edge import semantics as sm
-from bsn_edge.card import ModelCard
-from bsn_edge.cli.common import CHECKOUT
-from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
-from bsn_edge.default_model import DEFAULT_MODEL
-from bsn_edge.export.seal import read_card
-from bsn_edge.train.run import Run
+from .bench_realcam import REAL
+from .common import named
+from .runner import Report, run
 
 KINDS = {"vehicle": (sm.CAR, sm.TRUCK, sm.BUS, sm.TRAIN, sm.MOTORCYCLE), "person": (sm.PERSON, sm.RIDER),
          "cyclist": (sm.PERSON, sm.RIDER, sm.BICYCLE), "road": (sm.ROAD,)}

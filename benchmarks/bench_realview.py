@@ -23,10 +23,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from benchmarks import runner
-from benchmarks.bench_realcam import REAL, ddad_samples, licence, udacity_samples
-from benchmarks.common import load_engine, named
-from benchmarks.runner import Report
 from bsn_edge.calibration import Calibration
 from bsn_edge.camera import Intrinsics
 from bsn_edge.default_model import DEFAULT_MODEL
@@ -34,6 +30,11 @@ from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.media import read_video
 from bsn_edge.synth.sheet import tint
+
+from . import runner
+from .bench_realcam import REAL, ddad_samples, licence, udacity_samples
+from .common import load_engine, named
+from .runner import Report
 
 WIDTH = 480                # each panel's width in the figures
 HIGHWAY_FRAMES = (60, 140, 220)

@@ -53,10 +53,6 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks import runner
-from benchmarks.bench_realcam import REAL, udacity_camera
-from benchmarks.common import class_name, machine, summary, time_calls
-from benchmarks.runner import Report
 from bsn_edge.alerts.senders import CanSender
 from bsn_edge.calibration import Calibration
 from bsn_edge.default_model import DEFAULT_MODEL
@@ -65,6 +61,11 @@ from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.sources import LiveSource, Reconnect
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import read_video
+
+from . import runner
+from .bench_realcam import REAL, udacity_camera
+from .common import class_name, machine, summary, time_calls
+from .runner import Report
 
 FPS_BAR, FPS_BAR_VNNI = 30.0, 60.0
 SHARE_BAR = 0.9

@@ -13,11 +13,12 @@ from __future__ import annotations
 import argparse
 import time
 
-from benchmarks import runner
-from benchmarks.common import summary, time_calls
-from benchmarks.runner import Report
 from bsn_edge.synth import STYLES, Renderer, SynthConfig, make_clip
 from bsn_edge.synth.clip import render_frames
+
+from . import runner
+from .common import summary, time_calls
+from .runner import Report
 
 BAR_FPS = 20.0
 WORKERS = (1, 2)

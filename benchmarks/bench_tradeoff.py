@@ -25,11 +25,12 @@ matplotlib.use("Agg")  # headless: before pyplot is imported
 import matplotlib.pyplot as plt
 import numpy as np
 
-from benchmarks import runner
-from benchmarks.bench_floor import conv_kinds
-from benchmarks.common import class_name, cpu_named, machine
-from benchmarks.runner import Report
 from bsn_edge.runtime.engine import Engine
+
+from . import runner
+from .bench_floor import conv_kinds
+from .common import class_name, cpu_named, machine
+from .runner import Report
 
 
 def alternated(engines: dict[str, Engine], runs: int, warmup: int = 5) -> dict[str, list[float]]:

@@ -36,7 +36,6 @@ from typing import Any
 
 import torch
 
-from benchmarks.runner import Report, run
 from bsn_edge.cli.common import parse_size
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.data.cache import SampleCache
@@ -46,6 +45,8 @@ from bsn_edge.train.config import load_config
 from bsn_edge.train.device import autocast_dtype, cpu_has_native_bf16, layout, scaled
 from bsn_edge.train.optim import Optimizer
 from bsn_edge.train.trainer import losses
+
+from .runner import Report, run
 
 _BEFORE = {"cache": False, "teacher_grid": False, "channels_last": False, "precision": "fp32", "fused": False}
 LEVERS = [

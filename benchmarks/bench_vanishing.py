@@ -29,8 +29,6 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks import runner
-from benchmarks.runner import Report
 from bsn_edge.calibration import Calibration
 from bsn_edge.calibration.vanishing_point import find_vanishing_point
 from bsn_edge.cli.common import REAL_DATA
@@ -40,6 +38,9 @@ from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.frames import read_rgb
 from bsn_edge.sequence.media import read_video
 from bsn_edge.synth import SynthConfig, write_clip
+
+from . import runner
+from .runner import Report
 
 STYLES = ("town", "suburb", "highway", "urban")
 SEEDS = (981, 982)               # per style, apart from every training and held-out seed
@@ -66,7 +67,7 @@ def rendered(work: Path) -> list[dict[str, Any]]:
 
 
 def real() -> list[dict[str, Any]]:
-    from benchmarks.bench_realcam import ddad_samples, udacity_camera
+    from .bench_realcam import ddad_samples, udacity_camera
 
     rows = []
     for s in ddad_samples("front"):

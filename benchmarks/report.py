@@ -15,8 +15,8 @@ matplotlib.use("Agg")  # headless: before pyplot is imported
 import matplotlib.pyplot as plt
 from matplotlib.ticker import NullFormatter, ScalarFormatter
 
-from benchmarks.common import machine
-from benchmarks.ledger import mean_std
+from .common import machine
+from .ledger import mean_std
 
 ORDER = ("synth", "labels", "train_step", "train_step_avx2_research", "train_step_avx2_shared",
          "train_step_avx512_research", "train_step_archs", "train_step_archs_avx2", "checkpoint_state_avx2",

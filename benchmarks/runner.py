@@ -8,7 +8,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from benchmarks.common import write_result
+from .common import write_result
 
 
 @dataclass(frozen=True)

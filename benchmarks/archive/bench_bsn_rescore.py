@@ -27,7 +27,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-from benchmarks.bench_bsn_accuracy import (
+from bsn_edge.sequence.folder import SequenceFolder
+from bsn_edge.train import Run
+
+from ..bench_bsn_accuracy import (
     BASELINES,
     COLUMNS,
     FAMILIES,
@@ -39,10 +42,8 @@ from benchmarks.bench_bsn_accuracy import (
     trained_keys,
     write_clips,
 )
-from benchmarks.common import eval_run, write_result
-from benchmarks.ledger import Ledger, fmt
-from bsn_edge.sequence.folder import SequenceFolder
-from bsn_edge.train import Run
+from ..common import eval_run, write_result
+from ..ledger import Ledger, fmt
 
 FIELDS = ("iou", "best_iou", "best_threshold", "ap", "ap_by_chance")
 

@@ -24,10 +24,11 @@ from typing import Any
 
 import torch
 
-from benchmarks.common import class_name, write_result
 from bsn_edge.models import create_model, weights_bytes
 from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.train.run import Run, _write_state
+
+from ..common import class_name, write_result
 
 ROUNDS = 7
 

@@ -21,7 +21,14 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from benchmarks.archive.bench_bsn_rescore import (
+from bsn_edge.cli import label as label_cli
+from bsn_edge.data import find_clips, split_clips
+from bsn_edge.synth import SynthConfig, write_clip
+from bsn_edge.synth.clip import build_scenario
+from bsn_edge.synth.rig import Rig
+from bsn_edge.train import Run
+
+from ..archive.bench_bsn_rescore import (
     add_table_arguments,
     arms_by_clip,
     describe_clips,
@@ -29,7 +36,7 @@ from benchmarks.archive.bench_bsn_rescore import (
     score,
     score_path,
 )
-from benchmarks.bench_bsn_accuracy import (
+from ..bench_bsn_accuracy import (
     FINETUNE_LR,
     report_name,
     shared_settings,
@@ -37,13 +44,7 @@ from benchmarks.bench_bsn_accuracy import (
     teacher_settings,
     trained_keys,
 )
-from benchmarks.common import records, train_run, write_result
-from bsn_edge.cli import label as label_cli
-from bsn_edge.data import find_clips, split_clips
-from bsn_edge.synth import SynthConfig, write_clip
-from bsn_edge.synth.clip import build_scenario
-from bsn_edge.synth.rig import Rig
-from bsn_edge.train import Run
+from ..common import records, train_run, write_result
 
 STYLE = "suburb"
 ARMS = ("nothing", "day", "night")       # what the fine-tuning adds to suburb's training clips

@@ -38,7 +38,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from benchmarks.archive.bench_bsn_rescore import (
+from bsn_edge.models import MODELS
+from bsn_edge.train import Run
+
+from ..archive.bench_bsn_rescore import (
     add_table_arguments,
     arms_by_clip,
     describe_clips,
@@ -46,7 +49,7 @@ from benchmarks.archive.bench_bsn_rescore import (
     score,
     score_path,
 )
-from benchmarks.bench_bsn_accuracy import (
+from ..bench_bsn_accuracy import (
     STYLES,
     prepare,
     report_name,
@@ -55,11 +58,9 @@ from benchmarks.bench_bsn_accuracy import (
     source_settings,
     teacher_run,
 )
-from benchmarks.bench_campaign import run_curve
-from benchmarks.common import train_run, write_result
-from benchmarks.ledger import Ledger, fmt
-from bsn_edge.models import MODELS
-from bsn_edge.train import Run
+from ..bench_campaign import run_curve
+from ..common import train_run, write_result
+from ..ledger import Ledger, fmt
 
 ARMS = {
     "BSN": "BSN as trained",

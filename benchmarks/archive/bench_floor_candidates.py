@@ -19,12 +19,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from benchmarks.bench_arch import count_gmacs
-from benchmarks.bench_floor import alternation, stack_rate
 from bsn_edge.camera import Intrinsics
 from bsn_edge.export import QuantConfig, quantize, to_onnx
 from bsn_edge.models import registry
 from bsn_edge.models.resnet import ResNetEncoder
+
+from ..bench_arch import count_gmacs
+from ..bench_floor import alternation, stack_rate
 
 SIZE = (256, 512)
 PROBE = "_floor_probe"      # a registry name for the candidate while it is exported

@@ -21,8 +21,6 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.bench_realcam import ddad_samples, metrics, predict
-from benchmarks.common import write_result
 from bsn_edge import semantics as sm
 from bsn_edge.adapt.labeller import export_teacher
 from bsn_edge.export.pipeline import export_run
@@ -30,6 +28,9 @@ from bsn_edge.labels.sources.ground_depth import ground_depth
 from bsn_edge.labels.sources.onnx_model import OnnxImageModel
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.train import Run
+
+from ..bench_realcam import ddad_samples, metrics, predict
+from ..common import write_result
 
 
 def teacher_in_raw(teacher: OnnxImageModel, image_bgr: np.ndarray, mf) -> np.ndarray:

@@ -27,13 +27,14 @@ from pathlib import Path
 
 import cv2
 
-from benchmarks.common import write_result
 from bsn_edge.calibration import Calibration, calibrate
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.mounting import Mounting
 from bsn_edge.sequence.media import read_video
+
+from ..common import write_result
 
 REAL, MODEL = REAL_DATA, DEFAULT_MODEL
 GOAL = 0.95

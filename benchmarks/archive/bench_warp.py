@@ -21,13 +21,14 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
-from benchmarks.bench_realcam import REAL, udacity_camera
-from benchmarks.common import time_calls, write_result
 from bsn_edge.calibration import Calibration
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.model_frame import ModelFrame, block_mean
 from bsn_edge.runtime import Engine
 from bsn_edge.sequence.media import read_video
+
+from ..bench_realcam import REAL, udacity_camera
+from ..common import time_calls, write_result
 
 
 def ms_per_call(fn: Callable[[int], object], n: int) -> float:

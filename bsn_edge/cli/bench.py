@@ -1,33 +1,44 @@
 """``bsn-bench``: run the project's benchmarks and write the report.
 
-The benchmarks are scripts of the source tree (``benchmarks/``), not of the wheel: from a checkout they are
-found beside the package; an installed wheel runs those of a checkout or an unpacked source distribution
-named by ``--checkout`` (or ``$BSN_EDGE_CHECKOUT``, or the current folder), against the installed package.
+The benchmarks are written in the source tree (``benchmarks/``) and travel in the wheel as
+``bsn_edge.benchmarks``. With a source tree (beside the package, ``--checkout``, ``$BSN_EDGE_CHECKOUT`` or the
+current folder) every benchmark runs from it; an installed wheel without one runs those that need nothing of
+it (:data:`NEEDS_TREE` names the others and why) and says which it left out.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from bsn_edge.cli.common import CHECKOUT, fail
+from bsn_edge.cli.common import CHECKOUT, REAL_DATA, fail
 from bsn_edge.default_model import DEFAULT_MODEL
 
 PROG = "bsn-bench"
 CHECKOUT_ENV = "BSN_EDGE_CHECKOUT"
-MARK = Path("benchmarks") / "report.py"      # what makes a folder a source tree with the benchmarks
+# what makes a folder a checkout with everything the benchmarks use (a source distribution has the first only)
+MARKS = (Path("benchmarks") / "report.py", Path("configs") / "quick.toml", Path("models") / "README.md")
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "footprint",
          "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive", "prune",
          "calibration", "first_guess", "optimizer", "label_classes")
+# what every run of bsn-bench needs of the full install: the benchmarks train and export (torch, onnx), the
+# report plots (matplotlib)
+FULL_NEEDS = ("torch", "onnx", "matplotlib")
 # the campaign's own benchmarks: they judge a leg's run folder against held-out sets the campaign makes
 # (models/campaign/judge*.sh run them), so they have nothing to measure outside it
 CAMPAIGN_TOOLS = ("bench_cameras", "bench_tradeoff", "bench_campaign")
+# what of the source tree a benchmark needs beyond the package (an installed wheel runs the rest)
+NEEDS_TREE = {"arch": "configs/quick.toml", "quant": "configs/quick.toml", "accuracy": "configs/quick.toml",
+              "adapt": "configs/quick.toml", "footprint": "the source tree it installs twice",
+              "realteacher": "the default's training run (models/default)",
+              "alive": "the training runs' weights (models/)", "prune": "the default's training run (models/default)"}
 ADAPT_SOURCE, ADAPT_TARGET = "suburb", "urban"
 ADAPT_EVAL_SEEDS = (1300, 1301)   # held-out target clips: seeds no training clip has
 SEEDS = (0, 1, 2)                 # training seeds of the paper's tables
@@ -56,33 +67,35 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def find_checkout(given: str | None, cwd: Path | None = None) -> Path:
+def find_checkout(given: str | None, cwd: Path | None = None) -> Path | None:
     """The source tree with the benchmarks: ``given``, else ``$BSN_EDGE_CHECKOUT``, else the package's own
-    checkout, else ``cwd``; ``FileNotFoundError`` saying where it looked."""
+    checkout, else ``cwd``; None when there is none (an installed wheel); ``FileNotFoundError`` for a tree
+    named that is not one."""
     cwd = cwd or Path.cwd()
     named = given or os.environ.get(CHECKOUT_ENV)
     if named:
         root = Path(named).expanduser().resolve()
-        if not (root / MARK).is_file():
-            raise FileNotFoundError(f"{named}: no {MARK} there: not a bsn-edge source tree (a checkout or an "
-                                    "unpacked source distribution)")
+        if not all((root / m).is_file() for m in MARKS):
+            missing = " or ".join(str(m) for m in MARKS if not (root / m).is_file())
+            raise FileNotFoundError(f"{named}: no {missing} there: not a bsn-edge checkout")
         return root
     for root in (CHECKOUT, cwd.resolve()):
-        if (root / MARK).is_file():
+        if all((root / m).is_file() for m in MARKS):
             return root
-    raise FileNotFoundError(f"the benchmarks are scripts of the source tree, not of the installed package: none "
-                            f"beside it ({CHECKOUT}) nor here ({cwd}); give one with --checkout DIR (a checkout or "
-                            f"an unpacked source distribution) or ${CHECKOUT_ENV}")
+    return None
 
 
-def _py(root: Path, *args: str) -> None:
-    """``python ARGS`` in the source tree ``root`` (where ``-m benchmarks.X`` is found)."""
+def _py(root: Path | None, *args: str) -> None:
+    """``python ARGS`` in the source tree ``root`` (``-m benchmarks.X`` there), or here from the installed
+    package (``-m bsn_edge.benchmarks.X``) without one."""
+    if root is None:
+        args = tuple(f"bsn_edge.{a}" if a.startswith("benchmarks.") else a for a in args)
     cmd = [sys.executable, *args]
     print("+", " ".join(cmd), flush=True)
     subprocess.run(cmd, cwd=root, check=True)
 
 
-def _prepare_data(root: Path, work: Path) -> Path:
+def _prepare_data(root: Path | None, work: Path) -> Path:
     """Labelled clips of every style, made once and reused."""
     data = work / "data"
     # the shipped default's recipe (models/README.md): every style, seeds apart per style
@@ -95,7 +108,7 @@ def _prepare_data(root: Path, work: Path) -> Path:
     return data
 
 
-def _prepare(root: Path, work: Path) -> tuple[Path, Path, Path]:
+def _prepare(root: Path | None, work: Path) -> tuple[Path, Path, Path]:
     """Labelled clips, a trained run and its int8 export, made once and reused."""
     data, run, model = _prepare_data(root, work), work / "run_quick", work / "bsn_int8.onnx"
     from bsn_edge.train.run import Run
@@ -121,11 +134,22 @@ BY_OUT_ONLY = {"labels": "benchmarks.bench_labels", "realcam": "benchmarks.bench
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    for name in FULL_NEEDS:      # a missing one ends here, said by the command's guard (cli.full), not mid-run
+        importlib.import_module(name)
     try:
         root = find_checkout(args.checkout)
     except FileNotFoundError as e:
         return fail(PROG, str(e))
     names = args.only or list(NAMES)
+    if root is None:
+        left = [n for n in names if n in NEEDS_TREE]
+        names = [n for n in names if n not in NEEDS_TREE]
+        if left:
+            print(f"{PROG}: no source tree (a checkout; --checkout DIR or "
+                  f"${CHECKOUT_ENV}): left out " + ", ".join(f"{n} (needs {NEEDS_TREE[n]})" for n in left),
+                  file=sys.stderr)
+        if not names:
+            return fail(PROG, "nothing to run from the installed package alone")
     out, work = str(Path(args.out).resolve()), Path(args.work).resolve()
     t0 = time.perf_counter()
     try:
@@ -138,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _one(root: Path, name: str, args: argparse.Namespace, out: str, work: Path) -> None:
+def _one(root: Path | None, name: str, args: argparse.Namespace, out: str, work: Path) -> None:
     if name in BY_OUT_ONLY:
         _py(root, "-m", BY_OUT_ONLY[name], "--out", out)
     elif name == "synth":
@@ -169,12 +193,12 @@ def _one(root: Path, name: str, args: argparse.Namespace, out: str, work: Path) 
             *map(str, SEEDS))
 
 
-def _real_data(root: Path) -> Path:
-    """The real development data beside the source tree ``root``."""
-    return root.parent / "shared" / "data" / "real"
+def _real_data(root: Path | None) -> Path:
+    """The real development data: beside the source tree ``root``, else where the package looks for it."""
+    return root.parent / "shared" / "data" / "real" if root is not None else REAL_DATA
 
 
-def _calibration(root: Path, out: str, work: Path) -> None:
+def _calibration(root: Path | None, out: str, work: Path) -> None:
     """The real clips that are at hand (no truth) and five synthetic drives (with their truth)."""
     real = [str(_real_data(root) / name) for name in ("udacity_test_video.mp4", "dashcam_highway.mp4",
                                                   "mountain_highway.mp4") if (_real_data(root) / name).is_file()]
@@ -182,7 +206,7 @@ def _calibration(root: Path, out: str, work: Path) -> None:
         str(work / "calibration"), "--out", out)
 
 
-def _runtime(root: Path, out: str, work: Path) -> None:
+def _runtime(root: Path | None, out: str, work: Path) -> None:
     """The real clips when at hand, else a synthetic one with its camera."""
     source: list[str] = []
     if not (_real_data(root) / "udacity_test_video.mp4").is_file():
@@ -193,7 +217,7 @@ def _runtime(root: Path, out: str, work: Path) -> None:
     _py(root, "-m", "benchmarks.bench_runtime", "--model", str(DEFAULT_MODEL), *source, "--repeats", "3", "--out", out)
 
 
-def _adapt(root: Path, out: str, work: Path) -> None:
+def _adapt(root: Path | None, out: str, work: Path) -> None:
     data = _prepare_data(root, work)
     held = work / "adapt_eval"
     for seed in ADAPT_EVAL_SEEDS:

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 from pathlib import Path
 
 # the source checkout this package runs from (editable install): benchmarks/ and models/ live here
 CHECKOUT = Path(__file__).resolve().parents[2]
-# the real development data, beside the checkout (tests and benchmarks that need it skip without it)
-REAL_DATA = CHECKOUT.parent / "shared" / "data" / "real"
+REAL_DATA_ENV = "BSN_EDGE_REAL_DATA"
+# the real development data: $BSN_EDGE_REAL_DATA, else beside the checkout (tests and benchmarks that need it
+# skip without it)
+REAL_DATA = Path(os.environ.get(REAL_DATA_ENV) or CHECKOUT.parent / "shared" / "data" / "real")
 
 
 def parse_size(text: str) -> tuple[int, int]:

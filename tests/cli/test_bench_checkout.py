@@ -25,6 +25,9 @@ def _tree(root: Path) -> Path:
         "a = argparse.ArgumentParser(); a.add_argument('--out'); o = a.parse_args().out\n"
         "pathlib.Path(o).mkdir(parents=True, exist_ok=True)\n"
         "(pathlib.Path(o) / 'alive.md').write_text(bsn_edge.__file__)\n")
+    for mark in ("configs/quick.toml", "models/README.md"):
+        (root / mark).parent.mkdir(parents=True, exist_ok=True)
+        (root / mark).write_text("")
     (b / "report.py").write_text(
         "import argparse, pathlib\n"
         "a = argparse.ArgumentParser(); a.add_argument('--results'); r = a.parse_args().results\n"
@@ -54,19 +57,42 @@ def test_the_tree_comes_from_the_flag_then_the_environment_then_beside_the_packa
     monkeypatch.delenv(bench.CHECKOUT_ENV)
     monkeypatch.setattr(bench, "CHECKOUT", tmp_path / "site-packages")      # as installed from a wheel
     assert bench.find_checkout(None, cwd=tree) == tree.resolve()
-    with pytest.raises(FileNotFoundError, match="--checkout DIR"):
-        bench.find_checkout(None, cwd=tmp_path)
-    with pytest.raises(FileNotFoundError, match="not a bsn-edge source tree"):
+    assert bench.find_checkout(None, cwd=tmp_path) is None
+    with pytest.raises(FileNotFoundError, match="not a bsn-edge checkout"):
         bench.find_checkout(str(tmp_path))
 
 
-def test_a_wheel_without_a_tree_is_refused_by_name(tmp_path, monkeypatch, capsys):
+def _as_installed(tmp_path, monkeypatch):
+    """bsn-bench as an installed wheel sees it: no source tree beside the package nor here; the commands it
+    would run, recorded."""
     monkeypatch.delenv(bench.CHECKOUT_ENV, raising=False)
     monkeypatch.setattr(bench, "CHECKOUT", tmp_path / "site-packages")
     monkeypatch.chdir(tmp_path)
-    assert bench.main(["--only", "alive"]) == 2
+    ran = []
+    monkeypatch.setattr(bench.subprocess, "run", lambda cmd, cwd, check: ran.append((cmd, cwd)))
+    return ran
+
+
+def test_an_installed_wheel_runs_what_needs_no_tree_from_the_package_and_names_what_it_left_out(
+        tmp_path, monkeypatch, capsys):
+    ran = _as_installed(tmp_path, monkeypatch)
+    assert bench.main(["--only", "vanishing", "alive", "--out", str(tmp_path / "out")]) == 0
+    modules = [cmd[cmd.index("-m") + 1] for cmd, _ in ran]
+    assert modules == ["bsn_edge.benchmarks.bench_vanishing", "bsn_edge.benchmarks.report"]
+    assert all(cwd is None for _, cwd in ran)
     err = capsys.readouterr().err
-    assert "not of the installed package" in err and "--checkout" in err
+    assert "left out alive (needs the training runs' weights (models/))" in err and "--checkout" in err
+
+
+def test_an_installed_wheel_asked_only_for_what_needs_a_tree_is_refused_by_name(tmp_path, monkeypatch, capsys):
+    ran = _as_installed(tmp_path, monkeypatch)
+    assert bench.main(["--only", "alive", "prune"]) == 2
+    err = capsys.readouterr().err
+    assert "alive (needs" in err and "prune (needs" in err and "nothing to run" in err and not ran
+
+
+def test_what_needs_a_tree_is_named_for_benchmarks_that_exist():
+    assert set(bench.NEEDS_TREE) <= set(bench.NAMES)
 
 
 def test_every_benchmark_is_reachable_from_bsn_bench_or_named_as_the_campaigns():

@@ -22,7 +22,7 @@ def _run(entry: str, argv: list[str]) -> subprocess.CompletedProcess:
 
 @pytest.mark.parametrize(("entry", "argv"), [
     ("train", ["--help"]), ("eval", ["--help"]), ("adapt", ["--help"]),
-    ("export", ["--checkpoint", "runs/x", "--out", "x.onnx"]),
+    ("export", ["--checkpoint", "runs/x", "--out", "x.onnx"]), ("bench", ["--only", "vanishing"]),
 ])
 def test_a_command_of_the_full_install_names_the_install_when_torch_is_missing(entry: str, argv: list[str]):
     r = _run(entry, argv)
