@@ -60,9 +60,9 @@ def _model_and_source(p: argparse.ArgumentParser) -> None:
                         "the status then says Model_Unsigned on every cycle and the summary says whose it is not. "
                         "A signature that does not match its model is refused even so")
     g.add_argument("--pace", action="store_true", help="play files at their own frame rate")
-    g.add_argument("--stall", type=float, default=2.0, metavar="SECONDS",
+    g.add_argument("--stall", type=float, default=None, metavar="SECONDS",
                    help="a camera or stream that delivers no frame for this long is lost: the bus says "
-                        "UNAVAILABLE and it is reopened with back-off (default 2)")
+                        "UNAVAILABLE and it is reopened with back-off (source.stall_s; default 2)")
     g.add_argument("--max-frames", type=int, default=None, metavar="N", help="stop after this many frames")
 
 
@@ -138,22 +138,24 @@ def _settings(p: argparse.ArgumentParser) -> None:
                         "configs/runtime.schema.json in a checkout) and exit; docs/settings.md is its reference")
     g.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="change one setting, after --config: e.g. --set sectors.left_edge_deg=-15 --set "
-                        "alerts.tau_s=0.5 --set alerts.warning.on=0.7 (repeatable). --cycle, --in-flight and "
-                        "--in-turn are shorthands for runtime.cycle_s, runtime.in_flight and runtime.overlap")
+                        "alerts.tau_s=0.5 --set alerts.warning.on=0.7 (repeatable). --cycle, --in-flight, "
+                        "--in-turn, --threads, --spin / --no-spin and --stall are shorthands for runtime.cycle_s, "
+                        "runtime.in_flight, runtime.overlap, runtime.threads, runtime.spin and source.stall_s")
 
 
 def _speed(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("speed on the car's cores")
     g.add_argument("--threads", type=int, default=None,
-                   help="onnxruntime intra-op threads per inference (default 2, or 1 with --in-flight 2 and more)")
+                   help="onnxruntime intra-op threads per inference (runtime.threads; default 2, or 1 with "
+                        "--in-flight 2 and more)")
     g.add_argument("--in-flight", type=int, default=None, metavar="N",
                    help="frames the model runs at once, each on a thread of its own (default 1). On 2 cores, 2 "
                         "gives more frames a second than one inference split over both, each frame's answer "
                         "later (see the README); needs reading overlapped")
     spin = g.add_mutually_exclusive_group()
     spin.add_argument("--spin", action="store_true",
-                      help="let idle onnxruntime threads spin-wait (faster for the model alone, slower end to end: "
-                           "they take the cores the loop decodes, warps and calibrates on)")
+                      help="let idle onnxruntime threads spin-wait (runtime.spin; faster for the model alone, slower "
+                           "end to end: they take the cores the loop decodes, warps and calibrates on)")
     spin.add_argument("--no-spin", action="store_true", help="idle onnxruntime threads sleep (the default)")
     reading = g.add_mutually_exclusive_group()
     reading.add_argument("--overlap", action="store_true",
@@ -171,8 +173,10 @@ def runtime_settings(args: argparse.Namespace) -> RuntimeConfig:
     """The runtime's settings: the defaults, ``--config``, ``--set``, then the shorthand flags."""
     from bsn_edge.runtime.config_file import load_runtime_config
 
-    shorthand = [f"runtime.{k}={v}" for k, v in (("cycle_s", args.cycle), ("in_flight", args.in_flight))
-                 if v is not None] + (["runtime.overlap=false"] if args.in_turn else [])
+    pairs = (("runtime.cycle_s", args.cycle), ("runtime.in_flight", args.in_flight),
+             ("runtime.threads", args.threads), ("source.stall_s", args.stall))
+    shorthand = [f"{k}={v}" for k, v in pairs if v is not None] + (["runtime.overlap=false"] if args.in_turn else []) \
+        + (["runtime.spin=true"] if args.spin else ["runtime.spin=false"] if args.no_spin else [])
     return load_runtime_config(args.config, [*args.overrides, *shorthand])
 
 
@@ -223,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         if args.max_frames is not None and args.max_frames < 1:
             return fail(PROG, "--max-frames must be >= 1")
-        if not args.stall > 0:
+        if args.stall is not None and not args.stall > 0:
             return fail(PROG, f"--stall must be a positive number of seconds, got {args.stall:g}")
         return _run(args, stopper)
 
@@ -336,12 +340,11 @@ def _start(args: argparse.Namespace, cfg: RuntimeConfig):
         check_height(args.height, "--height")
     maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
     trust = TrustPolicy.default(args.trust, args.allow_unsigned)
-    threads = cfg.engine_threads if args.threads is None else args.threads
-    engine = Engine(args.model, threads, args.spin, trust=trust)
+    engine = Engine(args.model, cfg.engine_threads, cfg.spin, trust=trust)
     if not engine.authentic:
         print(f"{PROG}: warning: {engine.verdict.note}; it runs because of --allow-unsigned, and the status says "
               "Model_Unsigned on every cycle", file=sys.stderr)
-    source = open_source(args.source, pace=args.pace, stall_s=args.stall)
+    source = open_source(args.source, pace=args.pace, reconnect=cfg.source.reconnect())
     if calibration is None and source.cameras is not None and not source.one_camera:
         from bsn_edge.runtime.picture_cameras import PictureCameras
         print(f"{PROG}: note: {source.cameras.cameras.value}: {source.cameras.why}; each is warped with its own lens "
@@ -355,7 +358,8 @@ def _start(args: argparse.Namespace, cfg: RuntimeConfig):
             intrinsics_from = calibration.intrinsics_method
             print(f"{PROG}: note: no camera file: the intrinsics from the {intrinsics_from}; pitch and yaw are "
                   "calibrated online", file=sys.stderr)
-    camera = CameraState(engine.card, calibration, args.height, args.save_calib, intrinsics_from=intrinsics_from)
+    camera = CameraState(engine.card, calibration, args.height, args.save_calib, intrinsics_from=intrinsics_from,
+                         calibrate_nice=cfg.calibration.nice, calibrate_hz=cfg.calibration.frames_per_s)
     if calibration is not None and source.size is not None:
         try:
             camera.size_note = calibration.fit_to(*source.size, where=f"--calib {args.calib}")

@@ -29,6 +29,7 @@ from bsn_edge.card import ModelCard
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.mounting import Mounting
 from bsn_edge.runtime.calibrator import OnlineCalibrator
+from bsn_edge.runtime.source_config import CalibrationConfig
 
 
 class CameraState:
@@ -41,7 +42,7 @@ class CameraState:
     may be warped on one thread (the loop's feeder) while another asks for :meth:`progress` or
     :meth:`summary`: one lock guards the state."""
 
-    CALIBRATE_HZ = 12.5
+    CALIBRATE_HZ = CalibrationConfig.frames_per_s     # the vehicle file's calibration.frames_per_s, by default
     # a camera file whose camera shows the model less of its view than this (its hood masked) is refused:
     # blind spots anywhere else could never be seen. A 16:9 lens of 30 degrees across straight ahead still
     # shows 12 % of the model camera's 80 degrees (25 degrees: 8 %); a long lens pitched off the road, none

@@ -3,13 +3,16 @@
 :data:`DEFAULTS_FILE` (in the package, so every install has it; ``configs/runtime.toml`` in a checkout,
 ``bsn-run --print-config`` prints it) holds every one at its default, with what it does:
 
-- ``[runtime]``: the loop (``cycle_s``, ``warmup``, ``overlap``, ``in_flight``, ``feeder_nice``);
+- ``[runtime]``: the loop (``cycle_s``, ``warmup``, ``overlap``, ``in_flight``, ``feeder_nice``, ``threads``,
+  ``spin``);
 - ``[sectors]``: the sector edges as bearings and how far blind spots count (:class:`SectorConfig`);
 - ``[alerts]``: smoothing (``tau_s``) and each level's rule (``[alerts.caution]``, ``[alerts.warning]``:
   ``on``, ``off``, ``delay_s``, ``hold_s``; :class:`AlertConfig`);
 - ``[health]``: when the status says DEGRADED or UNAVAILABLE (:class:`HealthConfig`);
 - ``[bus]``: the buses, the serial baud rate, the sends' timeouts and when a bus is down (:class:`BusConfig`);
-- ``[messages]``: each message every so many cycles (:class:`MessageRates`).
+- ``[messages]``: each message every so many cycles (:class:`MessageRates`);
+- ``[source]``: when a camera or stream is lost and how it is brought back (:class:`SourceConfig`);
+- ``[calibration]``: online calibration's share of the cores (:class:`CalibrationConfig`).
 
 ``bsn-run --config FILE --set sectors.left_edge_deg=-15`` reads it with the mechanism the training config
 has (:mod:`bsn_edge.config_toml`): a key the runtime does not have, or a value out of range, is refused
@@ -30,11 +33,13 @@ from bsn_edge.alerts.sectors import SectorConfig
 from bsn_edge.alerts.state_machine import AlertConfig
 from bsn_edge.config_toml import build, merge_overrides, read_toml, unknown
 from bsn_edge.runtime.loop import RuntimeConfig
+from bsn_edge.runtime.source_config import CalibrationConfig, SourceConfig
 
 DEFAULTS_FILE = Path(__file__).with_name("runtime.toml")
 SCHEMA_FILE = DEFAULTS_FILE.with_name("runtime.schema.json")     # written by config_schema, checked by a test
 NESTED: dict[str, type] = {"sectors": SectorConfig, "alerts": AlertConfig, "health": HealthConfig,
-                           "bus": BusConfig, "messages": MessageRates}
+                           "bus": BusConfig, "messages": MessageRates, "source": SourceConfig,
+                           "calibration": CalibrationConfig}
 LOOP = "runtime"
 
 

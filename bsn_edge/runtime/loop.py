@@ -45,6 +45,7 @@ from bsn_edge.runtime.overlay import OverlayWriter, draw
 from bsn_edge.runtime.priority import NICE_RANGE
 from bsn_edge.runtime.run_summary import ModelSummary, RunSummary, SinkSummary
 from bsn_edge.runtime.sinks import GuardedSink, LineLog, SinkFailure, open_all
+from bsn_edge.runtime.source_config import CalibrationConfig, SourceConfig
 from bsn_edge.runtime.sources import Captured, Source
 from bsn_edge.runtime.stats import LatencyStats
 from bsn_edge.sequence.folder import frame_name
@@ -54,24 +55,30 @@ STAGES = ("decode", "preprocess", "inference", "postprocess", "send")
 # heartbeat's first cycle): the bus has said nothing, so nothing is available
 NOT_SENT = Status(SystemState.UNAVAILABLE, 0.0)
 MAX_IN_FLIGHT = 4
+MAX_THREADS = 64
 
 
 @dataclass(frozen=True)
 class RuntimeConfig:
-    """How the loop runs: the alerts' state machine, the sectors, health, the send cycle, warm-up
-    inferences before the first frame, and whether reading overlaps the model (:mod:`.feeder`), its
-    thread then ``feeder_nice`` steps below the model's priority."""
+    """How the loop runs: the alerts' state machine, the sectors, health, the buses and their messages, the
+    source's watch and reconnects, online calibration's share, the send cycle, warm-up inferences before the
+    first frame, whether reading overlaps the model (:mod:`.feeder`, its thread then ``feeder_nice`` steps
+    below the model's priority), and onnxruntime's threads."""
 
     alerts: AlertConfig = field(default_factory=AlertConfig)
     sectors: SectorConfig = field(default_factory=SectorConfig)
     health: HealthConfig = field(default_factory=HealthConfig)
     bus: BusConfig = field(default_factory=BusConfig)
     messages: MessageRates = field(default_factory=MessageRates)
+    source: SourceConfig = field(default_factory=SourceConfig)
+    calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
     cycle_s: float = setting(0.1, 0.01, 1.0, "s")
     warmup: int = setting(3, 0, 100, "inferences")
     overlap: bool = True         # decode and warp the next frame on a thread of its own while the model runs
     feeder_nice: int = setting(10, *NICE_RANGE)
     in_flight: int = setting(1, 1, MAX_IN_FLIGHT, "frames")  # each inference on a thread of its own
+    threads: int = setting(0, 0, MAX_THREADS, "threads")     # onnxruntime's per inference; 0: as in_flight suits
+    spin: bool = False           # idle onnxruntime threads spin-wait instead of sleeping
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -81,9 +88,9 @@ class RuntimeConfig:
 
     @property
     def engine_threads(self) -> int:
-        """onnxruntime intra-op threads per inference that suit ``in_flight`` on 2 cores: both for one
-        frame at a time, one each for frames side by side."""
-        return 2 if self.in_flight == 1 else 1
+        """onnxruntime intra-op threads per inference: ``threads``, else what suits ``in_flight`` on 2 cores
+        (both for one frame at a time, one each for frames side by side)."""
+        return self.threads or (2 if self.in_flight == 1 else 1)
 
 
 @dataclass

@@ -382,14 +382,16 @@ class LiveSource(Source):
 
 
 def open_source(spec: str, pace: bool = False, fps: float = 10.0, stall_s: float = Reconnect.stall_s,
-                decode_threads: int = 1) -> Source:
+                decode_threads: int = 1, reconnect: Reconnect | None = None) -> Source:
     """``VIDEO`` file, image ``DIR``, camera index (``0``), or stream ``URL`` (``rtsp://...``); a camera
-    or stream that delivers nothing for ``stall_s`` is taken as lost and reopened. ``decode_threads``:
-    a video file's (:class:`VideoFileSource`)."""
+    or stream that delivers nothing for ``stall_s`` is taken as lost and reopened (``reconnect``: the whole
+    policy, the vehicle file's ``[source]``, instead). ``decode_threads``: a video file's
+    (:class:`VideoFileSource`)."""
+    policy = reconnect or Reconnect(stall_s=stall_s)
     if spec.isdigit():
-        return LiveSource(int(spec), Reconnect(stall_s=stall_s))
+        return LiveSource(int(spec), policy)
     if "://" in spec:
-        return LiveSource(spec, Reconnect(stall_s=stall_s))
+        return LiveSource(spec, policy)
     p = Path(spec)
     if p.is_dir():
         return ImageFolderSource(p, fps)

@@ -66,7 +66,7 @@ def test_a_sector_edge_and_a_smoothing_time_from_the_file_reach_the_bus(setup, t
     ("sectors.left_edge=-15", "unknown key(s) in [sectors]: 'left_edge' (did you mean 'left_edge_deg'?)"),
     ("alerts.caution.on=2", "[alerts.caution] (--set): on = 2.0 is outside [0.05, 0.9]"),
     ("runtime.cycle_s=abc", "runtime.cycle_s = 'abc' (--set) must be a finite number in [0.01, 1] s"),
-    ("wheels.count=4", "unknown section(s): 'wheels'; valid: alerts, bus, health, messages, runtime, sectors"),
+    ("wheels.count=4", "unknown section(s): 'wheels'; valid: alerts, bus, calibration, health, messages, runtime, sectors, source"),
 ])
 def test_a_bad_setting_is_refused_naming_it_and_the_bus_says_unavailable(setup, tmp_path, capsys, setting, says):
     _, clip = setup
@@ -291,7 +291,8 @@ def test_the_shipped_file_lists_and_describes_every_key_the_schema_has():
                 yield f"{name}.{key}", name
 
     every = [x for name, node in schema()["properties"].items() for x in leaves(node, name)]
-    assert len(every) == 30     # runtime 5, sectors 4, alerts 1 + 4 + 4, health 3, bus 7, messages 2
+    # runtime 7, sectors 4, alerts 1 + 4 + 4, health 3, bus 7, messages 2, source 4, calibration 2
+    assert len(every) == 38
     for dotted, table in every:
         assert dotted in said, f"{dotted} is not in the shipped file"
         assert said[dotted] or said.get(table), f"{dotted} has no comment, nor has its table"
@@ -373,3 +374,38 @@ def test_a_vehicle_file_sets_the_serial_baud_rate_and_the_frames_come_through(tm
         assert got == ["BSN_Hazard", "BSN_Status"]
     finally:
         sender.close()
+
+
+def test_the_vehicle_files_threads_source_and_calibration_reach_what_they_set_and_flags_override_them(
+        setup, tmp_path, monkeypatch):
+    """runtime.threads and spin reach onnxruntime's session, [calibration] the camera's online estimator,
+    [source] the reconnect policy a camera is opened with; --threads, --no-spin and --stall override the file."""
+    from bsn_edge.runtime import sources
+
+    model, clip = setup
+    vehicle = tmp_path / "vehicle.toml"
+    vehicle.write_text("[runtime]\nthreads = 1\nspin = true\n[source]\nstall_s = 3.5\nreconnect_first_s = 0.5\n"
+                       "reconnect_max_s = 8.0\ngive_up_s = 20.0\n[calibration]\nframes_per_s = 5.0\nnice = 15\n")
+    argv = ["--model", str(model), "--source", str(clip / "rgb"), "--config", str(vehicle)]
+    cfg = run_cli.runtime_settings(run_cli.build_parser().parse_args(argv))
+    engine, camera, source, _ = run_cli._start(run_cli.build_parser().parse_args(argv), cfg)
+    try:
+        options = engine.sess.get_session_options()
+        assert options.intra_op_num_threads == 1
+        try:
+            spinning = options.get_session_config_entry("session.intra_op.allow_spinning") != "0"
+        except Exception:      # no entry: onnxruntime's default, which spins
+            spinning = True
+        assert spinning
+        assert camera.calibrate_hz == 5.0 and camera.calibrate_nice == 15
+    finally:
+        source.close()
+        camera.close()
+    assert cfg.source.reconnect() == sources.Reconnect(3.5, 0.5, 8.0, 20.0)
+    monkeypatch.setattr(sources, "LiveSource", lambda target, policy: (target, policy))
+    assert sources.open_source("0", reconnect=cfg.source.reconnect()) == (0, sources.Reconnect(3.5, 0.5, 8.0, 20.0))
+    flags = run_cli.runtime_settings(run_cli.build_parser().parse_args(
+        [*argv, "--threads", "2", "--no-spin", "--stall", "1.5"]))
+    assert (flags.threads, flags.spin, flags.source.stall_s) == (2, False, 1.5)
+    with pytest.raises(ValueError, match="reconnect_first_s"):
+        load_runtime_config(None, ["source.reconnect_first_s=9", "source.reconnect_max_s=1"])
