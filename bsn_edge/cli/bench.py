@@ -9,7 +9,6 @@ it (:data:`NEEDS_TREE` names the others and why) and says which it left out.
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import subprocess
 import sys
@@ -28,9 +27,6 @@ DEFAULT_SEEDS = 5
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "footprint",
          "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive", "prune",
          "calibration", "first_guess", "optimizer", "label_classes")
-# what every run of bsn-bench needs of the full install: the benchmarks train and export (torch, onnx), the
-# report plots (matplotlib)
-FULL_NEEDS = ("torch", "onnx", "matplotlib")
 # the campaign's own benchmarks: they judge a leg's run folder against held-out sets the campaign makes
 # (models/campaign/judge*.sh run them), so they have nothing to measure outside it
 CAMPAIGN_TOOLS = ("bench_cameras", "bench_tradeoff", "bench_campaign")
@@ -65,6 +61,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "package was installed from, else the current folder); an installed wheel runs them against "
                         "itself")
     return p
+
+
+def _full_install() -> None:
+    """What every run needs of the full install, imported before anything runs: a missing one ends the command
+    here, said by its guard (:mod:`bsn_edge.cli.full`), not a benchmark's traceback mid-run. The benchmarks
+    train and export (torch, onnx); the report plots (matplotlib)."""
+    import matplotlib  # noqa: F401
+    import onnx  # noqa: F401
+    import torch  # noqa: F401
 
 
 def find_checkout(given: str | None, cwd: Path | None = None) -> Path | None:
@@ -134,8 +139,7 @@ BY_OUT_ONLY = {"labels": "benchmarks.bench_labels", "realcam": "benchmarks.bench
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    for name in FULL_NEEDS:      # a missing one ends here, said by the command's guard (cli.full), not mid-run
-        importlib.import_module(name)
+    _full_install()
     try:
         root = find_checkout(args.checkout)
     except FileNotFoundError as e:
