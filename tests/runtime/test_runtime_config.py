@@ -66,7 +66,8 @@ def test_a_sector_edge_and_a_smoothing_time_from_the_file_reach_the_bus(setup, t
     ("sectors.left_edge=-15", "unknown key(s) in [sectors]: 'left_edge' (did you mean 'left_edge_deg'?)"),
     ("alerts.caution.on=2", "[alerts.caution] (--set): on = 2.0 is outside [0.05, 0.9]"),
     ("runtime.cycle_s=abc", "runtime.cycle_s = 'abc' (--set) must be a finite number in [0.01, 1] s"),
-    ("wheels.count=4", "unknown section(s): 'wheels'; valid: alerts, bus, calibration, health, messages, runtime, sectors, source"),
+    ("wheels.count=4",
+     "unknown section(s): 'wheels'; valid: alerts, bus, calibration, health, messages, runtime, sectors, source"),
 ])
 def test_a_bad_setting_is_refused_naming_it_and_the_bus_says_unavailable(setup, tmp_path, capsys, setting, says):
     _, clip = setup
