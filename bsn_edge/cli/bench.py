@@ -197,15 +197,10 @@ def _one(root: Path | None, name: str, args: argparse.Namespace, out: str, work:
             *map(str, SEEDS))
 
 
-def _real_data(root: Path | None) -> Path:
-    """The real development data: beside the source tree ``root``, else where the package looks for it."""
-    return root.parent / "shared" / "data" / "real" if root is not None else REAL_DATA
-
-
 def _calibration(root: Path | None, out: str, work: Path) -> None:
     """The real clips that are at hand (no truth) and five synthetic drives (with their truth)."""
-    real = [str(_real_data(root) / name) for name in ("udacity_test_video.mp4", "dashcam_highway.mp4",
-                                                  "mountain_highway.mp4") if (_real_data(root) / name).is_file()]
+    real = [str(REAL_DATA / name) for name in ("udacity_test_video.mp4", "dashcam_highway.mp4",
+                                                  "mountain_highway.mp4") if (REAL_DATA / name).is_file()]
     _py(root, "-m", "benchmarks.bench_calibration", *[a for c in real for a in ("--clip", c)], "--cache",
         str(work / "calibration"), "--out", out)
 
@@ -213,7 +208,7 @@ def _calibration(root: Path | None, out: str, work: Path) -> None:
 def _runtime(root: Path | None, out: str, work: Path) -> None:
     """The real clips when at hand, else a synthetic one with its camera."""
     source: list[str] = []
-    if not (_real_data(root) / "udacity_test_video.mp4").is_file():
+    if not (REAL_DATA / "udacity_test_video.mp4").is_file():
         clip = work / "clip" / "video.mp4"
         if not clip.is_file():
             _py(root, "-m", "bsn_edge.cli.synth", str(work / "clip"), "--frames", "300", "--seed", "42", "--force")

@@ -381,13 +381,12 @@ class LiveSource(Source):
             self.cap.release()
 
 
-def open_source(spec: str, pace: bool = False, fps: float = 10.0, stall_s: float = Reconnect.stall_s,
-                decode_threads: int = 1, reconnect: Reconnect | None = None) -> Source:
+def open_source(spec: str, pace: bool = False, fps: float = 10.0, decode_threads: int = 1,
+                reconnect: Reconnect | None = None) -> Source:
     """``VIDEO`` file, image ``DIR``, camera index (``0``), or stream ``URL`` (``rtsp://...``); a camera
-    or stream that delivers nothing for ``stall_s`` is taken as lost and reopened (``reconnect``: the whole
-    policy, the vehicle file's ``[source]``, instead). ``decode_threads``: a video file's
-    (:class:`VideoFileSource`)."""
-    policy = reconnect or Reconnect(stall_s=stall_s)
+    or stream is watched and brought back as ``reconnect`` says (the vehicle file's ``[source]``; by default
+    :class:`Reconnect`'s). ``decode_threads``: a video file's (:class:`VideoFileSource`)."""
+    policy = reconnect or Reconnect()
     if spec.isdigit():
         return LiveSource(int(spec), policy)
     if "://" in spec:
