@@ -1,10 +1,13 @@
 """Training health: the share of a network's channels that are alive.
 
-A convolution's output channel is dead when its weights are all exactly zero, or when the batch norm
-right after it scales it by (about) nothing: either way it carries no information about the picture,
-though the graph still computes it. Adam with L2 weight decay drives channels there (the decay's
-gradient is normalised like any other, so a channel with little gradient of its own walks to zero at
-the learning rate's pace); a healthy run keeps nearly all of them.
+A convolution's output channel is dead when its weights are all (about) zero, when the batch norm right
+after it scales it by (about) nothing, or when that norm has seen it vary by (about) nothing: any way it
+carries no information about the picture, though the graph still computes it. Adam with L2 weight decay
+drives channels there (the decay's gradient is normalised like any other, so a channel with little
+gradient of its own walks to zero at the learning rate's pace). Behind a batch norm the walk is the
+convolution's weights, not the norm's scale: the norm divides their size out, so the channel works on
+while its weights shrink by orders of magnitude and dies when its variation sinks under the norm's
+epsilon; weights stored in fp16 then round to exactly zero. A healthy run keeps nearly all of them.
 """
 
 from __future__ import annotations
@@ -15,6 +18,12 @@ import torch
 
 # a normalisation scale under this (in absolute value) silences its channel
 SCALE_EPS = 1e-3
+# a convolution row whose every weight is under this (in absolute value) computes nothing: fp32 weights
+# walking to zero pass here long before they reach it, and fp16 storage rounds them to zero below 6e-8
+WEIGHT_EPS = 1e-6
+# a batch norm whose running variance of a channel is under this share of its epsilon passes on under a
+# tenth of that channel's variation (sqrt(var / (var + eps)) < 0.1): what is left is its constant shift
+VAR_SHARE = 1e-2
 # a layer with fewer of its channels alive than this share is named in the one-line summary
 WEAK_LAYER_SHARE = 0.5
 
@@ -80,18 +89,29 @@ def following_norm(modules: list[tuple[str, torch.nn.Module]],
     return None
 
 
+def dead_rows(conv: torch.nn.Conv2d, norm: torch.nn.modules.batchnorm._BatchNorm | None,
+              scale_eps: float = SCALE_EPS) -> torch.Tensor:
+    """Which output channels of ``conv`` are dead (a bool per channel): every weight under
+    :data:`WEIGHT_EPS`; or, with the batch norm ``norm`` after it, its scale at most ``scale_eps`` or its
+    running variance under :data:`VAR_SHARE` of its epsilon."""
+    w = conv.weight.detach()
+    dead = w.reshape(w.shape[0], -1).abs().lt(WEIGHT_EPS).all(dim=1)
+    if norm is not None:
+        dead |= norm.weight.detach().abs().le(scale_eps)
+        if norm.running_var is not None:
+            dead |= norm.running_var.detach().lt(VAR_SHARE * norm.eps).to(dead.device)
+    return dead
+
+
 def alive_channels(model: torch.nn.Module, scale_eps: float = SCALE_EPS) -> Alive:
-    """Which output channels of every convolution of ``model`` are alive: weights not all zero, and the
-    scale of the batch norm that follows it (the next module in ``model``'s order, when it normalises as
-    many channels) above ``scale_eps``."""
+    """Which output channels of every convolution of ``model`` are alive: not :func:`dead_rows`, the batch
+    norm that follows a convolution being the next module in ``model``'s order, when it normalises as many
+    channels."""
     modules = list(model.named_modules())
     layers = []
     for i, (name, m) in enumerate(modules):
         if not isinstance(m, torch.nn.Conv2d):
             continue
-        w = m.weight.detach()
-        alive = w.reshape(w.shape[0], -1).ne(0).any(dim=1)
-        if (norm := following_norm(modules, i)) is not None:
-            alive &= norm.weight.detach().abs().gt(scale_eps)
-        layers.append(LayerAlive(name, int(w.shape[0]), int(alive.sum())))
+        dead = dead_rows(m, following_norm(modules, i), scale_eps)
+        layers.append(LayerAlive(name, int(dead.numel()), int((~dead).sum())))
     return Alive(tuple(layers))

@@ -17,7 +17,7 @@ import math
 
 import torch
 
-from bsn_edge.models.alive import SCALE_EPS, following_norm
+from bsn_edge.models.alive import SCALE_EPS, dead_rows, following_norm
 
 # a revived channel's norm starts at this share of its layer's living scale. At a tenth (0.001-0.01 in the
 # default's encoder) Adam's steps of a learning rate's size swamped it: after 1,000 steps at 5e-4 half of them
@@ -27,15 +27,6 @@ from bsn_edge.models.alive import SCALE_EPS, following_norm
 REVIVED_SCALE = 1.0
 # a convolution with no norm after it writes its row straight into what follows: re-drawn at a tenth
 UNNORMED_SCALE = 0.1
-
-
-def _dead_rows(conv: torch.nn.Conv2d, bn: torch.nn.modules.batchnorm._BatchNorm | None,
-               scale_eps: float) -> torch.Tensor:
-    w = conv.weight.detach()
-    dead = w.reshape(w.shape[0], -1).eq(0).all(dim=1)
-    if bn is not None:
-        dead |= bn.weight.detach().abs().le(scale_eps)
-    return dead
 
 
 @torch.no_grad()
@@ -49,7 +40,7 @@ def revive(model: torch.nn.Module, seed: int = 0, scale_eps: float = SCALE_EPS) 
         if not isinstance(m, torch.nn.Conv2d):
             continue
         bn = following_norm(modules, i)
-        dead = _dead_rows(m, bn, scale_eps)
+        dead = dead_rows(m, bn, scale_eps)
         n = int(dead.sum())
         if n == 0:
             continue
