@@ -41,9 +41,9 @@ from .runner import Report, run
 LR = 1e-3
 SIZE = (64, 128)
 BATCH = 8
-# name: (optimizer, weight decay, whether normalisation scales and biases are decayed too)
 # a --variant of this prefix is the segmentation teacher on the encoder named after it
 TEACHER = "teacher:"
+# name: (optimizer, weight decay, whether normalisation scales and biases are decayed too)
 SETTINGS = {"adam": (ADAM, 5e-4, True), "adamw-all": (ADAMW, 1e-2, True), "adamw": (ADAMW, 1e-2, False)}
 
 
@@ -76,13 +76,13 @@ def _network(variant: str) -> tuple[torch.nn.Module, Callable[[torch.nn.Module, 
 
 def curve(variant: str, setting: str, steps: int, every: int, schedule: int) -> list[dict[str, Any]]:
     """Alive channels at step 0 and every ``every`` steps of one setting's run: the first ``steps`` of a
-    learning-rate schedule of ``schedule`` steps."""
+    learning-rate schedule of ``schedule`` steps (at least ``steps``)."""
     kind, decay, all_params = SETTINGS[setting]
     torch.manual_seed(0)
     model, loss = _network(variant)
     model.train()
     t = TrainConfig(optimizer=kind, weight_decay=decay)
-    optim = Optimizer(model.parameters(), LR, max(schedule, steps), t)
+    optim = Optimizer(model.parameters(), LR, schedule, t)
     if all_params and kind == ADAMW:        # the scales and biases decayed too: the split undone
         for g in optim.opt.param_groups:
             g["weight_decay"] = decay
@@ -101,8 +101,8 @@ def measure(args: argparse.Namespace, _parser: argparse.ArgumentParser) -> Repor
     # weights walking to zero pass through subnormal floats, which x86 multiplies a hundred times slower:
     # flushed to zero, every setting runs at full speed (a weight under 1e-38 is zero to every count here)
     torch.set_flush_denormal(True)
-    curves = {s: curve(args.variant, s, args.steps, args.every, args.schedule) for s in args.settings}
     schedule = max(args.schedule, args.steps)
+    curves = {s: curve(args.variant, s, args.steps, args.every, schedule) for s in args.settings}
     result = {"machine": machine(), "variant": args.variant, "steps": args.steps, "schedule": schedule, "lr": LR,
               "size": SIZE, "batch": BATCH, "curves": curves}
     channels = curves[args.settings[0]][0]["channels"]

@@ -99,7 +99,7 @@ def dead_rows(conv: torch.nn.Conv2d, norm: torch.nn.modules.batchnorm._BatchNorm
     if norm is not None:
         dead |= norm.weight.detach().abs().le(scale_eps)
         if norm.running_var is not None:
-            dead |= norm.running_var.detach().lt(VAR_SHARE * norm.eps).to(dead.device)
+            dead |= norm.running_var.detach().lt(VAR_SHARE * norm.eps)
     return dead
 
 
