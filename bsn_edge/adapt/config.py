@@ -9,6 +9,7 @@ from typing import Any
 from bsn_edge.labels.config import LabelConfig
 
 LABEL_DEPTHS = ("auto", "ground", "model")
+ASSUMED_HEIGHT_M = 1.5   # the model camera's mounting height: a camera whose height nobody stated
 ADAPT_LABELS = LabelConfig(look_tol=8.0)   # bsn-label's defaults, with the look check for road-plane labels
 
 
@@ -73,7 +74,10 @@ class AdaptConfig:
     def label_config(self, depth: str = "") -> LabelConfig:
         """The T-frame label settings of a clip labelled with the ``depth`` source spec (the look
         check is for the road plane's labels, ``ground``)."""
-        return dataclasses.replace(self.labels, look_tol=self.labels.look_tol if depth == "ground" else 0.0)
+        if depth != "ground":
+            return dataclasses.replace(self.labels, look_tol=0.0)
+        # a clip with no mounting finds its road plane from the direction of travel, at this height
+        return dataclasses.replace(self.labels, camera_height=self.labels.camera_height or ASSUMED_HEIGHT_M)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -36,23 +36,24 @@ class _Scores(nn.Module):
         return self.teacher(x)[0]
 
 
-def load_teacher(run: Run) -> tuple[nn.Module, tuple[int, int], float]:
-    """The run's segmentation teacher (eval mode), the input size it was trained at and its scale
-    of the model's input. ``FileNotFoundError`` when the run has none."""
+def load_teacher(run: Run, model_run: Run | None = None) -> tuple[nn.Module, tuple[int, int], float]:
+    """The run's segmentation teacher (eval mode), the input size it is fed at (its scale of
+    ``model_run``'s input, by default the run's own) and that scale. ``FileNotFoundError`` when the
+    run has none."""
     teacher = run.load_teacher()
     if teacher is None:
-        raise FileNotFoundError(f"{run.path}: no teacher ({run.TEACHER}/teacher.pt); bsn-adapt labels with the "
-                                "run's own teacher (train with bsn-train, which keeps it)")
-    h, w = run.card().input_size
+        raise FileNotFoundError(f"{run.path}: no teacher ({run.TEACHER}/teacher.pt); bsn-adapt labels with a "
+                                "run's teacher (train with bsn-train, which keeps it)")
+    h, w = (model_run or run).card().input_size
     scale = run.teacher_config().scale
     size = (max(32, round(h * scale / 32) * 32), max(32, round(w * scale / 32) * 32))
     return teacher, size, scale
 
 
-def export_teacher(run: Run, out: Path) -> Path:
+def export_teacher(run: Run, out: Path, model_run: Run | None = None) -> Path:
     """The run's teacher as ONNX: float RGB ``[1, 3, H, W]`` (ImageNet-normalised) in, 19 class
-    scores out, at the size it was trained at."""
-    teacher, (h, w), _ = load_teacher(run)
+    scores out, at the size it is fed at (:func:`load_teacher`)."""
+    teacher, (h, w), _ = load_teacher(run, model_run)
     buf = io.BytesIO()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -65,12 +66,13 @@ def export_teacher(run: Run, out: Path) -> Path:
     return out
 
 
-def prepare_labeller(run: Run, depth_out: Path, teacher_out: Path) -> dict[str, str]:
-    """Both label models, made once (kept when already there)."""
+def prepare_labeller(run: Run, depth_out: Path, teacher_out: Path, teacher: Run | None = None) -> dict[str, str]:
+    """Both label models, made once (kept when already there): ``run``'s depth head and ``teacher``'s
+    segmentation (by default ``run``'s own teacher)."""
     if not depth_out.is_file():
         export_run(run.path, depth_out, log=io.StringIO())
     if not teacher_out.is_file():
-        export_teacher(run, teacher_out)
+        export_teacher(teacher or run, teacher_out, run)
     return {"depth": f"bsn:{depth_out}", "seg": f"onnx:{teacher_out}"}
 
 

@@ -8,6 +8,8 @@ import hashlib
 import json
 import shutil
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -92,30 +94,45 @@ def _coverage(seq: Path, label: str) -> dict[str, Any]:
 
 
 def _labelling_settings(run_dir: str | Path, weights: str, videos: list[str | Path], calib: str | Path | None,
-                        fps: float | None, cfg: AdaptConfig) -> dict[str, Any]:
+                        fps: float | None, cfg: AdaptConfig, teacher: Run | None = None) -> dict[str, Any]:
     """What the imported clips and their labels depend on (a resumed adaptation must match it;
     fine-tuning settings may change between resumes)."""
     c = cfg.to_dict()
     return {"run": str(Path(run_dir).resolve()), "weights_sha256": weights,
             "videos": [str(Path(v).resolve()) for v in videos], "calib": str(calib or ""), "fps": fps,
+            "teacher": str(teacher.path.resolve()) if teacher else "",
             **{k: c[k] for k in ("labels", "label_depth", "max_fps", "min_moving_s")}}
 
 
 def label_clips(src: Run, videos: list[str | Path], folder: AdaptFolder, cfg: AdaptConfig,
                 calib: Calibration | None, fps: float | None, report: dict[str, Any],
-                progress: bool = True) -> list[Clip]:
-    """Import ``videos`` into ``folder`` and label them with ``src``'s depth, teacher and the
-    built-in VO; clips that cannot be used go to ``report["rejected"]`` with the reason. Both steps
-    resume: a finished import and finished label frames are kept."""
+                progress: bool = True, teacher: Run | None = None) -> list[Clip]:
+    """Import ``videos`` into ``folder`` and label them with ``src``'s depth, ``teacher``'s segmentation
+    (``src``'s own teacher by default) and the built-in VO; clips that cannot be used go to
+    ``report["rejected"]`` with the reason. Both steps resume: a finished import and finished label
+    frames are kept."""
     card = src.card()
     hfov = float(np.degrees(2 * np.arctan(card.camera.width / (2 * card.camera.fx))))
-    usable = _import_all(videos, folder, cfg, calib, hfov, fps, report, progress)
-    specs = prepare_labeller(src, folder.depth_model, folder.teacher_model)
-    road_ok = _with_road(usable, specs["seg"], report)
-    depth_of = {imp.name: _first_depth(cfg.label_depth, imp.path, cfg.label_config().name, specs["depth"])
-                for imp in road_ok}
-    results = _label_all(road_ok, depth_of, specs["seg"], cfg, report, progress)
-    return _kept(road_ok, results, depth_of, cfg.label_config(), report)
+    with _stage(report, "import"):
+        usable = _import_all(videos, folder, cfg, calib, hfov, fps, report, progress)
+    with _stage(report, "label models"):
+        specs = prepare_labeller(src, folder.depth_model, folder.teacher_model, teacher)
+    with _stage(report, "label"):
+        road_ok = _with_road(usable, specs["seg"], report)
+        depth_of = {imp.name: _first_depth(cfg.label_depth, imp.path, cfg.label_config().name, specs["depth"])
+                    for imp in road_ok}
+        results = _label_all(road_ok, depth_of, specs["seg"], cfg, report, progress)
+    return _kept(road_ok, results, depth_of, cfg, report)
+
+
+@contextmanager
+def _stage(report: dict[str, Any], name: str) -> Iterator[None]:
+    """Time one stage into ``report["stages_s"]`` (a resumed stage counts what it did this time)."""
+    t0 = time.perf_counter()
+    try:
+        yield
+    finally:
+        report.setdefault("stages_s", {})[name] = round(time.perf_counter() - t0, 1)
 
 
 def _import_all(videos: list[str | Path], folder: AdaptFolder, cfg: AdaptConfig, calib: Calibration | None,
@@ -179,9 +196,10 @@ def _label_all(road_ok: list[Imported], depth_of: dict[str, str], seg: str, cfg:
                 results.update({imp.name: r for imp, r in zip(part, done, strict=True)})
 
         label(road_ok)
-        # auto: a clip the depth head does not fit is labelled from the road plane when its mounting is known
+        # auto: a clip the depth head does not fit is labelled from the road plane: the camera file's
+        # mounting, else the plane square to the direction the car travels at the assumed height
         fallback = [imp for imp in road_ok if cfg.label_depth == "auto" and depth_of[imp.name] != "ground"
-                    and results[imp.name].status == "rejected" and _has_mounting(imp.path)]
+                    and results[imp.name].status == "rejected"]
         for imp in fallback:
             report["clips"][imp.name]["model_depth_rejected"] = results[imp.name].message
             depth_of[imp.name] = "ground"
@@ -189,13 +207,16 @@ def _label_all(road_ok: list[Imported], depth_of: dict[str, str], seg: str, cfg:
     return results
 
 
-def _kept(road_ok: list[Imported], results: dict[str, Any], depth_of: dict[str, str], lcfg,
+def _kept(road_ok: list[Imported], results: dict[str, Any], depth_of: dict[str, str], cfg: AdaptConfig,
           report: dict[str, Any]) -> list[Clip]:
     """The labelled clips with blind spots in their labels; the others rejected with the reason."""
+    lcfg = cfg.label_config()
     labelled = []
     for imp in road_ok:
         r = results[imp.name]
         report["clips"][imp.name]["label_depth"] = "ground" if depth_of[imp.name] == "ground" else "model"
+        if depth_of[imp.name] == "ground":
+            report["clips"][imp.name]["road_plane_from"] = _plane_from(imp.path, cfg)
         frames = tuple(SequenceFolder(imp.path).labels(lcfg.name).frames()) if r.status == "ok" else ()
         if not frames:
             report["rejected"][imp.name] = f"labels {r.status}: {r.message or 'no label frame'}"
@@ -215,8 +236,13 @@ def _kept(road_ok: list[Imported], results: dict[str, Any], depth_of: dict[str, 
     return labelled
 
 
-def _has_mounting(clip: Path) -> bool:
-    return Calibration.read(SequenceFolder(clip).calibration_path).mounting is not None
+def _plane_from(clip: Path, cfg: AdaptConfig) -> str:
+    """Where a clip's road plane comes from when it is labelled from it (said in the report)."""
+    if Calibration.read(SequenceFolder(clip).calibration_path).mounting is not None:
+        return "the camera file's mounting"
+    height = cfg.label_config("ground").camera_height
+    return (f"pitch and yaw from the direction of travel, the camera {height:g} m above the road "
+            f"({'--camera-height' if cfg.labels.camera_height else 'assumed: --camera-height states it'})")
 
 
 def _first_depth(choice: str, clip: Path, label: str, model_spec: str) -> str:
@@ -252,8 +278,9 @@ def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, repo
                          "cannot be measured nor a threshold chosen; add clips or hold out more (--holdout)")
     grid = tuple(src.config().get("train", {}).get("distill_grid", (8, 16)))
     use_teacher = bool(card.spec.get("distill", True))
-    losses = finetune_b(model, train_ds, cfg, teacher if use_teacher else None, teacher_scale, grid, progress)
-    after = agreement(model, held_ds)
+    with _stage(report, "fine-tune"):
+        losses = finetune_b(model, train_ds, cfg, teacher if use_teacher else None, teacher_scale, grid, progress)
+        after = agreement(model, held_ds)
     threshold, best = after.best()
     b_th, b_best = before.best()
     source_threshold = card.threshold
@@ -284,12 +311,30 @@ def tune(src: Run, labelled: list[Clip], out: str | Path, cfg: AdaptConfig, repo
 
     report["weights_sha256"] = _write_adapted(src, Path(out), model, card, threshold, best, lcfg.name, train, held)
     if export:
-        from bsn_edge.export.pipeline import export_run
-
         path = Path(out) / EXPORT_NAME
-        summary = export_run(out, path, int8=True, calib=max(labelled, key=lambda c: len(c.frames)).path)
-        report["export"] = {"path": str(path), "int8_vs_fp32": summary["int8_vs_fp32"]}
+        with _stage(report, "export"):
+            report["export"] = _export(out, path, labelled, card.weights_sha256 if "kept_source" in report else None)
     return report
+
+
+def _export(out: str | Path, path: Path, labelled: list[Clip], kept: str | None) -> dict[str, Any]:
+    """The adapted run exported int8 to ``path``; when adaptation kept the source (``kept``: its weights'
+    sha256) and the source is the shipped default's run, the shipped model itself, its threshold and card:
+    never a model worse than the one the user started from."""
+    from bsn_edge.default_model import DEFAULT_CARD, DEFAULT_MODEL
+
+    shipped = json.loads(DEFAULT_CARD.read_text()).get("card", {}) if DEFAULT_CARD.is_file() else {}
+    if kept is not None and kept == shipped.get("weights_sha256"):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(DEFAULT_MODEL, path)
+        shutil.copy2(DEFAULT_CARD, path.with_suffix(".json"))
+        return {"path": str(path), "shipped": True,
+                "note": f"the shipped model as it is (threshold {shipped.get('threshold')}, signed with the project's "
+                        "key): adaptation kept the source"}
+    from bsn_edge.export.pipeline import export_run
+
+    summary = export_run(out, path, int8=True, calib=max(labelled, key=lambda c: len(c.frames)).path)
+    return {"path": str(path), "shipped": False, "int8_vs_fp32": summary["int8_vs_fp32"]}
 
 
 def _write_adapted(src: Run, out: Path, model, card, threshold: float, best: dict[str, Any], label: str,
@@ -309,11 +354,14 @@ def _write_adapted(src: Run, out: Path, model, card, threshold: float, best: dic
 
 def adapt(run_dir: str | Path, videos: list[str | Path], out: str | Path, cfg: AdaptConfig | None = None,
           calib: str | Path | None = None, fps: float | None = None, export: bool = False,
-          resume: bool = False, force: bool = False, progress: bool = True) -> dict[str, Any]:
+          resume: bool = False, force: bool = False, progress: bool = True,
+          teacher: str | Path | None = None) -> dict[str, Any]:
     """Adapt the run ``run_dir`` to the recordings ``videos`` (videos, image folders or sequence
     folders; only their frames and camera are read) and write the adapted run to ``out``; returns
-    the report (also ``out/adapt/report.json``). Clips that cannot be used are reported with the
-    reason; ``AdaptError`` when none can, or when ``out`` is taken (see ``resume`` / ``force``)."""
+    the report (also ``out/adapt/report.json``). ``teacher``: a run whose segmentation teacher labels
+    the road and road users (by default ``run_dir``'s own). Clips that cannot be used are reported
+    with the reason; ``AdaptError`` when none can, or when ``out`` is taken (see ``resume`` /
+    ``force``)."""
     cfg = cfg or AdaptConfig()
     t0 = time.perf_counter()
     src = Run(run_dir)
@@ -323,18 +371,21 @@ def adapt(run_dir: str | Path, videos: list[str | Path], out: str | Path, cfg: A
         if model.oracle_depth:
             raise AdaptError(f"{run_dir}: a {card.variant!r} run cannot be adapted: {ORACLE_DEPTH_NOTE}")
         load_teacher(src)
+        labeller = Run.of_teacher(teacher) if teacher else None
+        if labeller is not None:
+            load_teacher(labeller, src)
     except (FileNotFoundError, ValueError) as e:
         raise AdaptError(str(e)) from None
     if card.threshold is None:
         raise AdaptError(f"{run_dir}: the run has no decision threshold (training did not finish)")
     cal = Calibration.read(calib) if calib else None
     out = Path(out)
-    labelling = _labelling_settings(run_dir, card.weights_sha256, videos, calib, fps, cfg)
+    labelling = _labelling_settings(run_dir, card.weights_sha256, videos, calib, fps, cfg, labeller)
     folder = _prepare_out(src, out, labelling, resume, force)
     folder.write_json(folder.config_path, {"labelling": labelling, "config": cfg.to_dict()})
     report: dict[str, Any] = {"run": str(run_dir), "out": str(out), "config": cfg.to_dict(), "clips": {},
                               "rejected": {}}
-    labelled = label_clips(src, videos, folder, cfg, cal, fps, report, progress)
+    labelled = label_clips(src, videos, folder, cfg, cal, fps, report, progress, labeller)
     if not labelled:
         folder.write_json(folder.report_path, {**report, "status": "failed"})
         why = "; ".join(f"{k}: {v}" for k, v in report["rejected"].items()) or "no clip given"

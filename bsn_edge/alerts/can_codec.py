@@ -7,6 +7,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from bsn_edge.alerts.blindness import Blindness
 from bsn_edge.alerts.e2e import AliveCounter, e2e_crc
 from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.health import Fault, SystemState
@@ -17,6 +18,12 @@ HAZARD, STATUS = "BSN_Hazard", "BSN_Status"
 NO_DISTANCE = 63.5
 SAT = 255
 SIDES = tuple(name.title() for name in SECTORS)   # the DBC's signal prefixes: Left, Centre, Right
+
+
+def signal_name(sector: str, field: str) -> str:
+    """The DBC's signal of ``field`` (Level, Score, Distance) for ``sector`` (LEFT -> Left_Level): the one
+    place a sector's signals are named."""
+    return f"{sector.title()}_{field}"
 SINK_SAT = 63
 
 
@@ -58,6 +65,7 @@ class CanEncoder:
             hz[f"{name}_Level"] = int(s.level)
             hz[f"{name}_Score"] = round(min(max(s.score, 0.0), 1.0) * 127) / 127
             hz[f"{name}_Distance"] = NO_DISTANCE if s.distance_m is None else min(round(s.distance_m * 2) / 2, 63.0)
+            hz[f"{name}_Unseen"] = int(s.unseen)
         f = frame.faults
         st = {"System_State": int(frame.state), "Frame_Rate": min(round(frame.fps * 2) / 2, 127.5),
               "Decode_Errors": min(f.get(Fault.DECODE_ERRORS, 0) + f.get(Fault.SIZE_CHANGES, 0), SAT),
@@ -65,7 +73,8 @@ class CanEncoder:
               "Invalid_Outputs": min(f.get(Fault.NAN_OUTPUTS, 0), SAT),
               "Tx_Errors": min(sum(f.get(k, 0) for k in (Fault.TX_ERRORS, Fault.TX_FULL, Fault.SERIAL_ERRORS)), SAT),
               "Sink_Errors": min(f.get(Fault.SINK_ERRORS, 0), SINK_SAT),
-              "Model_Unsigned": 1 if f.get(Fault.UNSIGNED_MODEL, 0) else 0}
+              "Model_Unsigned": 1 if f.get(Fault.UNSIGNED_MODEL, 0) else 0,
+              "Camera_Reason": int(frame.camera)}
         values = {HAZARD: hz, STATUS: st}
         return [self._encode(name, values[name]) for name in (messages if messages is not None else (HAZARD, STATUS))]
 
@@ -98,7 +107,8 @@ LEVEL_NAMES = ("NONE", "CAUTION", "WARNING")
 def invalid_fields(d: Decoded) -> list[str]:
     """Signals whose raw value the DBC's value table does not define (e.g. a level of 3)."""
     if d.name != HAZARD:
-        return []
+        reason = int(d.signals.get("Camera_Reason", 0))
+        return [] if reason in set(Blindness) else [f"Camera_Reason={reason}"]
     return [f"{side}_Level={int(d.signals[f'{side}_Level'])}" for side in SIDES
             if not 0 <= int(d.signals[f"{side}_Level"]) < len(LEVEL_NAMES)]
 
@@ -114,10 +124,19 @@ def to_alert_text(d: Decoded) -> str:
             lv = LEVEL_NAMES[v] if 0 <= v < len(LEVEL_NAMES) else f"LEVEL?{v}"
             dist = s[f"{side}_Distance"]
             where = "" if dist >= NO_DISTANCE else f" {dist:.1f} m"
-            parts.append(f"{side.upper()} {lv} {s[f'{side}_Score']:.2f}{where}")
+            unseen = " UNSEEN" if int(s.get(f"{side}_Unseen", 0)) else ""
+            parts.append(f"{side.upper()} {lv} {s[f'{side}_Score']:.2f}{where}{unseen}")
         return f"hazard #{d.counter}: " + " | ".join(parts) + flag
     state = SystemState(int(s["System_State"])).name
     return (f"status #{d.counter}: {state} {s['Frame_Rate']:.1f} fps, decode errors {int(s['Decode_Errors'])}, "
             f"dropped {int(s['Dropped_Frames'])}, invalid outputs {int(s['Invalid_Outputs'])}, "
             f"tx errors {int(s['Tx_Errors'])}, sink errors {int(s.get('Sink_Errors', 0))}"
-            + (", model UNSIGNED" if int(s.get("Model_Unsigned", 0)) else "") + flag)
+            + (", model UNSIGNED" if int(s.get("Model_Unsigned", 0)) else "") + _camera_text(s) + flag)
+
+
+def _camera_text(signals: dict[str, Any]) -> str:
+    """``, camera COVERED`` for a status whose camera cannot see (the raw number when undefined)."""
+    reason = int(signals.get("Camera_Reason", 0))
+    if reason == Blindness.CLEAR:
+        return ""
+    return f", camera {Blindness(reason).name}" if reason in set(Blindness) else f", camera REASON?{reason}"

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from bsn_edge.alerts.blindness import WHOLE, Blindness
 from bsn_edge.alerts.health import Status, SystemState
 from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
@@ -19,6 +20,7 @@ class SectorAlert:
     score: float            # smoothed, [0, 1]
     level: Level
     distance_m: float | None
+    unseen: bool = False    # the camera cannot see this sector: its level says nothing of it
 
 
 def _one_per_sector(sectors: tuple[SectorAlert, ...]) -> None:
@@ -37,9 +39,10 @@ class Hazard:
         _one_per_sector(self.sectors)
 
     @classmethod
-    def none(cls, t: float) -> Hazard:
-        """Nothing to warn of: what goes with an UNAVAILABLE status, whatever the last frame saw."""
-        return cls(t, (SectorAlert(0.0, Level.NONE, None),) * len(SECTORS))
+    def none(cls, t: float, unseen: bool = False) -> Hazard:
+        """Nothing to warn of: what goes with an UNAVAILABLE status, whatever the last frame saw (``unseen``:
+        because the camera cannot see)."""
+        return cls(t, (SectorAlert(0.0, Level.NONE, None, unseen),) * len(SECTORS))
 
 
 @dataclass(frozen=True)
@@ -52,16 +55,18 @@ class AlertFrame:
     state: SystemState
     fps: float
     faults: dict[str, int] = field(default_factory=dict)
+    camera: Blindness = Blindness.CLEAR
 
     def __post_init__(self) -> None:
         _one_per_sector(self.sectors)
 
     @classmethod
     def of(cls, t: float, hazard: Hazard, status: Status) -> AlertFrame:
-        """The cycle at ``t`` carrying ``hazard`` and ``status``: an UNAVAILABLE status carries no hazard."""
+        """The cycle at ``t`` carrying ``hazard`` and ``status``: an UNAVAILABLE status carries no hazard (every
+        sector unseen when the camera cannot see as a whole)."""
         if status.state == SystemState.UNAVAILABLE:
-            hazard = Hazard.none(t)
-        return cls(t, hazard.sectors, status.state, status.fps, dict(status.faults))
+            hazard = Hazard.none(t, status.camera in WHOLE)
+        return cls(t, hazard.sectors, status.state, status.fps, dict(status.faults), status.camera)
 
     @classmethod
     def unavailable(cls, t: float, faults: dict[str, int] | None = None) -> AlertFrame:
@@ -73,4 +78,4 @@ class AlertFrame:
 
     @property
     def status(self) -> Status:
-        return Status(self.state, self.fps, dict(self.faults))
+        return Status(self.state, self.fps, dict(self.faults), self.camera)

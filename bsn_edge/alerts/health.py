@@ -1,4 +1,5 @@
-"""System state: OK, DEGRADED (too slow), UNAVAILABLE (no valid inference lately), CALIBRATING (the
+"""System state: OK, DEGRADED (too slow, an output down, a sector the camera cannot see), UNAVAILABLE (no
+valid inference lately, or a camera that cannot see as a whole), CALIBRATING (the
 camera's mounting is still being estimated: the sectors are not to be trusted yet), and fault counters.
 
 Shared between the frame loop (which reports valid inferences and faults) and the heartbeat
@@ -12,6 +13,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from enum import IntEnum, StrEnum
 
+from bsn_edge.alerts.blindness import WHOLE, Blindness
 from bsn_edge.config_toml import check_fields, setting
 
 
@@ -52,6 +54,7 @@ class Status:
     state: SystemState
     fps: float                                   # valid inferences a second on the processing clock
     faults: dict[str, int] = field(default_factory=dict)     # the counters, by :class:`Fault`'s names
+    camera: Blindness = Blindness.CLEAR          # why the camera cannot see (CLEAR: it can)
 
 
 @dataclass(frozen=True)
@@ -82,12 +85,19 @@ class Health:
         self._down = False
         self._calibrating = False
         self._senders_down: set[str] = set()
+        self._camera = Blindness.CLEAR
         self._lock = threading.Lock()
 
     def calibrating(self, on: bool) -> None:
         """While on, a state that would be OK reads CALIBRATING (a fault still reads as the fault)."""
         with self._lock:
             self._calibrating = bool(on)
+
+    def camera(self, reason: Blindness) -> None:
+        """The camera-health check's word: a reason that blinds the whole picture reads UNAVAILABLE, one that
+        blinds some sectors (PARTIAL) DEGRADED, until it says CLEAR again."""
+        with self._lock:
+            self._camera = Blindness(reason)
 
     def sender_down(self, name: str, down: bool) -> None:
         """A sender that has failed every send for a while (a serial port gone, a bus off) is down: the
@@ -154,13 +164,13 @@ class Health:
         # the deadline holds on both clocks: a file's frame time stands still while the loop is stuck on a
         # frame, the processing clock does not
         if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s \
-                or wall - self._work[-1] > self.cfg.deadline_s:
+                or wall - self._work[-1] > self.cfg.deadline_s or self._camera in WHOLE:
             return SystemState.UNAVAILABLE
         # the rate is judged once a floor's interval has passed since the first inference in the window:
         # before that even one inference is on time (the first frame of a run is not DEGRADED)
         judged = bool(self._work) and wall - self._work[0] >= 1.0 / max(self.cfg.fps_floor, 1e-9)
         slow = judged and self._fps(wall) < self.cfg.fps_floor
-        if slow or self._senders_down or any(self._faults[f] for f in DEGRADING):
+        if slow or self._senders_down or any(self._faults[f] for f in DEGRADING) or self._camera:
             return SystemState.DEGRADED
         return SystemState.CALIBRATING if self._calibrating else SystemState.OK
 
@@ -173,4 +183,5 @@ class Health:
         the counters, read together."""
         w = t if wall is None else wall
         with self._lock:
-            return Status(self._state(t, w), self._fps(w), {str(f): n for f, n in self._faults.items()})
+            return Status(self._state(t, w), self._fps(w), {str(f): n for f, n in self._faults.items()},
+                          self._camera)

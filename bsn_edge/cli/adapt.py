@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from bsn_edge.adapt import AdaptConfig, AdaptError, adapt
-from bsn_edge.adapt.config import LABEL_DEPTHS
+from bsn_edge.adapt.config import ASSUMED_HEIGHT_M, LABEL_DEPTHS
 from bsn_edge.cli.common import fail
 from bsn_edge.labels.config import LabelConfig
 
@@ -34,6 +34,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--calib", default=None, metavar="CALIB.json",
                    help="your camera file from bsn-calibrate (intrinsics, lens, mounting); without it a sequence "
                         "folder's own camera file is used, else the model camera's field of view is assumed")
+    p.add_argument("--teacher", default=None, metavar="RUN",
+                   help="a run whose segmentation teacher labels road, pavement and road users instead of --run's "
+                        "own (a run folder or its teacher/ folder; D's depth and the distillation stay --run's)")
+    p.add_argument("--camera-height", type=float, default=None, metavar="M",
+                   help="the camera's height above the road, metres: with no camera file, a clip the depth head "
+                        f"does not fit is labelled from the road plane at this height (default {ASSUMED_HEIGHT_M:g}, "
+                        "the model camera's; pitch and yaw come from the direction of travel)")
     p.add_argument("--fps", type=float, default=None, help="frame rate of folders of images (videos say their own)")
     p.add_argument("--steps", type=int, default=d.steps, help=f"fine-tuning steps (default {d.steps})")
     p.add_argument("--lr", type=float, default=d.lr, help=f"fine-tuning learning rate (default {d.lr:g})")
@@ -80,11 +87,12 @@ def main(argv: list[str] | None = None) -> int:
         except (FileNotFoundError, ValueError) as e:
             return fail(PROG, str(e))
     try:
-        labels = LabelConfig(rate=args.rate, horizon_s=args.horizon, min_corr=args.min_corr, look_tol=args.look_tol)
+        labels = LabelConfig(rate=args.rate, horizon_s=args.horizon, min_corr=args.min_corr, look_tol=args.look_tol,
+                             camera_height=args.camera_height)
         cfg = AdaptConfig(labels=labels, label_depth=args.label_depth, holdout_fraction=args.holdout,
                           steps=args.steps, lr=args.lr, seed=args.seed)
         rep = adapt(args.run, args.video, args.out, cfg, calib=args.calib, fps=args.fps, export=args.export,
-                    resume=args.resume, force=args.force, progress=not args.quiet)
+                    resume=args.resume, force=args.force, progress=not args.quiet, teacher=args.teacher)
     except (AdaptError, FileNotFoundError, ValueError) as e:
         return fail(PROG, str(e))
     for name, c in rep["clips"].items():
@@ -98,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     if "kept_source" in rep:
         print(f"kept the source model: {rep['kept_source']}")
     if "export" in rep:
-        print(f"wrote {rep['export']['path']}")
+        print(f"wrote {rep['export']['path']}" + (f": {rep['export']['note']}" if rep["export"].get("shipped") else ""))
         from bsn_edge.cli.export import signed
         if signed(Path(rep["export"]["path"]), args.sign):
             return 2

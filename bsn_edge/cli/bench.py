@@ -26,7 +26,7 @@ DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "footprint",
          "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive", "prune",
-         "calibration", "first_guess", "optimizer", "label_classes")
+         "calibration", "first_guess", "optimizer", "label_classes", "camera_health", "adapt_real")
 # the campaign's own benchmarks: they judge a leg's run folder against held-out sets the campaign makes
 # (models/campaign/judge*.sh run them), so they have nothing to measure outside it
 CAMPAIGN_TOOLS = ("bench_cameras", "bench_tradeoff", "bench_campaign")
@@ -34,7 +34,8 @@ CAMPAIGN_TOOLS = ("bench_cameras", "bench_tradeoff", "bench_campaign")
 NEEDS_TREE = {"arch": "configs/quick.toml", "quant": "configs/quick.toml", "accuracy": "configs/quick.toml",
               "adapt": "configs/quick.toml", "footprint": "the source tree it installs twice",
               "realteacher": "the default's training run (models/default)",
-              "alive": "the training runs' weights (models/)", "prune": "the default's training run (models/default)"}
+              "alive": "the training runs' weights (models/)", "prune": "the default's training run (models/default)",
+              "adapt_real": "the default's training run (models/default)"}
 ADAPT_SOURCE, ADAPT_TARGET = "suburb", "urban"
 ADAPT_EVAL_SEEDS = (1300, 1301)   # held-out target clips: seeds no training clip has
 SEEDS = (0, 1, 2)                 # training seeds of the paper's tables
@@ -134,7 +135,7 @@ BY_OUT_ONLY = {"labels": "benchmarks.bench_labels", "realcam": "benchmarks.bench
                "floor": "benchmarks.bench_floor", "int8_cpu": "benchmarks.bench_int8_cpu",
                "footprint": "benchmarks.bench_footprint", "alive": "benchmarks.bench_alive",
                "prune": "benchmarks.bench_prune", "first_guess": "benchmarks.bench_first_guess",
-               "optimizer": "benchmarks.bench_optimizer"}
+               "optimizer": "benchmarks.bench_optimizer", "camera_health": "benchmarks.bench_camera_health"}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -188,6 +189,9 @@ def _one(root: Path | None, name: str, args: argparse.Namespace, out: str, work:
         _adapt(root, out, work)
     elif name == "calibration":
         _calibration(root, out, work)
+    elif name == "adapt_real":
+        _py(root, "-m", "benchmarks.bench_adapt_real", "--work", str(work / "adapt_real"), "--drive", "0006R0",
+            "0001TP", "0016E5", "--out", out)
     elif name == "label_classes":
         campaign = Path("~/.cache/bsn-edge/campaign/data").expanduser()
         data = campaign if campaign.is_dir() else _prepare_data(root, work)

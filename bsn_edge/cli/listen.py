@@ -3,22 +3,22 @@
 from __future__ import annotations
 
 import argparse
-import re
 import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
-from bsn_edge.alerts.can_codec import decode, invalid_fields, to_alert_text
-from bsn_edge.alerts.e2e import COUNTER_MOD, counter_gap
+from bsn_edge.alerts.bus_check import FrameChecker, Verdict
+from bsn_edge.alerts.can_codec import STATUS, to_alert_text
+from bsn_edge.alerts.can_log import PYTHON_CAN_LOGS, is_log, read_log
+from bsn_edge.alerts.e2e import COUNTER_MOD
 from bsn_edge.alerts.serial_codec import FrameDecoder
 from bsn_edge.cli.common import fail
 
 PROG = "bsn-listen"
-# candump -L: "(1700000000.123456) can0 500#0011223344556677", python-can adds " T" / " R" (direction)
-CANDUMP = re.compile(r"^\((\d+(?:\.\d+)?)\)\s+\S+\s+([0-9A-Fa-f]{1,8})#([0-9A-Fa-f]*)(?:\s+[TR])?\s*$")
+# the status goes out at least once a second whatever the rates (the DBC says so): longer is a silent bus
+STATUS_SILENCE_S = 1.5
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -36,44 +36,57 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class Printer:
-    """Prints each decoded frame; counts bad CRCs, repeats and losses per message."""
+    """Prints each decoded frame as :class:`FrameChecker` judges it; counts bad CRCs, repeats, losses,
+    undefined fields and unreadable lines (each frame under one verdict)."""
 
     def __init__(self, out=None) -> None:
         self.out = out
-        self.last: dict[str, int] = {}
-        self.frames = self.bad_crc = self.lost = self.repeated = self.bad_lines = self.bad_fields = 0
+        self.check = FrameChecker()
+        self.frames = self.bad_lines = self.gaps = 0
+        self.serial_crc = 0        # frames the serial decoder dropped for a bad CRC before decoding
+        self.first_t: float | None = None
+        self.last_status_t: float | None = None
 
-    def __call__(self, frame_id: int, data: bytes, where: str = "") -> None:
-        try:
-            d = decode(frame_id, data)
-        except Exception as e:  # a frame of our ids with the wrong length or layout
-            self.bad_line(where or "frame", f"id {frame_id:#x} cannot be decoded ({type(e).__name__}: {e})")
+    @property
+    def bad_crc(self) -> int:
+        return self.check.counts[Verdict.BAD_CRC] + self.serial_crc
+
+    @property
+    def repeated(self) -> int:
+        return self.check.counts[Verdict.REPEATED]
+
+    @property
+    def lost(self) -> int:
+        return self.check.lost
+
+    @property
+    def bad_fields(self) -> int:
+        return self.check.counts[Verdict.UNDEFINED] + self.check.counts[Verdict.BAD_COUNTER]
+
+    def __call__(self, frame_id: int, data: bytes, where: str = "", t: float | None = None) -> None:
+        """Judge and print one frame; ``t``: its time (the log's or the receiver's clock), printed from the
+        first frame's and checked for silences on the bus."""
+        c = self.check(frame_id, data)
+        if c is None:
             return
-        if d is None:
+        if c.decoded is None:
+            self.bad_line(where or "frame", f"id {frame_id:#x} cannot be decoded ({c.detail})")
             return
         self.frames += 1
-        note = ""
-        bad = invalid_fields(d)
-        if bad and d.crc_ok:
-            self.bad_fields += 1
-            note = f"  (undefined {', '.join(bad)})"
-        if not d.crc_ok:
-            self.bad_crc += 1   # its counter cannot be trusted: the counter state stays
-        elif not 0 <= d.counter < COUNTER_MOD:
-            # outside the DBC's 0..14 (15 is 'invalid'): flagged, and no loss is counted from it
-            self.bad_fields += 1
-            note += f"  (counter {d.counter} outside 0-{COUNTER_MOD - 1})"
-        else:
-            prev = self.last.get(d.name)
-            if prev == d.counter:
-                self.repeated += 1
-                note += "  (repeated)"
-            else:
-                gap = counter_gap(prev, d.counter)
-                self.lost += gap
-                note += f"  ({gap} lost)" if gap else ""
-            self.last[d.name] = d.counter
-        print(to_alert_text(d) + note, file=self.out or sys.stdout)
+        note = {Verdict.OK: "", Verdict.BAD_CRC: "", Verdict.REPEATED: "  (repeated)",
+                Verdict.UNDEFINED: f"  (undefined {c.detail})",
+                Verdict.BAD_COUNTER: f"  ({c.detail} outside 0-{COUNTER_MOD - 1})"}.get(c.verdict, "")
+        note += f"  ({c.lost} lost)" if c.lost else ""
+        stamp = ""
+        if t is not None:
+            self.first_t = t if self.first_t is None else self.first_t
+            stamp = f"{t - self.first_t:9.3f} s  "
+            if c.decoded.name == STATUS:
+                if self.last_status_t is not None and t - self.last_status_t > STATUS_SILENCE_S:
+                    self.gaps += 1
+                    note += f"  (the bus was silent {t - self.last_status_t:.2f} s)"
+                self.last_status_t = t
+        print(stamp + to_alert_text(c.decoded) + note, file=self.out or sys.stdout)
 
     def bad_line(self, where: str, why: str) -> None:
         self.bad_lines += 1
@@ -81,61 +94,13 @@ class Printer:
 
     @property
     def ok(self) -> bool:
-        """Nothing wrong: no bad CRC, repeat, loss, undefined field or unreadable line."""
-        return not (self.bad_crc or self.repeated or self.lost or self.bad_fields or self.bad_lines)
+        """Nothing wrong: no bad CRC, repeat, loss, undefined field, silence or unreadable line."""
+        return not (self.bad_crc or self.repeated or self.lost or self.bad_fields or self.bad_lines or self.gaps)
 
     def summary(self) -> str:
         return (f"{self.frames} frames, {self.bad_crc} with a bad CRC, {self.lost} lost, {self.repeated} repeated, "
-                f"{self.bad_fields} with an undefined field, {self.bad_lines} unreadable lines")
-
-
-ECHO_CHARS = 60     # of a bad line or message echoed back: enough to recognise it, never a whole megabyte
-
-
-def _short(text: str) -> str:
-    return text if len(text) <= ECHO_CHARS else f"{text[:ECHO_CHARS]}... ({len(text)} characters)"
-
-
-def candump_lines(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]:
-    """Frames of a candump log; comment, malformed and truncated lines are reported and skipped."""
-    with open(path, errors="replace") as f:
-        for n, line in enumerate(f, 1):
-            text = line.strip()
-            if not text or text.startswith(("#", ";")):
-                if text:
-                    show.bad_line(f"{path}:{n}", "comment line skipped")
-                continue
-            m = CANDUMP.match(text)
-            if m is None:
-                show.bad_line(f"{path}:{n}", f"not a candump line: {_short(text)!r}")
-                continue
-            payload = m.group(3)
-            if len(payload) % 2 or len(payload) > 16:
-                show.bad_line(f"{path}:{n}", f"truncated or oversized data {_short(payload)!r}")
-                continue
-            yield int(m.group(2), 16), bytes.fromhex(payload), f"{path}:{n}"
-
-
-PYTHON_CAN_LOGS = (".asc", ".blf", ".csv", ".db", ".mf4", ".trc")
-
-
-def python_can_log(path: Path, show: Printer) -> Iterator[tuple[int, bytes, str]]:
-    import can
-
-    try:
-        reader = iter(can.LogReader(str(path)))
-    except Exception as e:  # not a log of that kind at all: an unreadable file, as a damaged record is
-        show.bad_line(str(path), f"unreadable ({type(e).__name__}: {_short(str(e))})")
-        return
-    while True:
-        try:
-            msg = next(reader)
-        except StopIteration:
-            return
-        except Exception as e:  # a damaged record: python-can cannot go on after it
-            show.bad_line(str(path), f"unreadable from here on ({type(e).__name__}: {_short(str(e))})")
-            return
-        yield msg.arbitration_id, bytes(msg.data), str(path)
+                f"{self.bad_fields} with an undefined field, {self.gaps} silences over {STATUS_SILENCE_S:g} s, "
+                f"{self.bad_lines} unreadable lines")
 
 
 class _Stopped(KeyboardInterrupt):
@@ -184,15 +149,13 @@ def _listen(argv: list[str] | None) -> int:
             path = Path(args.can_log)
             if not path.is_file():
                 return fail(PROG, f"CAN log {path} not found")
-            suffix = path.suffix.lower()
-            if suffix != ".log" and suffix not in PYTHON_CAN_LOGS:
+            if not is_log(path):
                 return fail(PROG, f"{path}: not a CAN log this tool reads (.log, as bsn-run --can-log writes, or "
                                   f"python-can's {' '.join(PYTHON_CAN_LOGS)})")
-            frames = candump_lines(path, show) if suffix == ".log" else python_can_log(path, show)
-            for fid, data, where in frames:
+            for f in read_log(path, show.bad_line):
                 if not more():
                     break
-                show(fid, data, where)
+                show(f.frame_id, f.data, f.where, f.timestamp)
             if show.frames == 0 and not show.bad_lines:   # a run that sent nothing is not a clean run
                 print(show.summary(), file=sys.stderr)
                 return fail(PROG, f"{path}: holds no frame (bsn-run writes one every cycle from its start)", 1)
@@ -203,7 +166,7 @@ def _listen(argv: list[str] | None) -> int:
                 while more():
                     msg = bus.recv(timeout=0.2)
                     if msg is not None:
-                        show(msg.arbitration_id, bytes(msg.data))
+                        show(msg.arbitration_id, bytes(msg.data), t=time.monotonic())
         else:
             import serial
             dec = FrameDecoder()
@@ -211,9 +174,9 @@ def _listen(argv: list[str] | None) -> int:
                 with serial.serial_for_url(args.serial, timeout=0.2) as port:
                     while more():
                         for fid, data in dec.feed(port.read(256)):
-                            show(fid, data)
+                            show(fid, data, t=time.monotonic())
             finally:                  # SIGINT included: the frames whose CRC failed are counted
-                show.bad_crc += dec.errors
+                show.serial_crc += dec.errors
     except KeyboardInterrupt:
         _quiet()
     except Exception as e:

@@ -111,3 +111,33 @@ def check_distinct(outputs: Iterable[tuple[OutputKind, str | os.PathLike | None]
         if real in seen:
             raise ValueError(f"{seen[real].flag} and {kind.flag} both name {path}: one would overwrite the other")
         seen[real] = kind
+
+
+def _identity(path: Path) -> tuple[str, tuple[int, int] | None]:
+    """A path's real location and, when it exists, its device and inode (a hard link has another name)."""
+    try:
+        st = path.stat()
+        ino: tuple[int, int] | None = (st.st_dev, st.st_ino)
+    except OSError:
+        ino = None
+    return os.path.realpath(path), ino
+
+
+def check_not_inputs(outputs: Iterable[tuple[str, str | os.PathLike | None]],
+                     inputs: Iterable[tuple[str, str | os.PathLike | None]]) -> None:
+    """``ValueError`` when an output names one of the run's inputs (the same file by its real path or its
+    inode), or a folder output lies in an input folder (maps saved among a folder's frames would be read as
+    frames by the next run). ``--force`` changes nothing of it: an output never replaces what the run reads."""
+    ins = [(flag, Path(p), *_identity(Path(p))) for flag, p in inputs if p and Path(p).exists()]
+    for flag, out in outputs:
+        if not out:
+            continue
+        o = Path(out)
+        real, ino = _identity(o)
+        for in_flag, src, in_real, in_ino in ins:
+            if real == in_real or (ino is not None and ino == in_ino):
+                raise ValueError(f"{flag} {out} is the run's {in_flag} ({src}): an output never replaces what "
+                                 "the run reads, --force or not")
+            if src.is_dir() and (real + os.sep).startswith(in_real + os.sep):
+                raise ValueError(f"{flag} {out} lies in the run's {in_flag} folder ({src}): the next run would "
+                                 "read what it writes as input; give it a folder of its own")

@@ -12,7 +12,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from bsn_edge.cli.common import fail
-from bsn_edge.cli.outputs import OutputKind, check_outputs
+from bsn_edge.cli.outputs import OutputKind, check_not_inputs, check_outputs
 from bsn_edge.cli.run_report import PROG, early_summary, report
 from bsn_edge.cli.stop_signal import StopOnSignal, exit_code
 from bsn_edge.default_model import DEFAULT_MODEL
@@ -258,6 +258,9 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     if stopper.event.is_set():          # a signal while the runtime loaded
         return _stopped_early(args, stopper)
     try:                                              # every output judged before any is written
+        check_not_inputs([(k.flag, path) for k, path in _output_files(args)] + [("--save-maps", args.save_maps)],
+                         [("--source", args.source), ("--calib", args.calib), ("--model", args.model),
+                          ("--config", args.config), *(("--trust", t) for t in args.trust)])
         check_outputs(_output_files(args), args.force)
     except (ValueError, OSError) as e:
         return _refuse_outputs(args, str(e))

@@ -46,7 +46,15 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
 
     # an unsigned model is said on its own line below, not as a fault
     faults = {k: v for k, v in summary["faults"].items() if v and k != Fault.UNSIGNED_MODEL}
-    lines.append("  faults: " + (", ".join(f"{k} {v}" for k, v in faults.items()) if faults else "none"))
+    seen = (summary.get("visibility") or {}).get("seconds") or {}
+    said = [f"{k} {v}" for k, v in faults.items()]
+    said += [f"camera {reason} {secs:.1f} s" for reason, secs in seen.items()]
+    if summary.get("stall_cycles"):
+        said.append(f"stall cycles {summary['stall_cycles']} (the loop held up past health.deadline_s: UNAVAILABLE)")
+    said += [f"bus down: {name}" for name in summary.get("senders_down") or ()]
+    states = summary.get("states_s") or {}
+    on_bus = ", ".join(f"{k} {v:.1f} s" for k, v in sorted(states.items(), key=lambda kv: -kv[1]))
+    lines.append("  faults: " + (", ".join(said) if said else "none") + (f"; on the bus: {on_bus}" if on_bus else ""))
     model = summary["model"]
     lines.append(f"  model: signed by key {model['signer']}" if model["authentic"]
                  else f"  model: UNSIGNED ({model['trust_note']}; run by --allow-unsigned)")
@@ -111,6 +119,10 @@ def report(summary: dict[str, Any], args: argparse.Namespace, camera: CameraStat
         return 1
     if summary["source_failure"]:
         print(f"{PROG}: error: the source failed: {summary['source_failure']}", file=sys.stderr)
+        return 1
+    if not summary["frames"] and signame is None and not summary.get("stopped"):
+        print(f"{PROG}: error: the source delivered no frame (an empty or unreadable video, an empty folder): "
+              "nothing was seen, UNAVAILABLE was the bus's only word", file=sys.stderr)
         return 1
     if summary["frames"] and not summary["valid_frames"]:
         print(f"{PROG}: error: none of the {summary['frames']} frames gave a valid inference (see the faults)",

@@ -151,7 +151,8 @@ def visual_odometry(frames: list[np.ndarray], K: np.ndarray,
             else:
                 R, t = ess
                 if matches is not None:
-                    scale = float(np.linalg.norm(prev_T[:3, 3])) if i else 1.0
+                    # the first step solved sets the unit: steps carried before it moved nothing
+                    scale = float(np.linalg.norm(prev_T[:3, 3])) or 1.0
                 else:
                     scale = _carry_scale(K, frames, i, prev_pair, prev_T, R, t, p0, p1) if i else 1.0
                 T_rel = _rel(R, t * scale)

@@ -21,7 +21,7 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
     thumbnails (``overlay``); write ``out``/report.html and report.json, returned. ``out`` is refused when it
     exists unless ``force`` (then only the report's two files are replaced); nothing is written until the
     report is whole. ``say`` is told each step."""
-    from bsn_edge.report.can_check import bus_onsets, check
+    from bsn_edge.report.can_check import check, read_bus
     from bsn_edge.report.page import MAX_THUMBS, page, thumbnails, timelines
 
     out = Path(out)
@@ -39,7 +39,12 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
     record = drive.to_dict()
     if can_log is not None:
         say(f"checking the bus: {can_log}")
-        record["bus_check"] = check(drive.onsets, bus_onsets(can_log))
+        bus = read_bus(can_log)
+        record["bus_check"] = {**check(drive.onsets, bus.onsets), "hazard_frames": bus.hazard_frames,
+                               "damaged_frames": bus.damaged, "unreadable": bus.unreadable}
+        if bus.damaged or bus.unreadable:
+            say(f"the CAN log has damaged frames ({', '.join(f'{n} {k}' for k, n in bus.damaged.items())})"
+                + (f"; {bus.unreadable}" if bus.unreadable else "") + ": counted, never taken as onsets")
     say(f"drawing {len(drive.records)} frames")
     picture = timelines(drive)
     thumbs = {}

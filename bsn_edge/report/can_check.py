@@ -1,5 +1,6 @@
 """The bus against the frame log: the level onsets a CAN log carries, decoded with cantools from the
-package's DBC (not the runtime's own decoder), matched with the frame log's sector by sector, in order.
+package's DBC and judged as ``bsn-listen`` judges them (:mod:`bsn_edge.alerts.bus_check`), matched with the
+frame log's sector by sector, in order. Damaged frames are counted, never onsets.
 
 A frame log's onset that never reached the bus (a level that rose and fell within one send cycle) and a
 bus onset no frame explains are both flagged.
@@ -9,14 +10,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
-from bsn_edge.alerts.can_codec import DBC_PATH, HAZARD
+from bsn_edge.alerts.bus_check import FrameChecker, Verdict
+from bsn_edge.alerts.can_codec import HAZARD, signal_name
+from bsn_edge.alerts.can_log import read_log
 from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
 from bsn_edge.report.drive import Onset
-
-SIGNALS = {name: f"{name.capitalize()}_Level" for name in SECTORS}     # LEFT -> Left_Level
 
 
 @dataclass(frozen=True)
@@ -29,33 +30,51 @@ class BusOnset:
     timestamp: float
 
 
-def bus_onsets(can_log: str | Path) -> list[BusOnset]:
-    """Every level onset the hazard frames of ``can_log`` (``.log`` candump, ``.asc``, ``.blf``) carry.
-    ``ValueError`` for a file python-can cannot read."""
-    import can
-    import cantools
+@dataclass(frozen=True)
+class BusRead:
+    """What a CAN log says: the level onsets of its trusted hazard frames, and what could not be read
+    (damaged frames by what was wrong; lines or records that could not be read, counted and the first named)."""
 
-    db = cantools.database.load_file(str(DBC_PATH))
-    assert isinstance(db, cantools.database.can.Database)    # a DBC file is a CAN database
-    hazard = db.get_message_by_name(HAZARD)
+    onsets: list[BusOnset]
+    hazard_frames: int
+    damaged: dict[str, int]
+    unreadable: str = ""
+
+
+def read_bus(can_log: str | Path) -> BusRead:
+    """Every level onset the hazard frames of ``can_log`` (``.log`` candump, ``.asc``, ``.blf``) carry, read as
+    ``bsn-listen`` reads them (:func:`~bsn_edge.alerts.can_log.read_log`) and judged as it judges them
+    (:class:`FrameChecker`): a damaged frame (bad CRC or counter, an undefined level, a layout that does not
+    decode) and a line that cannot be read are counted, never an onset."""
+    check = FrameChecker()
     last = dict.fromkeys(SECTORS, 0)
     out: list[BusOnset] = []
+    unreadable: list[str] = []
     n = 0
-    try:
-        reader = can.LogReader(str(can_log))
-    except Exception as e:
-        raise ValueError(f"{can_log}: not a CAN log python-can reads ({type(e).__name__}: {e})") from None
-    for msg in reader:
-        if msg.arbitration_id != hazard.frame_id:
+
+    def bad(where: str, why: str) -> None:
+        unreadable.append(f"{where}: {why}")
+
+    for f in read_log(can_log, bad):
+        c = check(f.frame_id, f.data)
+        if c is None or (c.decoded is not None and c.decoded.name != HAZARD):
             continue
-        values = cast(dict[str, Any], hazard.decode(bytes(msg.data), decode_choices=False))
-        for name, signal in SIGNALS.items():
-            level = int(values[signal])
-            if level > last[name]:
-                out.append(BusOnset(name, Level(level).name, n, float(msg.timestamp)))
-            last[name] = level
         n += 1
-    return out
+        if c.decoded is None or not c.trusted:
+            continue
+        for name in SECTORS:
+            level = int(c.decoded.signals[signal_name(name, "Level")])
+            if level > last[name]:
+                out.append(BusOnset(name, Level(level).name, n - 1, f.timestamp))
+            last[name] = level
+    damaged = {v.value: k for v, k in check.counts.items() if k and v not in (Verdict.OK, Verdict.REPEATED)}
+    said = f"{len(unreadable)} unreadable line(s), the first {unreadable[0]}" if unreadable else ""
+    return BusRead(out, n, damaged, said)
+
+
+def bus_onsets(can_log: str | Path) -> list[BusOnset]:
+    """The level onsets of :func:`read_bus`."""
+    return read_bus(can_log).onsets
 
 
 def check(log_onsets: list[Onset], on_bus: list[BusOnset]) -> dict[str, Any]:

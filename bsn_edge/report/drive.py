@@ -94,6 +94,20 @@ class Drive:
                 spans.append((rec.t, rec.t, state))
         return spans
 
+    def camera(self) -> list[tuple[float, float, str, list[str]]]:
+        """Where the camera-health check raised a reason: spans ``(from t, to t, reason, unseen sectors)``."""
+        spans: list[tuple[float, float, str, list[str]]] = []
+        for rec in self.records:
+            v = rec.visibility
+            if v is None:
+                continue
+            unseen = [s for s, u in zip(SECTORS, v.unseen, strict=True) if u]
+            if spans and spans[-1][2] == v.reason.name and spans[-1][3] == unseen and rec.t - spans[-1][1] < 1.0:
+                spans[-1] = (spans[-1][0], rec.t, v.reason.name, unseen)
+            else:
+                spans.append((rec.t, rec.t, v.reason.name, unseen))
+        return spans
+
     def faults(self) -> list[tuple[float, int, str]]:
         """Each frame that had a fault: ``(t, frame, fault)``."""
         return [(r.t, r.frame, r.fault.value) for r in self.records if r.fault is not None]
@@ -105,6 +119,7 @@ class Drive:
                 "onsets": [o.to_dict() for o in self.onsets], "latency_ms": self.latency(),
                 "states": [{"from_t": a, "to_t": b, "state": s} for a, b, s in self.states()],
                 "faults": [{"t": t, "frame": f, "fault": k} for t, f, k in self.faults()],
+                "camera": [{"from_t": a, "to_t": b, "reason": r, "unseen": u} for a, b, r, u in self.camera()],
                 "calibration": calibration(self.summary), "identity": identity(self.summary)}
 
 

@@ -171,14 +171,7 @@ def page(drive: Drive, record: dict[str, Any], picture: str, thumbs: dict[int, s
     parts += ["<h2>Latency (ms)</h2>",
               _table([[e(s), *(f"{v:.2f}" for v in p.values())] for s, p in lat.items()],
                      ["stage", "p50", "p95", "p99"])]
-    check = record.get("bus_check")
-    if check is not None:
-        verdict = "the bus carried every onset of the frame log, and no other" if check["agree"] \
-            else "<b>the bus and the frame log DISAGREE</b>"
-        parts += ["<h2>The bus against the frame log</h2>", f"<p>{verdict}.</p>",
-                  _table([[e(n), s["log"], s["bus"], e(", ".join(s["only_in_log"]) or "-"),
-                           e(", ".join(s["only_on_bus"]) or "-")] for n, s in check["sectors"].items()],
-                         ["sector", "onsets in the log", "on the bus", "only in the log", "only on the bus"])]
+    parts += _bus_section(record.get("bus_check")) + _camera_section(record.get("camera") or [])
     if record["damaged_lines"]:
         parts += ["<h2>Damaged lines of the frame log</h2>",
                   _table([[d["line"], e(d["why"])] for d in record["damaged_lines"]], ["line", "why"])]
@@ -186,3 +179,35 @@ def page(drive: Drive, record: dict[str, Any], picture: str, thumbs: dict[int, s
              "td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px;text-align:left}")
     return (f"<!doctype html><html><head><meta charset='utf-8'><title>{e(title)}</title><style>{style}</style>"
             f"</head><body>{''.join(parts)}</body></html>\n")
+
+
+def _bus_section(check: dict[str, Any] | None) -> list[str]:
+    """The bus checked against the frame log, with the damaged frames counted (none without a CAN log)."""
+    if check is None:
+        return []
+    e = html.escape
+    verdict = "the bus carried every onset of the frame log, and no other" if check["agree"] \
+        else "<b>the bus and the frame log DISAGREE</b>"
+    parts = ["<h2>The bus against the frame log</h2>", f"<p>{verdict}.</p>",
+             _table([[e(n), s["log"], s["bus"], e(", ".join(s["only_in_log"]) or "-"),
+                      e(", ".join(s["only_on_bus"]) or "-")] for n, s in check["sectors"].items()],
+                    ["sector", "onsets in the log", "on the bus", "only in the log", "only on the bus"])]
+    damaged = check.get("damaged_frames") or {}
+    if damaged or check.get("unreadable"):
+        parts.append("<p>Damaged frames on the bus, counted and never taken as onsets: "
+                     + e(", ".join(f"{n} with a {k}" if k == "bad CRC" else f"{n}: {k}" for k, n in damaged.items())
+                         or "none") + (f"; {e(check['unreadable'])}" if check.get("unreadable") else "")
+                     + f" (of {check.get('hazard_frames', 0)} hazard frames).</p>")
+    return parts
+
+
+def _camera_section(spans: list[dict[str, Any]]) -> list[str]:
+    """When the camera-health check said the camera could not see (nothing when it never did)."""
+    if not spans:
+        return []
+    e = html.escape
+    return ["<h2>When the camera could not see</h2>",
+            "<p>The camera-health check's reason on the bus (<code>BSN_Status.Camera_Reason</code>): a reason "
+            "of the whole picture reads UNAVAILABLE, PARTIAL reads DEGRADED for the sectors it names.</p>",
+            _table([[f"{c['from_t']:.2f} s", f"{c['to_t']:.2f} s", e(c["reason"]), e(", ".join(c["unseen"]) or "-")]
+                    for c in spans], ["from", "to", "reason", "sectors it cannot see"])]

@@ -12,7 +12,8 @@
 - ``[bus]``: the buses, the serial baud rate, the sends' timeouts and when a bus is down (:class:`BusConfig`);
 - ``[messages]``: each message every so many cycles (:class:`MessageRates`);
 - ``[source]``: when a camera or stream is lost and how it is brought back (:class:`SourceConfig`);
-- ``[calibration]``: online calibration's share of the cores (:class:`CalibrationConfig`).
+- ``[calibration]``: online calibration's share of the cores (:class:`CalibrationConfig`);
+- ``[visibility]``: the camera-health check's thresholds and times (:class:`VisibilityConfig`).
 
 ``bsn-run --config FILE --set sectors.left_edge_deg=-15`` reads it with the mechanism the training config
 has (:mod:`bsn_edge.config_toml`): a key the runtime does not have, or a value out of range, is refused
@@ -34,12 +35,13 @@ from bsn_edge.alerts.state_machine import AlertConfig
 from bsn_edge.config_toml import build, merge_overrides, read_toml, unknown
 from bsn_edge.runtime.loop import RuntimeConfig
 from bsn_edge.runtime.source_config import CalibrationConfig, SourceConfig
+from bsn_edge.runtime.visibility import VisibilityConfig
 
 DEFAULTS_FILE = Path(__file__).with_name("runtime.toml")
 SCHEMA_FILE = DEFAULTS_FILE.with_name("runtime.schema.json")     # written by config_schema, checked by a test
 NESTED: dict[str, type] = {"sectors": SectorConfig, "alerts": AlertConfig, "health": HealthConfig,
                            "bus": BusConfig, "messages": MessageRates, "source": SourceConfig,
-                           "calibration": CalibrationConfig}
+                           "calibration": CalibrationConfig, "visibility": VisibilityConfig}
 LOOP = "runtime"
 
 

@@ -45,6 +45,7 @@ class CycleEmitter:
         self.next_t: float | None = None
         self.sent_cycles = 0
         self.stall_cycles = 0           # of them, sent by the stall watch while the loop was stuck on a frame
+        self.state_cycles: dict[str, int] = {}     # cycles sent in each state, by its name
         self.last_sent_at: float | None = None     # on ``clock``, when there is one
         self.stalling = False           # the last cycle was the stall watch's
         self._failing_since: dict[str, float] = {}     # a sender's first failed send of its current run
@@ -122,6 +123,7 @@ class CycleEmitter:
                 h.fault(fault, n)
         self._last = frame
         self.sent_cycles += 1
+        self.state_cycles[frame.state.name] = self.state_cycles.get(frame.state.name, 0) + 1
         if self.clock is not None:
             self.last_sent_at = self.clock()
 

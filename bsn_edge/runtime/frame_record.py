@@ -6,7 +6,8 @@ with this frame, by the names of :class:`~bsn_edge.alerts.health.Fault`: ``decod
 ``size_changes``, ``nan_outputs``), ``levels`` (LEFT, CENTRE, RIGHT: ``NONE``, ``CAUTION`` or
 ``WARNING``), ``scores`` (smoothed, 0-1), ``distances`` (metres to the nearest blind spot, null for
 none), ``state`` (the system state the bus carried when the frame's hazard was made: the last status
-sent), ``latency_ms`` and ``stage_ms`` (this frame's milliseconds in each stage it went through:
+sent), ``camera`` and ``unseen`` (when the camera-health check raised a reason: its name, and the sectors
+it cannot see), ``latency_ms`` and ``stage_ms`` (this frame's milliseconds in each stage it went through:
 ``decode``, ``preprocess``, ``inference``, ``postprocess``, ``send``).
 """
 
@@ -15,9 +16,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from bsn_edge.alerts.blindness import Blindness
 from bsn_edge.alerts.frame import Hazard, SectorAlert
 from bsn_edge.alerts.health import Fault, Status, SystemState
+from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
+from bsn_edge.runtime.visibility import Visibility
 
 
 @dataclass
@@ -31,6 +35,7 @@ class FrameRecord:
     status: Status | None = None        # the bus's, at the last cycle sent (None before the first)
     latency_ms: float | None = None
     stage_ms: dict[str, float] = field(default_factory=dict)
+    visibility: Visibility | None = None   # the camera-health check's word on this frame
 
     def to_json(self) -> dict[str, Any]:
         """The frame log's line (rounded as written)."""
@@ -43,6 +48,9 @@ class FrameRecord:
                        distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in sectors])
             if self.status is not None:
                 out["state"] = self.status.state.name
+        if self.visibility is not None and self.visibility.reason is not Blindness.CLEAR:
+            out["camera"] = self.visibility.reason.name
+            out["unseen"] = [s for s, u in zip(SECTORS, self.visibility.unseen, strict=True) if u]
         if self.latency_ms is not None:
             out["latency_ms"] = round(self.latency_ms, 2)
         if self.stage_ms:
@@ -62,6 +70,9 @@ class FrameRecord:
             rec.hazard = Hazard(rec.t, sectors)
             if "state" in d:
                 rec.status = Status(SystemState[d["state"]], 0.0)
+        if "camera" in d:
+            unseen = set(d.get("unseen") or ())
+            rec.visibility = Visibility(Blindness[d["camera"]], tuple(s in unseen for s in SECTORS), 0.0)
         if "latency_ms" in d:
             rec.latency_ms = float(d["latency_ms"])
         rec.stage_ms = {str(k): float(v) for k, v in d.get("stage_ms", {}).items()}

@@ -48,9 +48,10 @@ from bsn_edge.runtime.sinks import GuardedSink, LineLog, SinkFailure, open_all
 from bsn_edge.runtime.source_config import CalibrationConfig, SourceConfig
 from bsn_edge.runtime.sources import Captured, Source
 from bsn_edge.runtime.stats import LatencyStats
+from bsn_edge.runtime.visibility import BlindnessLog, CameraHealth, VisibilityConfig
 from bsn_edge.sequence.folder import frame_name
 
-STAGES = ("decode", "preprocess", "inference", "postprocess", "send")
+STAGES = ("decode", "preprocess", "visibility", "inference", "postprocess", "send")
 # what the outputs show of a frame before the bus has carried anything (a camera's first frames, before the
 # heartbeat's first cycle): the bus has said nothing, so nothing is available
 NOT_SENT = Status(SystemState.UNAVAILABLE, 0.0)
@@ -72,6 +73,7 @@ class RuntimeConfig:
     messages: MessageRates = field(default_factory=MessageRates)
     source: SourceConfig = field(default_factory=SourceConfig)
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
+    visibility: VisibilityConfig = field(default_factory=VisibilityConfig)
     cycle_s: float = setting(0.1, 0.01, 1.0, "s")
     warmup: int = setting(3, 0, 100, "inferences")
     overlap: bool = True         # decode and warp the next frame on a thread of its own while the model runs
@@ -143,6 +145,8 @@ class FramePipeline:
         self.geometry = SectorGeometry(engine.card.camera, cfg.sectors)
         self.machines = [SectorState(cfg.alerts) for _ in SECTORS]
         self.health = Health(cfg.health)
+        self.visibility = CameraHealth(cfg.visibility, self.geometry.column_sector, len(SECTORS))
+        self.blind = BlindnessLog()
         self.wall = None if source.live else clock    # a live source's frame times are the processing clock
         if not engine.authentic:        # said on every cycle: nobody trusted vouches for this model
             self.health.set_fault(Fault.UNSIGNED_MODEL, 1)
@@ -233,16 +237,28 @@ class FramePipeline:
             return None
         return prob, depth
 
+    def look(self, cap: Captured, buf: np.ndarray, rec: FrameRecord) -> None:
+        """The camera-health check on the frame and what the model sees (``buf``): its reason to the health
+        (the send cycle's status) and to the frame's record."""
+        if cap.frame is None:
+            return
+        vis = self.visibility.look(cap.t, cap.frame, buf[0])
+        self.health.camera(vis.reason)
+        self.blind.add(cap.t, vis.reason)
+        rec.visibility = vis
+
     def sectors(self, cap: Captured, mf: ModelFrame, prob: np.ndarray,
-                depth: np.ndarray) -> tuple[Hazard, np.ndarray]:
+                depth: np.ndarray, unseen: tuple[bool, ...] = ()) -> tuple[Hazard, np.ndarray]:
         """Mask and depth -> sector readings -> smoothed levels -> the hazard, published to the send cycle
-        (which decides the status it goes out with), and the mask."""
+        (which decides the status it goes out with), and the mask; ``unseen``: the sectors the camera cannot
+        see, said with their readings."""
         mask = blind_spots(prob, self.engine.threshold, mf)
         readings = self.geometry.read(mask, mf.depth_to_metres(depth))
         sectors = []
-        for m, r in zip(self.machines, readings, strict=True):
+        blind = unseen or (False,) * len(readings)
+        for m, r, u in zip(self.machines, readings, blind, strict=True):
             score, level = m.update(cap.t, r.score)
-            sectors.append(SectorAlert(score, level, r.distance_m))
+            sectors.append(SectorAlert(score, level, r.distance_m, u))
         self.health.valid(cap.t, None if self.wall is None else self.wall())
         self.valid += 1
         hazard = Hazard(cap.t, tuple(sectors))
@@ -313,6 +329,10 @@ class FramePipeline:
         rec.stage_ms.update(decode=1e3 * cap.decode_s, preprocess=1e3 * item.warp_s)
         drawn = None
         if self.read(cap, rec) and item.mf is not None and item.buf is not None:
+            t_look = time.perf_counter()
+            self.look(cap, item.buf, rec)
+            self.timer.add("visibility", time.perf_counter() - t_look)
+            rec.stage_ms["visibility"] = 1e3 * (time.perf_counter() - t_look)
             began, drawn = self.answer(item, item.mf, item.buf, inflight, rec)
             t0 = min(t0, began)          # the frame's path began with its inference at the latest
         t4 = time.perf_counter()
@@ -352,7 +372,8 @@ class FramePipeline:
             rec.fault = Fault.NAN_OUTPUTS
             return began, None
         prob, depth = out
-        rec.hazard, mask = self.sectors(item.cap, mf, prob, depth)
+        rec.hazard, mask = self.sectors(item.cap, mf, prob, depth,
+                                        rec.visibility.unseen if rec.visibility is not None else ())
         self.timer.add("postprocess", time.perf_counter() - t2)
         rec.stage_ms["postprocess"] = 1e3 * (time.perf_counter() - t2)
         return began, (mask, prob, depth)
@@ -427,11 +448,13 @@ class FramePipeline:
             wait_ms={k.removesuffix("_ms"): v for k, v in self.waiting.percentiles().items()},
             stage_ms=self.timer.per_frame_ms(frames), stage_share=self.timer.shares(), faults=self.health.faults,
             cycles_sent=self.emitter.sent_cycles, stall_cycles=self.emitter.stall_cycles,
+            states_s={k: round(n * self.cfg.cycle_s, 2) for k, n in self.emitter.state_cycles.items()},
             senders={s.name: vars(s.stats) for s in self.senders},
             senders_down=self.health.senders_down, source_failure=self.source.failure,
             stopped=bool(stop is not None and stop.is_set()),
             heartbeat_error=self.heartbeat.last_error if self.heartbeat is not None else "",
-            camera=self.camera.summary(), maps_written=0 if maps is None else maps.written,
+            camera=self.camera.summary(), visibility=self.blind.to_json(),
+            maps_written=0 if maps is None else maps.written,
             sinks={name: SinkSummary(k.written, k.dropped, None if k.ok else vars(k.failure))
                    for name, k in self.sinks.items()},
             model=ModelSummary(card.variant, card.input_size, self.engine.threshold, card.quantization,

@@ -9,12 +9,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bsn_edge.alerts.blindness import Blindness
 from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.sectors import SectorGeometry
 from bsn_edge.alerts.state_machine import Level
 from bsn_edge.model_frame import ModelFrame
 
 LEVEL_BGR = {Level.NONE: (80, 160, 80), Level.CAUTION: (0, 190, 255), Level.WARNING: (0, 0, 255)}
+UNSEEN_BGR = (160, 160, 160)   # a sector the camera cannot see: grey, whatever its level
 TINT = (40, 40, 255)      # BGR of blind spots, blended in at TINT_WEIGHT
 TINT_WEIGHT = 0.55
 
@@ -39,14 +41,16 @@ def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
         if not len(xs):
             continue
         x0, x1 = int(xs[0]), int(xs[-1])
-        color = LEVEL_BGR[sector.level]
+        color = UNSEEN_BGR if sector.unseen else LEVEL_BGR[sector.level]
         cv2.rectangle(img, (x0 + 2, 2), (x1 - 2, 20), color, -1)
         text = sector.level.name if sector.distance_m is None else f"{sector.level.name} {sector.distance_m:.0f}m"
+        text = "CANNOT SEE" if sector.unseen else text
         cv2.putText(img, text, (x0 + 6, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
-        if s < 2:
+        if s < len(alert.sectors) - 1:
             cv2.line(img, (x1, 22), (x1, h), (255, 255, 255), 1)
-    cv2.putText(img, f"{alert.state.name} {alert.fps:.0f} fps", (4, h - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.38,
-                (255, 255, 255), 1, cv2.LINE_AA)
+    camera = "" if alert.camera is Blindness.CLEAR else f"  camera {alert.camera.name}"
+    cv2.putText(img, f"{alert.state.name} {alert.fps:.0f} fps{camera}", (4, h - 6), cv2.FONT_HERSHEY_SIMPLEX,
+                0.38, (255, 255, 255), 1, cv2.LINE_AA)
     return img
 
 

@@ -5,13 +5,15 @@ Fields of the JSON (:meth:`RunSummary.to_json`), in the order written:
 source's frames the loop had no time for), ``before_start`` (replaced before the loop first asked),
 ``overlap``, ``in_flight`` (how reading and inference ran), ``seconds``, ``fps`` (frames a second of
 processing), ``p50_ms``, ``p95_ms``, ``p99_ms`` (latency), ``wait_ms`` (frames waiting for the model,
-same percentiles), ``stage_ms`` and ``stage_share`` (per stage: decode, preprocess, inference,
+same percentiles), ``stage_ms`` and ``stage_share`` (per stage: decode, preprocess, visibility, inference,
 postprocess, send), ``faults`` (the counters, by :class:`~bsn_edge.alerts.health.Fault` name),
 ``cycles_sent``, ``stall_cycles`` (of them, sent by the stall watch while a file's loop was stuck on a
-frame), ``senders`` (per sender: sent, errors, ...), ``senders_down`` (senders that could not
+frame), ``states_s`` (seconds of cycles on the bus in each state: OK, CALIBRATING, DEGRADED, UNAVAILABLE),
+``senders`` (per sender: sent, errors, ...), ``senders_down`` (senders that could not
 send at the end), ``source_failure`` (why the source ended early, or null), ``stopped`` (by a signal
 or the caller), ``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report, hood: share of the rows,
-spread, columns agreeing, arch; null while still looked for),
+spread, columns agreeing, arch; null while still looked for), ``visibility`` (what the camera-health check
+raised: frames and seconds per reason, and its stretches),
 ``maps_written``, ``sinks`` (per output: written, dropped, failure), ``model`` (variant, size,
 threshold, quantization, kernels, self-test, signer, authentic, trust note, graph and config digests); ``bsn-run`` adds
 ``signal``, ``source`` (what it read) and ``machine`` (CPU, its int8 instruction sets, cores, Python).
@@ -87,12 +89,14 @@ class RunSummary:
     faults: dict[Fault, int]
     cycles_sent: int
     stall_cycles: int
+    states_s: dict[str, float]            # seconds of cycles sent in each state, by its name
     senders: dict[str, dict[str, Any]]
     senders_down: list[str]
     source_failure: str | None
     stopped: bool
     heartbeat_error: str
     camera: dict[str, Any]
+    visibility: dict[str, Any]
     maps_written: int
     sinks: dict[str, SinkSummary] = field(default_factory=dict)
     model: ModelSummary | None = None

@@ -82,7 +82,8 @@ def stand_in_labellers(monkeypatch, user_clip):
         return HiddenSeg(hidden / "semantic", clip) if spec == "hidden" else real_make_seg(spec, clip)
 
     monkeypatch.setattr(pipeline, "prepare_labeller",
-                        lambda src, depth, teacher: {"depth": f"rel:{hidden / 'rel'}:inverse", "seg": "hidden"})
+                        lambda src, depth, teacher, labeller=None: {"depth": f"rel:{hidden / 'rel'}:inverse",
+                                                                    "seg": "hidden"})
     monkeypatch.setattr(pipeline, "make_seg", make_seg)
     monkeypatch.setattr("bsn_edge.labels.generator.make_seg", make_seg)
 
@@ -158,7 +159,7 @@ def test_a_clip_the_depth_head_does_not_fit_is_labelled_from_the_road_plane(run,
     for i in range(40):
         np.save(noise / f"{i:06d}.npy", rng.uniform(0.05, 1.0, (128, 256)).astype(np.float32))
     monkeypatch.setattr(pipeline, "prepare_labeller",
-                        lambda src, depth, teacher: {"depth": f"rel:{noise}:inverse", "seg": "hidden"})
+                        lambda src, depth, teacher, labeller=None: {"depth": f"rel:{noise}:inverse", "seg": "hidden"})
     out = tmp_path / "adapted"
     rep = pipeline.adapt(run, [seq], out, pipeline.AdaptConfig(labels=T1S, steps=2), progress=False)
     clip = rep["clips"]["drive"]
@@ -174,19 +175,31 @@ def test_a_clip_the_depth_head_does_not_fit_is_labelled_from_the_road_plane(run,
     assert {p.name: p.stat().st_mtime_ns for p in labels.iterdir()} == stamp
 
 
-def test_ground_label_depth_without_a_mounting_is_refused_with_the_reason(run, user_clip, stand_in_labellers,
-                                                                          tmp_path):
+def test_a_camera_without_a_mounting_finds_its_road_plane_from_the_direction_of_travel(run, user_clip,
+                                                                                     stand_in_labellers, tmp_path):
+    """No refusal for a camera file without a mounting (or none at all): pitch and yaw come from the direction
+    the car travels, the height is the model camera's unless stated, and the report says so."""
     from bsn_edge.calibration import Calibration
     from bsn_edge.sequence.folder import SequenceFolder
 
     seq, _ = user_clip
+    truth = Calibration.read(SequenceFolder(seq).calibration_path).mounting
     bare = tmp_path / "bare"
     shutil.copytree(seq, bare)
     cal = Calibration.read(SequenceFolder(bare).calibration_path)
     Calibration.of(cal.intrinsics, cal.dist, method="chessboard only").write(SequenceFolder(bare).calibration_path)
-    with pytest.raises(pipeline.AdaptError, match="mounting"):
-        pipeline.adapt(run, [bare], tmp_path / "o", pipeline.AdaptConfig(labels=T1S, steps=2,
-                                                                         label_depth="ground"), progress=False)
+    labels = dataclasses.replace(T1S, camera_height=truth.height_m)
+    rep = pipeline.adapt(run, [bare], tmp_path / "o", pipeline.AdaptConfig(labels=labels, steps=2,
+                                                                           label_depth="ground"), progress=False)
+    clip = rep["clips"]["bare"]
+    assert "direction of travel" in clip["road_plane_from"] and "--camera-height" in clip["road_plane_from"]
+    made = json.loads((tmp_path / "o" / "adapt" / "clips" / "bare" / "labels" / "T1s" / "report.json").read_text())
+    assert made["sources_detail"]["depth"]["mounting_from"] == "direction of travel"
+    found = made["sources_detail"]["depth"]["mounting"]
+    # the rendered rig's pitch and yaw, found from 4 s of a 256x128 drive alone (the stated height is the rig's;
+    # test_vo holds the direction of travel to 0.5 degrees on a longer, sharper drive)
+    assert found["pitch_deg"] == pytest.approx(truth.pitch_deg, abs=1.5), (found, truth)
+    assert found["yaw_deg"] == pytest.approx(truth.yaw_deg, abs=1.5), (found, truth)
 
 
 def test_unusable_clips_are_rejected_with_the_reason(run, stand_in_labellers, tmp_path, capsys):

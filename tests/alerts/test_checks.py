@@ -242,7 +242,7 @@ def test_a_huge_bad_line_is_echoed_short_and_a_file_of_another_kind_exits_1(tmp_
     log.write_text("x" * 1_000_000 + "\n" + "(1.000000) vcan0 500#" + "00" * 400_000 + "\n")
     assert listen_cli.main(["--can-log", str(log)]) == 1
     err = capsys.readouterr().err
-    assert len(err) < 2000 and "1000000 characters" in err and "2 unreadable lines" in err
+    assert len(err) < 2000 and "a line of 1000001 bytes" in err and "2 unreadable lines" in err, err
     blf = tmp_path / "random.blf"
     blf.write_bytes(bytes(range(256)) * 40)
     assert listen_cli.main(["--can-log", str(blf)]) == 1          # as documented: something was wrong
@@ -274,3 +274,42 @@ def test_listen_ended_by_a_service_manager_or_a_closed_terminal_prints_its_summa
     _, err = proc.communicate(timeout=20)
     assert proc.returncode in (0, 1), (proc.returncode, err)
     assert "0 frames, 0 with a bad CRC" in err
+
+
+def test_a_stuck_counter_alone_fails_the_log(tmp_path, capsys):
+    # every CRC good, nothing lost: the only fault is a hazard frame sent twice with one counter
+    fs = frames(6)
+    fs.insert(4, fs[4])                        # cycle 2's hazard frame repeated
+    log = tmp_path / "stuck.log"
+    log.write_text("".join(candump(f, d, i * 0.05) for i, (f, d) in enumerate(fs)))
+    assert listen_cli.main(["--can-log", str(log)]) == 1, "a repeated frame alone must fail the log"
+    err = capsys.readouterr().err
+    assert "13 frames, 0 with a bad CRC, 0 lost, 1 repeated, 0 with an undefined field" in err, err
+
+
+def test_a_frame_with_two_wrong_fields_is_counted_once(tmp_path, capsys):
+    from bsn_edge.alerts.e2e import e2e_crc
+    fs = frames(4)
+    hid, data = fs[2]
+    bad = bytearray(data)
+    bad[0] |= 0x03                             # Left_Level = 3
+    bad[6] = (bad[6] & 0x0F) | 0xF0            # the counter's nibble = 15, outside 0..14
+    bad[7] = e2e_crc(bytes(bad[:7]), hid)      # a good CRC over both
+    fs[2] = (hid, bytes(bad))
+    log = tmp_path / "two.log"
+    log.write_text("".join(candump(f, d, i * 0.05) for i, (f, d) in enumerate(fs)))
+    assert listen_cli.main(["--can-log", str(log)]) == 1
+    err = capsys.readouterr().err
+    assert "8 frames, 0 with a bad CRC" in err and "1 with an undefined field" in err, err
+
+
+def test_a_silent_bus_is_flagged_and_every_frame_is_timed(tmp_path, capsys):
+    # every frame whole, nothing lost by the counters: only the bus fell silent for 5 s
+    fs = frames(6)
+    times = [i * 0.05 for i in range(6)] + [5.3 + i * 0.05 for i in range(6)]
+    log = tmp_path / "silent.log"
+    log.write_text("".join(candump(f, d, t) for (f, d), t in zip(fs, times, strict=True)))
+    assert listen_cli.main(["--can-log", str(log)]) == 1
+    out = capsys.readouterr()
+    assert "1 silences over 1.5 s" in out.err and "silent 5.10 s" in out.out, (out.out, out.err)
+    assert out.out.splitlines()[0].lstrip().startswith("0.000 s"), out.out.splitlines()[0]

@@ -113,3 +113,19 @@ def test_a_standing_camera_between_far_frames_is_no_motion_not_a_solver_error(re
     est, info = visual_odometry(gray, clip.intrinsics.K, matches=matches)
     assert info["still_steps"] == 2
     np.testing.assert_allclose(est, np.stack([np.eye(4)] * 3), atol=1e-12)
+
+
+def test_a_first_step_the_matcher_cannot_solve_does_not_zero_every_later_step(rendered):
+    # found on a real drive at 1 frame/s: the first pair's matches were too few, that step carried a
+    # zero motion, and every later step was scaled to its length, so the camera "never moved"
+    clip, _, gray, matches, _ = _far_apart(rendered, 5)
+
+    def first_unmatched(i: int, j: int) -> tuple[np.ndarray, np.ndarray]:
+        return (np.zeros((0, 2), np.float32),) * 2 if i == 0 else matches(i, j)
+
+    est, info = visual_odometry(gray, clip.intrinsics.K, matches=first_unmatched)
+    assert info["carried_steps"] >= 1, info
+    forward = travel_direction(est)
+    assert forward is not None, "every step had zero length"
+    m = Mounting.from_forward(forward, clip.rig.height_m)
+    assert m.pitch_deg == pytest.approx(clip.rig.mounting.pitch_deg, abs=0.5)

@@ -125,3 +125,56 @@ def setup(tmp_path_factory, small_light_onnx):
     clip = root / "clip"
     write_clip(SynthConfig(frames=15, height=96, width=192, seed=2), clip)
     return small_light_onnx((128, 256)), clip
+
+
+MARKUP = "<script>alert(1)</script>&<b>"
+
+
+def test_every_string_of_the_run_reaches_the_page_as_text_not_markup(tmp_path):
+    log, summary = tmp_path / "log.jsonl", tmp_path / "summary.json"
+    log.write_text(_line(0, ("NONE",) * 3) + "\n" + _line(1, ("CAUTION", "NONE", "NONE")) + "\n")
+    summary.write_text(json.dumps({
+        "frames": 2, "source": f"/drives/{MARKUP}clip.mp4", "settings_digest": MARKUP, "machine": {"cpu": MARKUP},
+        "model": {"variant": MARKUP, "graph_sha256": MARKUP, "config_digest": MARKUP, "signer": MARKUP,
+                  "authentic": True, "threshold": 0.25},
+        "camera": {"calibration": {"source": MARKUP}, "mounting": {"note": MARKUP}, "hood": MARKUP}}))
+    make_report(log, tmp_path / "r", summary=summary, say=lambda s: None)
+    page = (tmp_path / "r" / "report.html").read_text()
+    assert "<script>" not in page and "<b>" not in page, "a string of the run was written as markup"
+    assert page.count("&lt;script&gt;alert(1)&lt;/script&gt;&amp;") >= 6, page.count("&lt;script&gt;")
+    assert f"/drives/{MARKUP}clip.mp4".replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;") in page
+
+
+def _can_log(path, frames_):
+    path.write_text("".join(f"({i * 0.05:.6f}) vcan0 {f:03X}#{d.hex().upper()}\n" for i, (f, d) in enumerate(frames_)))
+
+
+def test_a_damaged_bus_frame_is_counted_never_an_onset_nor_a_crash(tmp_path):
+    from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+    from bsn_edge.alerts.can_codec import CanEncoder
+    from bsn_edge.alerts.e2e import e2e_crc
+
+    enc = CanEncoder()
+    none, warn = SectorAlert(0.0, Level.NONE, None), SectorAlert(0.9, Level.WARNING, 3.0)
+    fs = []
+    for k in range(6):
+        right = warn if k >= 3 else none
+        fs += enc.encode(AlertFrame(k * 0.1, (none, none, right), SystemState.OK, 10.0, {}))
+    hid, data = fs[2]                       # cycle 1's hazard frame
+    three = bytearray(data)
+    three[0] |= 0x03                        # Left_Level = 3 under a good CRC: undefined
+    three[7] = e2e_crc(bytes(three[:7]), hid)
+    hid4, data4 = fs[4]                     # cycle 2's hazard frame, a bit flipped: the CRC fails
+    flipped = bytearray(data4)
+    flipped[0] |= 0x01                      # would read Left CAUTION
+    fs[2], fs[4] = (hid, bytes(three)), (hid4, bytes(flipped))
+    can_log, log = tmp_path / "c.log", tmp_path / "log.jsonl"
+    _can_log(can_log, fs)
+    n, w = "NONE", "WARNING"
+    log.write_text("".join(_line(k, (n, n, w if k >= 3 else n)) + "\n" for k in range(6)))
+    record = make_report(log, tmp_path / "r", can_log=can_log, say=lambda s: None)
+    check = record["bus_check"]
+    assert check["damaged_frames"] == {"undefined field": 1, "bad CRC": 1}, check
+    assert check["sectors"]["LEFT"]["bus"] == 0 and check["sectors"]["RIGHT"]["bus"] == 1
+    assert check["agree"], check
+    assert "Damaged frames on the bus" in (tmp_path / "r" / "report.html").read_text()

@@ -16,7 +16,7 @@ import pytest
 
 from bsn_edge.alerts.can_codec import DBC_PATH
 from bsn_edge.cli.common import CHECKOUT
-from tests.fakes import long_video
+from tests.fakes import BUSY_S, long_video
 
 
 def env() -> dict[str, str]:
@@ -58,8 +58,10 @@ def test_an_output_that_blocks_when_opened_degrades_and_sigterm_still_ends_the_r
         assert len(got) >= 25, f"the bus stopped: {len(got)} status frames ({proc.poll()})"
         first = got[0][0]
         degraded = [t for t, s in got if s["System_State"] == 1 and s["Sink_Errors"] == 1]
-        assert degraded and degraded[0] - first <= 1.2, "DEGRADED within a second of the first status"
-        assert all(s["System_State"] == 1 for t, s in got if t > degraded[0])
+        assert degraded and degraded[0] - first <= BUSY_S, f"DEGRADED {degraded[:1]} s after the first status {first}"
+        # and never OK again; a stall's UNAVAILABLE may come between on a busy machine
+        after = [s["System_State"] for t, s in got if t > degraded[0]]
+        assert set(after) <= {1, 2}, f"states after DEGRADED: {after}"
         t0 = time.monotonic()
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=30)
@@ -68,7 +70,7 @@ def test_an_output_that_blocks_when_opened_degrades_and_sigterm_still_ends_the_r
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 0 and "Traceback" not in err, err
-    assert ended < 1.0, f"SIGTERM took {ended:.2f} s to end the run"
+    assert ended < BUSY_S, f"SIGTERM took {ended:.2f} s to end the run"
     assert statuses(can_log)[-1][1]["System_State"] == 2, "UNAVAILABLE last"
     failure = json.loads(summ.read_text())["sinks"]["log" if output == "--log" else "overlay"]["failure"]
     assert failure["frame"] is None and "stuck in opening it" in failure["error"]
@@ -132,4 +134,4 @@ def test_a_signal_as_soon_as_it_is_watched_ends_start_up_cleanly(setup, tmp_path
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == code and "Traceback" not in err, err
-    assert ended < 1.0, f"{sig.name} took {ended:.2f} s to end the run"
+    assert ended < BUSY_S, f"{sig.name} took {ended:.2f} s to end the run"

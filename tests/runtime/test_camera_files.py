@@ -150,7 +150,9 @@ def test_a_camera_file_of_the_same_aspect_at_another_size_is_rescaled_and_said(s
         assert run_cli.main(["--model", str(model), "--source", str(clip / "rgb"), "--calib", calib, "--log", str(log),
                              "--summary", str(summ)]) == 0
         lines = log.read_text().splitlines()
-        logs.append([{k: v for k, v in json.loads(x).items() if k not in ("latency_ms", "stage_ms")} for x in lines])
+        # the state is the bus's, which a stall on a busy machine changes: the warp and levels are compared
+        logs.append([{k: v for k, v in json.loads(x).items() if k not in ("latency_ms", "stage_ms", "state")}
+                     for x in lines])
     assert logs[0] == logs[1] and len(logs[0]) == 15
     note = json.loads(summ.read_text())["camera"]["size_note"]
     assert "384x192" in note and "192x96" in note and "same aspect" in note

@@ -194,6 +194,10 @@ def test_a_video_cut_short_is_a_failed_source_with_a_non_zero_exit(setup, tmp_pa
 
 # -- a stalled live stream: back-off reconnects, UNAVAILABLE while it is gone --------------------------
 
+_yy, _xx = np.mgrid[0:96, 0:192]
+SCENE = np.repeat((40 + _yy + 60 * ((_xx // 12) % 2))[..., None], 3, axis=2).astype(np.uint8)
+
+
 class FlakyCamera:
     """Frames for a while, then nothing (a stall ends in a failed read).
 
@@ -209,6 +213,7 @@ class FlakyCamera:
                  after: threading.Event | None = None) -> None:
         FlakyCamera.opened += 1
         self.left, self.stall_s, self.n = frames, stall_s, FlakyCamera.opened
+        self.rng = np.random.default_rng(self.n)
         self.after, self.since = after, time.monotonic()
         FlakyCamera.delivered.append(0)
 
@@ -230,7 +235,9 @@ class FlakyCamera:
             self.left -= 1
         FlakyCamera.delivered[self.n - 1] += 1
         time.sleep(0.02)
-        return True, np.full((96, 192, 3), 90, np.uint8)
+        # a scene, not a flat grey (a camera showing one grey is covered, and says so): stripes and a ramp,
+        # with a sensor's noise so that no two frames are the same
+        return True, SCENE + self.rng.integers(0, 3, SCENE.shape, dtype=np.uint8)
 
     def release(self):
         pass

@@ -12,7 +12,7 @@ import pytest
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.feeder import Feeder
 from bsn_edge.runtime.sources import Captured, Source
-from tests.fakes import mounted
+from tests.fakes import StepClock, mounted
 
 
 class ListSource(Source):
@@ -156,8 +156,9 @@ def test_overlap_changes_no_answer(setup, tmp_path, calibrating):
         engine = Engine(model)
         camera = None if calibrating else mounted(engine, clip)
         log, maps = tmp_path / f"log{overlap}.jsonl", tmp_path / f"maps{overlap}"
+        # on a clock the machine's speed does not move: a stall under load would change the state logged
         summary = run(engine, open_source(str(clip / "video.mp4")), [], RuntimeConfig(overlap=overlap),
-                      log=log, camera=camera, save_maps=maps)
+                      log=log, camera=camera, save_maps=maps, clock=StepClock())
         assert summary["overlap"] is overlap and summary["frames"] == 15 and summary["dropped"] == 0
         out[overlap] = frame_log(log), {p.name: p.read_bytes() for p in sorted(maps.iterdir())}
     assert out[True][0] == out[False][0]
@@ -191,7 +192,7 @@ def test_two_frames_in_flight_change_no_answer(setup, tmp_path, calibrating):
         camera = None if calibrating else mounted(engine, clip)
         log, maps = tmp_path / f"log{in_flight}.jsonl", tmp_path / f"maps{in_flight}"
         summary = run(engine, open_source(str(clip / "video.mp4")), [], RuntimeConfig(in_flight=in_flight),
-                      log=log, camera=camera, save_maps=maps)
+                      log=log, camera=camera, save_maps=maps, clock=StepClock())
         assert summary["in_flight"] == in_flight and summary["frames"] == 15 and summary["dropped"] == 0
         out[in_flight] = frame_log(log), {p.name: p.read_bytes() for p in sorted(maps.iterdir())}
     assert [r["frame"] for r in out[2][0]] == list(range(15))

@@ -161,3 +161,56 @@ def test_two_outputs_naming_one_file_are_refused_before_anything_is_written(setu
                 str(tmp_path / "c.log")) == 2
     assert "--summary and --save-calib both name" in capsys.readouterr().err
     assert not first.exists() and not (tmp_path / "c.log").exists()
+
+
+@pytest.mark.parametrize("flag,what", [("--overlay", "source"), ("--summary", "calib"), ("--summary", "model"),
+                                       ("--log", "hard link to the source")])
+def test_an_output_that_names_an_input_is_refused_even_with_force(setup, tmp_path, capsys, flag, what):
+    """With --force the source video, the camera file and the model were once replaced by the run's outputs."""
+    import os
+    import shutil
+
+    model, clip = setup
+    video, calib, mine = tmp_path / "in.mp4", tmp_path / "cam.json", tmp_path / "m.onnx"
+    shutil.copy(clip / "video.mp4", video)
+    shutil.copy(clip / "calibration.json", calib)
+    shutil.copy(model, mine)
+    target = {"source": video, "calib": calib, "model": mine}.get(what)
+    if target is None:                      # another name of the same file
+        target = tmp_path / "also.jsonl"
+        os.link(video, target)
+    before = {p: p.read_bytes() for p in (video, calib, mine)}
+    code = run_cli.main(["--model", str(mine), "--source", str(video), "--calib", str(calib), "--max-frames", "3",
+                         flag, str(target), "--force"])
+    err = capsys.readouterr().err
+    assert code == 2 and "an output never replaces what the run reads" in err, err
+    assert {p: p.read_bytes() for p in before} == before, "an input was written"
+
+
+def test_maps_saved_into_the_source_folder_are_refused(setup, tmp_path, capsys):
+    model, clip = setup
+    import shutil
+
+    frames = tmp_path / "frames"
+    shutil.copytree(clip / "rgb", frames)
+    code = run_cli.main(["--model", str(model), "--source", str(frames), "--max-frames", "3", "--save-maps",
+                         str(frames / "maps")])
+    err = capsys.readouterr().err
+    assert code == 2 and "lies in the run's --source folder" in err, err
+    assert not (frames / "maps").exists()
+
+
+def test_a_video_with_no_frame_is_an_error_not_a_clean_run(setup, tmp_path, capsys):
+    import cv2
+
+    model, _ = setup
+    empty = tmp_path / "empty.avi"
+    writer = cv2.VideoWriter(str(empty), cv2.VideoWriter.fourcc(*"MJPG"), 25.0, (192, 96))
+    writer.release()                            # a header and no frame
+    summary = tmp_path / "s.json"
+    code = run_cli.main(["--model", str(model), "--source", str(empty), "--summary", str(summary)])
+    out = capsys.readouterr()
+    assert code != 0, out.out
+    assert "faults: none" not in out.out or "delivered no frame" in out.err, (out.out, out.err)
+    if summary.exists():
+        assert json.loads(summary.read_text())["frames"] == 0

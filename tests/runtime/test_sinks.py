@@ -20,6 +20,7 @@ from bsn_edge.alerts import SystemState
 from bsn_edge.alerts.can_codec import decode
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli.common import CHECKOUT
+from tests.fakes import BUSY_S
 
 FULL = Path("/dev/full")
 needs_dev_full = pytest.mark.skipif(not FULL.exists(), reason="this system has no /dev/full")
@@ -235,7 +236,7 @@ def test_later_signals_change_nothing_the_first_one_started(setup, tmp_path):
     msgs = [decode(m.arbitration_id, bytes(m.data)) for m in can.LogReader(str(canlog))]
     states = [d.signals["System_State"] for d in msgs if d is not None and d.name == "BSN_Status"]
     assert states[-1] == SystemState.UNAVAILABLE
-    assert ended < 1.0, f"the run took {ended:.2f} s to end"
+    assert ended < BUSY_S, f"the run took {ended:.2f} s to end"
 
 
 def test_the_json_lines_of_a_killed_run_are_whole(setup, tmp_path):
@@ -554,8 +555,10 @@ def test_an_overlay_filling_its_disk_degrades_at_the_frame_it_fails_not_at_the_e
     model, _ = setup
     video = noise_video(tmp_path / "noise.mp4", 120, 1280, 720)
     summ = tmp_path / "s.json"
+    # noise fills the disk fastest; a camera sending noise is a fault of its own, so its check is off here
     code, got = run_on_bus("bsn-sink-disk", ["--model", str(model), "--source", str(video), "--overlay",
-                                             str(small_disk / "overlay.mp4"), "--summary", str(summ)])
+                                             str(small_disk / "overlay.mp4"), "--summary", str(summ),
+                                             "--set", "visibility.enabled=false"])
     s = json.loads(summ.read_text())
     failure = s["sinks"]["overlay"]["failure"]
     assert code == 0 and failure is not None and 0 < failure["frame"] < 110, failure
@@ -563,5 +566,7 @@ def test_an_overlay_filling_its_disk_degrades_at_the_frame_it_fails_not_at_the_e
     # the status turned DEGRADED while the run went on, well before its end, and stayed so
     first = next(i for i, st in enumerate(status) if st["Sink_Errors"] == 1)
     assert first < len(status) - 10 and status[first]["System_State"] == SystemState.DEGRADED
-    assert all(st["System_State"] == SystemState.DEGRADED for st in status[first:-1])
+    # and never OK again (a stall's UNAVAILABLE may come between on a busy machine)
+    later = [st["System_State"] for st in status[first:-1]]
+    assert set(later) <= {SystemState.DEGRADED, SystemState.UNAVAILABLE}, later
     assert status[-1]["System_State"] == SystemState.UNAVAILABLE and s["valid_frames"] == 120

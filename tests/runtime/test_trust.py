@@ -347,3 +347,23 @@ def test_a_card_holding_a_key_twice_is_refused_by_name(setup, tmp_path, keys, wh
     onnx.save(m, str(out))
     with pytest.raises((ModelError, ValueError), match=r"holds the key 'bsn\.threshold' twice"):
         Engine(out, trust=TrustPolicy.default([str(keys[0]) + ".pub"], False))
+
+
+def test_signing_a_signed_model_replaces_its_signature(setup, tmp_path, keys):
+    """Re-signing (a key rotation, one's own signature on the shipped default) through the Python API: one
+    signature entry afterwards, the new key's, which the runtime accepts; the old key's is gone."""
+    from bsn_edge.export.signing import sign
+
+    model, _ = setup
+    ours, theirs = keys
+    signed = signed_copy(model, tmp_path, ours)
+    again = tmp_path / "again.onnx"
+    sign(signed, theirs, again)
+    entries = [p.key for p in onnx.load(str(again)).metadata_props if p.key == SIGNATURE_KEY]
+    assert entries == [SIGNATURE_KEY], f"{len(entries)} signature entries after re-signing"
+    assert Engine(again, trust=load_public_keys(f"{theirs}.pub")).authentic
+    with pytest.raises(ModelError, match="not among the trusted keys"):
+        Engine(again, trust=load_public_keys(f"{ours}.pub"))
+    sign(again, theirs)                       # the same key twice, in place: still one entry, still valid
+    assert [p.key for p in onnx.load(str(again)).metadata_props].count(SIGNATURE_KEY) == 1
+    assert Engine(again, trust=load_public_keys(f"{theirs}.pub")).authentic
