@@ -16,6 +16,8 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from bsn_edge.user_file import read_user_file
+
 KINDS = {int: "a whole number", float: "a finite number", str: "a string", bool: "true or false", tuple: "a list"}
 
 
@@ -29,6 +31,8 @@ def parse_override(text: str, example: str) -> tuple[list[str], Any]:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw
+    except RecursionError:
+        raise ValueError(f"override {text[:60]!r}: nested too deep") from None
     return [part.strip() for part in dotted.split(".")], value
 
 
@@ -39,9 +43,9 @@ def read_toml(path: str | Path | None) -> dict[str, Any]:
     p = Path(path)
     if p.is_dir():
         raise ValueError(f"config {p} is a folder, not a TOML file")
-    if not p.is_file():
+    if not p.exists():
         raise FileNotFoundError(f"config {p} not found")
-    data = p.read_bytes()
+    data = read_user_file(p, "settings")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -51,6 +55,8 @@ def read_toml(path: str | Path | None) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"{p}: invalid TOML: {e}") from None
+    except RecursionError:
+        raise ValueError(f"{p}: invalid TOML: nested too deep") from None
 
 
 def merge_overrides(raw: dict[str, Any], overrides: list[str] | tuple[str, ...], example: str) -> set[str]:
@@ -130,6 +136,13 @@ def _range_of(cls: type, key: str) -> str:
     return f" in [{lo:g}, {hi:g}]" + (f" {meta['unit']}" if meta["unit"] else "")
 
 
+def shown(value: Any, most: int = 40) -> str:
+    """A value as a message shows it: its repr, cut to ``most`` characters with its length said (a 400-digit
+    number or a list nested 5,000 deep is named, not printed)."""
+    text = repr(value)
+    return text if len(text) <= most else f"{text[:most // 2]}... ({len(text)} characters)"
+
+
 def check_fields(obj: Any) -> None:
     """``ValueError`` naming the first field of dataclass ``obj`` of the wrong kind (a boolean for a
     number, a float for a whole number, anything not finite) or outside its :func:`setting` range."""
@@ -145,8 +158,9 @@ def check_fields(obj: Any) -> None:
         if isinstance(value, bool) or not isinstance(value, int | float) or (whole and not isinstance(value, int)):
             raise ValueError(f"{f.name} = {value!r} must be {'a whole number' if whole else 'a finite number'}"
                              f"{_range_of(type(obj), f.name)}")
-        if not (math.isfinite(value) and lo <= value <= hi):
-            raise ValueError(f"{f.name} = {value!r} is outside [{lo:g}, {hi:g}]{unit}")
+        # a 400-digit whole number is compared as a whole number (math.isfinite would overflow on it)
+        if not ((isinstance(value, int) or math.isfinite(value)) and lo <= value <= hi):
+            raise ValueError(f"{f.name} = {shown(value)} is outside [{lo:g}, {hi:g}]{unit}")
 
 
 def _field(cls: type, key: str) -> dataclasses.Field:
@@ -193,13 +207,13 @@ def build(cls: type, values: dict[str, Any], name: str, where: str, given: set[s
             continue
         try:
             out[key] = coerce(cls, key, value)
-        except ValueError:
+        except (ValueError, OverflowError, TypeError):      # a 400-digit number is no finite setting
             kind = KINDS.get(type(default), "a finite number" if _range_of(cls, key) else type(default).__name__)
             if isinstance(default, tuple) and default and _numbers(default):
                 kind = f"a list of {len(default)} numbers"
-            raise ValueError(f"{dotted} = {value!r} ({src}) must be {kind}{_range_of(cls, key)}") from None
+            raise ValueError(f"{dotted} = {shown(value)} ({src}) must be {kind}{_range_of(cls, key)}") from None
     try:
         return cls(**out)
-    except ValueError as e:             # the dataclass's own check, which names its fields
+    except (ValueError, OverflowError, TypeError) as e:     # the dataclass's own check, which names its fields
         src = "--set" if any(k.startswith(f"{name}.") for k in given) else where
         raise ValueError(f"[{name}] ({src}): {e}") from None

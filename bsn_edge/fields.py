@@ -15,6 +15,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from bsn_edge.user_file import read_user_file
+
+MAX_MAGNITUDE = 10 ** 15      # a whole number past this in a camera file or card is damage, not a value
+
 
 def read_json_object(path: str | os.PathLike, what: str = "", error: type[Exception] = ValueError) -> dict[str, Any]:
     """The JSON object in ``path``; ``error`` naming the path (and ``what`` it should be, e.g. "not a
@@ -24,8 +28,8 @@ def read_json_object(path: str | os.PathLike, what: str = "", error: type[Except
     lead = f"{p}: {what} (" if what else f"{p}: "
     tail = ")" if what else ""
     try:
-        d = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        d = json.loads(read_user_file(p, "JSON").decode("utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
         raise error(f"{lead}not valid JSON: {e}{tail}") from None
     if not isinstance(d, dict):
         raise error(f"{lead}expected a JSON object, got {type(d).__name__}{tail}")
@@ -42,6 +46,9 @@ def number(d: Mapping[str, Any], key: str, where: str, kind: type = float) -> fl
     v = d[key]
     if isinstance(v, bool) or not isinstance(v, int | float):
         raise ValueError(f"{where}: field {key!r} must be a number, got {v!r:.40}")
+    if isinstance(v, int) and abs(v) > MAX_MAGNITUDE:
+        # a 400-digit number: no camera's field, and float() of it would overflow
+        raise ValueError(f"{where}: field {key!r} must be a finite number, got one of {len(str(v))} digits")
     if not math.isfinite(v):
         raise ValueError(f"{where}: field {key!r} must be finite, got {v!r}")
     if kind is int:

@@ -21,6 +21,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "bsn_edge"
 LAYERS = [
+    ("user_file",),
     ("fields", "config_toml", "progress", "default_model"),
     ("camera",),
     ("mounting",),
@@ -40,8 +41,8 @@ LAYERS = [
 ]
 LEVEL = {pkg: i for i, layer in enumerate(LAYERS) for pkg in layer}
 # the car's side: never torch, onnx or the quantization tools, even on a path taken only sometimes
-TORCH_FREE = ("fields", "config_toml", "progress", "default_model", "camera", "mounting", "semantics", "sequence",
-              "tracks", "metrics", "card",
+TORCH_FREE = ("user_file", "fields", "config_toml", "progress", "default_model", "camera", "mounting", "semantics",
+              "sequence", "tracks", "metrics", "card",
               "model_frame", "modelfile", "calibration", "synth", "alerts", "runtime")
 HEAVY = ("torch", "onnx", "onnxruntime.quantization", "matplotlib")
 # the car's commands: they, the package's own __init__ and every module of the package they import (at the top

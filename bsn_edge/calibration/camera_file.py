@@ -142,8 +142,8 @@ class Calibration:
                           "mounting": None if m is None else Mounting.from_dict(m, f"{p}: mounting"),
                           "mounting_report": dict(d.get("mounting_report") or {}),
                           "hood": None if hood is None else Hood.from_dict(hood, f"{p}: hood")})
-        except TypeError as e:
-            raise ValueError(f"{p}: not a camera file ({e})") from None
+        except (TypeError, OverflowError, RecursionError) as e:     # a 400-digit coefficient, a list 5,000 deep
+            raise ValueError(f"{p}: not a camera file ({type(e).__name__}: {str(e)[:80]})") from None
         except ValueError as e:
             msg = str(e)
             raise ValueError(msg if msg.startswith(str(p)) else f"{p}: {msg}") from None

@@ -24,6 +24,7 @@ from pathlib import Path
 from bsn_edge.calibration.camera_file import Calibration
 from bsn_edge.calibration.field_of_view import HFOV_RANGE_DEG
 from bsn_edge.camera import Intrinsics
+from bsn_edge.user_file import read_user_file
 
 FILM_DIAGONAL_MM = math.hypot(36.0, 24.0)
 EXIF_IFD_POINTER = 0x8769
@@ -65,9 +66,8 @@ def camera_of(path: str | os.PathLike) -> tuple[str, str, float | None] | None:
 def _record(path: str | os.PathLike) -> tuple[bytes, str, int] | None:
     """A JPEG's EXIF TIFF block, its byte order and the offset of its first IFD; None without one."""
     try:
-        with open(path, "rb") as f:
-            head = f.read(_HEAD_BYTES + 4)
-    except OSError:
+        head = read_user_file(path, "picture", head=_HEAD_BYTES + 4)
+    except (OSError, ValueError):          # a FIFO or a device named like a picture has no EXIF
         return None
     tiff = _exif_tiff(head)
     if tiff is None or len(tiff) < 8 or tiff[:2] not in (b"II", b"MM"):

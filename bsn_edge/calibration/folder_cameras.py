@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from bsn_edge.calibration.exif import camera_of
+from bsn_edge.user_file import read_user_file
 
 PAIRS = 8               # consecutive pairs looked at, from the folder's start
 SHARED = 40             # matches on one epipolar geometry that make two pictures one scene moving on
@@ -79,7 +80,14 @@ def judge_folder(files: Sequence[Path], pairs: int = PAIRS,
 
 
 def _read(path: Path) -> np.ndarray | None:
-    return cv2.imread(str(path), cv2.IMREAD_COLOR)
+    try:
+        data = read_user_file(path, "picture")      # never cv2.imread: it would block on a FIFO
+    except (OSError, ValueError):
+        return None
+    try:
+        return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    except cv2.error:
+        return None
 
 
 def _features(grey: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:

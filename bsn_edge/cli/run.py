@@ -315,7 +315,7 @@ def _configured(args: argparse.Namespace) -> tuple[RuntimeConfig, list[Sender]] 
     an exit code when either is refused (settings refused: UNAVAILABLE to the buses the flags name)."""
     try:
         cfg = runtime_settings(args)
-    except ValueError as e:
+    except (ValueError, OSError) as e:         # FileNotFoundError for a --config that is not there
         try:
             senders = make_senders(args)
         except ValueError as e2:
@@ -330,7 +330,7 @@ def _configured(args: argparse.Namespace) -> tuple[RuntimeConfig, list[Sender]] 
 def _start(args: argparse.Namespace, cfg: RuntimeConfig):
     """What the run needs before its first frame, each piece checked: ``(engine, camera, source, maps)``;
     ``FileNotFoundError``, ``ValueError`` or ``OSError`` names what is wrong."""
-    from bsn_edge.calibration.camera_file import Calibration
+    from bsn_edge.calibration.camera_file import SIDE_RANGE_PX, Calibration
     from bsn_edge.calibration.exif import from_exif
     from bsn_edge.modelfile.trust import TrustPolicy
     from bsn_edge.mounting import check_height
@@ -348,6 +348,11 @@ def _start(args: argparse.Namespace, cfg: RuntimeConfig):
         print(f"{PROG}: warning: {engine.verdict.note}; it runs because of --allow-unsigned, and the status says "
               "Model_Unsigned on every cycle", file=sys.stderr)
     source = open_source(args.source, pace=args.pace, reconnect=cfg.source.reconnect())
+    if source.size is not None and source.one_camera and not all(
+            SIDE_RANGE_PX[0] <= side <= SIDE_RANGE_PX[1] for side in source.size):
+        source.close()                   # refused before its first frame, with or without a camera file
+        raise ValueError(f"{args.source}: frames of {source.size[0]}x{source.size[1]}: bsn-run takes frames "
+                         f"{SIDE_RANGE_PX[0]} to {SIDE_RANGE_PX[1]} pixels on a side")
     if calibration is None and source.cameras is not None and not source.one_camera:
         from bsn_edge.runtime.picture_cameras import PictureCameras
         print(f"{PROG}: note: {source.cameras.cameras.value}: {source.cameras.why}; each is warped with its own lens "

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
+from bsn_edge.user_file import read_user_file
+
 METADATA_FIELD = 14          # ModelProto.metadata_props
 CHUNK = 1 << 20
 ENTRY_KEY, ENTRY_VALUE = 1, 2  # StringStringEntryProto
@@ -120,9 +122,9 @@ class ModelFile:
     @classmethod
     def read(cls, path: str | Path) -> ModelFile:
         p = Path(path)
-        if not p.is_file():
+        if not p.exists():
             raise FileNotFoundError(f"model {p} not found")
-        data = p.read_bytes()
+        data = read_user_file(p, "model")     # a FIFO, a device or a model over its budget: refused unread
         try:
             metadata, digest = _scan(io.BytesIO(data), len(data))
         except ValueError as e:

@@ -28,6 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bsn_edge.user_file import read_user_file
+
 SIGNATURE_KEY = "bsnsig.ed25519"
 _MESSAGE = b"bsn-edge model seal v1\0"
 _PEM = re.compile(rb"-----BEGIN PUBLIC KEY-----.+?-----END PUBLIC KEY-----", re.S)
@@ -127,7 +129,9 @@ def load_public_keys(path: str | Path, allow_empty: bool = False) -> dict[str, A
     files = sorted(q for q in p.iterdir() if q.suffix in (".pub", ".pem")) if p.is_dir() else [p]
     keys: dict[str, Any] = {}
     for f in files:
-        blocks = _PEM.findall(f.read_bytes())
+        if p.is_dir() and not f.is_file():
+            continue                      # a FIFO or device named like a key in a trust folder is no key
+        blocks = _PEM.findall(read_user_file(f, "key"))
         if not blocks and not p.is_dir():
             raise ValueError(f"{f}: no PEM public key in it (bsn-export --new-key writes KEY.pub)")
         for block in blocks:

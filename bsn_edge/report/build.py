@@ -36,7 +36,10 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
         first = drive.damage[0]
         say(f"{len(drive.damage)} damaged line(s) in {log}, the first at line {first.line}: {first.why}; "
             "the rest is reported")
-    record = drive.to_dict()
+    try:
+        record = drive.to_dict()
+    except (AttributeError, TypeError, KeyError) as e:     # a summary of the wrong shape: named, not a crash
+        raise ValueError(f"{summary}: not a run's summary ({type(e).__name__}: {str(e)[:80]})") from None
     if can_log is not None:
         say(f"checking the bus: {can_log}")
         bus = read_bus(can_log)
@@ -51,7 +54,10 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
     if overlay is not None:
         say(f"cutting {min(len(drive.onsets), MAX_THUMBS)} onset thumbnails from {overlay}")
         thumbs = thumbnails(overlay, drive.onsets)
-    html = page(drive, record, picture, thumbs, f"bsn-run drive report: {Path(log).name}")
+    try:
+        html = page(drive, record, picture, thumbs, f"bsn-run drive report: {Path(log).name}")
+    except (AttributeError, TypeError, KeyError) as e:
+        raise ValueError(f"{summary}: not a run's summary ({type(e).__name__}: {str(e)[:80]})") from None
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
         (Path(tmp) / "report.html").write_text(html, encoding="utf-8")

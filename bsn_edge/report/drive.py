@@ -20,6 +20,7 @@ from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
 from bsn_edge.runtime.frame_record import FrameRecord
 from bsn_edge.runtime.loop import STAGES
+from bsn_edge.user_file import read_user_file
 
 PERCENTILES = (50, 95, 99)
 
@@ -137,7 +138,7 @@ def read_drive(log: str | Path, summary: str | Path | None = None) -> Drive:
                 if not line.strip():
                     continue
                 records.append(FrameRecord.from_json(json.loads(line)))
-            except (UnicodeDecodeError, ValueError, KeyError, TypeError) as e:
+            except (UnicodeDecodeError, ValueError, KeyError, TypeError, RecursionError) as e:
                 damage.append(Damage(n, f"{type(e).__name__}: {e}"[:200]))
     if not records:
         raise ValueError(f"{log}: no line is a frame of bsn-run's log ({len(damage)} unreadable)")
@@ -147,8 +148,8 @@ def read_drive(log: str | Path, summary: str | Path | None = None) -> Drive:
         if not p.is_file():
             raise FileNotFoundError(f"summary {p} not found")
         try:
-            drive.summary = json.loads(p.read_text(encoding="utf-8"))
-        except (UnicodeDecodeError, ValueError) as e:
+            drive.summary = json.loads(read_user_file(p, "JSON").decode("utf-8"))
+        except (UnicodeDecodeError, ValueError, RecursionError) as e:
             raise ValueError(f"{p}: not a run's summary ({e})") from None
         if not isinstance(drive.summary, dict) or "frames" not in drive.summary:
             raise ValueError(f"{p}: not a run's summary (bsn-run --summary writes one)")

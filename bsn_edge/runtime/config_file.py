@@ -56,6 +56,9 @@ def load_runtime_config(path: str | Path | None = None, overrides: list[str] | t
     sections = sorted(set(raw) - set(valid))
     if sections:
         raise ValueError(unknown(sections, valid, "section(s)"))
+    for name, table in raw.items():
+        if not isinstance(table, dict):      # `runtime = 5`, `[[runtime]]`: a value or a list, not a table
+            raise ValueError(f"[{name}] ({where}) must be a table of settings, got {type(table).__name__}")
     loop_keys = {f.name for f in dataclasses.fields(RuntimeConfig)} - set(NESTED)
     loop = raw.get(LOOP, {})
     bad = sorted(set(loop) - loop_keys)

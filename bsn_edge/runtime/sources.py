@@ -23,6 +23,7 @@ from bsn_edge.runtime.slot import LatestSlot
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import IMAGE_EXTS, is_image, picture_damage
 from bsn_edge.sequence.picture_header import declared_size, within_budget
+from bsn_edge.user_file import read_user_file
 
 
 @dataclass(frozen=True)
@@ -210,9 +211,8 @@ class ImageFolderSource(Source):
         sizes = {}
         for p in files:
             try:
-                with p.open("rb") as f:
-                    sizes[p] = declared_size(f.read(HEADER_BYTES))
-            except OSError:
+                sizes[p] = declared_size(read_user_file(p, "picture", head=HEADER_BYTES))
+            except (OSError, ValueError):      # a FIFO or device named like a picture is no picture
                 sizes[p] = None
         counts = Counter(s for s in sizes.values() if within_budget(s))
         if not counts:
@@ -226,8 +226,8 @@ class ImageFolderSource(Source):
         declares more than the pixel budget (checked before anything is decoded), or a cut file (which
         decodes with its missing part filled in: not a frame to run)."""
         try:
-            data = path.read_bytes()
-        except OSError:
+            data = read_user_file(path, "picture")
+        except (OSError, ValueError):          # a FIFO, a device or a file over the budget: not a frame
             return None
         if not within_budget(declared_size(data)) or picture_damage(data, path.suffix) is not None:
             return None
