@@ -33,9 +33,11 @@ def _levels(tmp_path: Path, source: Path, frames: int) -> list[dict]:
 @pytest.mark.skipif(not HIGHWAY.is_file(), reason="the real dashcam clip (../shared/data/real) is not present")
 def test_the_real_highway_without_a_camera_file_raises_nothing_in_its_first_seconds(tmp_path):
     records = [r for r in _levels(tmp_path, HIGHWAY, 80) if r["t"] <= FIRST_S]
-    # CALIBRATING throughout; a busy machine's stall may put UNAVAILABLE between, never OK
+    # CALIBRATING throughout; on a busy machine a stall's UNAVAILABLE or a slow spell's DEGRADED (under the frame
+    # rate floor) may come between, never OK
     states = {r["state"] for r in records}
-    assert len(records) >= 70 and "CALIBRATING" in states and states <= {"CALIBRATING", "UNAVAILABLE"}, states
+    assert len(records) >= 70 and "CALIBRATING" in states and states <= {"CALIBRATING", "UNAVAILABLE", "DEGRADED"}, \
+        states
     raised = [(r["frame"], r["levels"]) for r in records if r["levels"] != ["NONE", "NONE", "NONE"]]
     assert raised == []
 
