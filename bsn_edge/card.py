@@ -99,6 +99,7 @@ class TrainingRecord:
     precision: tuple[str, ...] = ()
     threshold_from: str = ""
     alive: str = ""
+    adapted_on: str = ""     # bsn-adapt's: the recordings it fine-tuned on, one line; empty: not adapted
 
     def __post_init__(self) -> None:
         if min(self.steps, self.samples, self.train_clips, self.val_clips) < 0 or not self.hours >= 0:
@@ -112,7 +113,7 @@ class TrainingRecord:
             d["precision"] = list(self.precision)
         else:
             del d["precision"]
-        for optional in ("threshold_from", "alive"):
+        for optional in ("threshold_from", "alive", "adapted_on"):
             if not d[optional]:
                 del d[optional]
         return d
@@ -122,7 +123,8 @@ class TrainingRecord:
         return cls(steps=int(d["steps"]), samples=int(d["samples"]), hours=float(d["hours"]),
                    train_clips=int(d["train_clips"]), val_clips=int(d["val_clips"]), init=str(d.get("init", "")),
                    teacher=str(d.get("teacher", "")), precision=tuple(map(str, d.get("precision", ()))),
-                   threshold_from=str(d.get("threshold_from", "")), alive=str(d.get("alive", "")))
+                   threshold_from=str(d.get("threshold_from", "")), alive=str(d.get("alive", "")),
+                   adapted_on=str(d.get("adapted_on", "")))
 
 
 @dataclass(frozen=True)

@@ -343,6 +343,10 @@ def _write_adapted(src: Run, out: Path, model, card, threshold: float, best: dic
     dst = Run(out)
     fields = {f.name: getattr(card, f.name) for f in dataclasses.fields(card) if f.name != "weights_sha256"}
     fields.update(threshold=threshold, graph_sha256="", self_test=None)
+    if card.training is not None:      # the card names what it was adapted on, as every export of it will
+        on = ", ".join(f"{c.path.name} ({len(c.frames)} label frames)" for c in train)
+        fields["training"] = dataclasses.replace(card.training, adapted_on=f"bsn-adapt of {src.path.name} on {on}; "
+                                                 f"threshold chosen on {', '.join(c.path.name for c in held)}")
     new_card = dst.save(model, fields, {"adapted_from": str(src.path), "label": label,
                                         "train_clips": sorted({c.path.name for c in train}),
                                         "val_clips": sorted({c.path.name for c in held}), "val": best})

@@ -15,6 +15,7 @@ from typing import Any
 from bsn_edge.alerts.bus_check import FrameChecker, Verdict
 from bsn_edge.alerts.can_codec import HAZARD, signal_name
 from bsn_edge.alerts.can_log import read_log
+from bsn_edge.alerts.health import SystemState
 from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
 from bsn_edge.report.drive import Onset
@@ -55,18 +56,34 @@ def read_bus(can_log: str | Path) -> BusRead:
     def bad(where: str, why: str) -> None:
         unreadable.append(f"{where}: {why}")
 
+    pending: tuple[dict[str, Any], int, float] | None = None     # a cycle's hazard, until its status says
+
+    def apply(signals: dict[str, Any], k: int, t: float) -> None:
+        for name in SECTORS:
+            level = int(signals[signal_name(name, "Level")])
+            if level > last[name]:
+                out.append(BusOnset(name, Level(level).name, k, t))
+            last[name] = level
+
     for f in read_log(can_log, bad):
         c = check(f.frame_id, f.data)
-        if c is None or (c.decoded is not None and c.decoded.name != HAZARD):
+        if c is None:
+            continue
+        if c.decoded is not None and c.decoded.name != HAZARD:
+            # the status after a hazard frame is its cycle's: an UNAVAILABLE cycle (a stall, the last word)
+            # carries no hazard, so its levels of NONE are no fall and what follows no new onset
+            if pending is not None and c.trusted and int(c.decoded.signals["System_State"]) != SystemState.UNAVAILABLE:
+                apply(*pending)
+            pending = None
             continue
         n += 1
-        if c.decoded is None or not c.trusted:
-            continue
-        for name in SECTORS:
-            level = int(c.decoded.signals[signal_name(name, "Level")])
-            if level > last[name]:
-                out.append(BusOnset(name, Level(level).name, n - 1, f.timestamp))
-            last[name] = level
+        if pending is not None:        # a hazard frame with no status of its own (status sent less often)
+            apply(*pending)
+            pending = None
+        if c.decoded is not None and c.trusted:
+            pending = (c.decoded.signals, n - 1, f.timestamp)
+    if pending is not None:
+        apply(*pending)
     damaged = {v.value: k for v, k in check.counts.items() if k and v not in (Verdict.OK, Verdict.REPEATED)}
     said = f"{len(unreadable)} unreadable line(s), the first {unreadable[0]}" if unreadable else ""
     return BusRead(out, n, damaged, said)

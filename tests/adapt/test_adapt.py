@@ -115,6 +115,8 @@ def test_adapt_runs_on_a_clip_without_ground_truth(run, user_clip, stand_in_labe
     changed = not all(torch.equal(p, q) for p, q in zip(old.blindspot.parameters(), model.blindspot.parameters(),
                                                          strict=True))
     assert changed == ("kept_source" not in rep), "B is the fine-tuned one unless the source was kept"
+    # the card names what it was adapted on, so every export of it does
+    assert card.training is not None and "bsn-adapt of run on drive" in card.training.adapted_on, card.training
     assert "agreement with held-out labels" in capsys.readouterr().out
 
     # the same command again is refused; --resume keeps the labels and fine-tunes again
@@ -256,3 +258,4 @@ def test_a_clip_whose_labels_hold_no_blind_spot_is_not_trained_on(run, user_clip
     assert adapt_cli.main(["--run", str(run), "--video", str(seq), "--out", str(out), "--T", "1", "--quiet"]) == 2
     assert "no blind spot in its labels" in capsys.readouterr().err
     assert not Run(out).exists(), "no run may be written from such labels"
+

@@ -178,3 +178,25 @@ def test_a_damaged_bus_frame_is_counted_never_an_onset_nor_a_crash(tmp_path):
     assert check["sectors"]["LEFT"]["bus"] == 0 and check["sectors"]["RIGHT"]["bus"] == 1
     assert check["agree"], check
     assert "Damaged frames on the bus" in (tmp_path / "r" / "report.html").read_text()
+
+
+def test_a_stall_cycle_on_the_bus_is_no_fall_and_the_level_after_it_no_new_onset(tmp_path):
+    """A stall sends UNAVAILABLE with every level NONE; the WARNING after it is the same onset, not a second
+    (a busy machine's stalls made the report say the bus and the log DISAGREE)."""
+    from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+    from bsn_edge.alerts.can_codec import CanEncoder
+    from bsn_edge.report.can_check import read_bus
+
+    enc = CanEncoder()
+    none, warn = SectorAlert(0.0, Level.NONE, None), SectorAlert(0.9, Level.WARNING, 3.0)
+    fs = []
+    for k, state in enumerate([SystemState.OK, SystemState.OK, SystemState.UNAVAILABLE, SystemState.OK]):
+        right = none if k == 0 else warn
+        frame = AlertFrame(k * 0.1, (none, none, right), state, 10.0, {})
+        if state == SystemState.UNAVAILABLE:        # what a stall cycle carries
+            frame = AlertFrame.unavailable(k * 0.1)
+        fs += enc.encode(frame)
+    can_log = tmp_path / "c.log"
+    _can_log(can_log, fs)
+    onsets = [(o.sector, o.level) for o in read_bus(can_log).onsets]
+    assert onsets == [("RIGHT", "WARNING")], onsets
