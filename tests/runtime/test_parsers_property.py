@@ -23,7 +23,7 @@ VALUES = st.recursive(LEAF, lambda inner: st.lists(inner, max_size=4) | st.dicti
 DEPTH = st.integers(min_value=1, max_value=6000)
 SECTIONS = ("runtime", "sectors", "alerts", "health", "bus", "messages", "source", "calibration", "visibility")
 KEYS = ("cycle_s", "warmup", "range_m", "left_edge_deg", "on", "deadline_s", "can", "stall_s", "frozen_s", "caution")
-FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+FAST = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 
 def _toml_value(v) -> str:
@@ -81,7 +81,7 @@ def test_any_camera_file_is_read_or_refused_as_invalid_input(tmp_path_factory, f
         assert str(path) in str(e)
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(line=VALUES, depth=DEPTH, nest=st.booleans(),
        summary=VALUES | st.dictionaries(st.sampled_from(["model", "camera", "source", "machine", "settings_digest",
                                                          "visibility", "states_s"]), VALUES, max_size=4))
