@@ -38,7 +38,7 @@ from bsn_edge.labels import camvid
 from bsn_edge.labels.config import LabelConfig
 from bsn_edge.sequence.folder import SequenceFolder
 
-from .bench_camvid import FALLS, infer_drive, like_area_threshold, score_masks
+from .bench_camvid import FALLS, infer_drive, like_area_threshold, score_masks, table_row
 from .bench_realboxes import frac
 from .bench_realcam import REAL, licence
 from .common import load_engine
@@ -119,14 +119,6 @@ def _near(r: dict[str, Any]) -> int:
     return c["vehicles_near"][0] + c["people_near"][0]
 
 
-def _row(what: str, r: dict[str, Any]) -> str:
-    c = r["counts"]
-    falls = " / ".join(f"{100 * r['falls'][k]:.0f}" for k in FALLS)
-    return (f"| {what} ({r['threshold']:.2f}) | {frac(c['vehicles_near'])} | {frac(c['people_near'])} | "
-            f"{frac(c['road_users_all'])} | {100 * r['open_road_flagged']:.1f} % | {100 * r['flagged']:.2f} % | "
-            f"{falls} |")
-
-
 def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | None:
     from bsn_edge.default_model import DEFAULT_MODEL
 
@@ -165,11 +157,11 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
                 "first_half": len(first), "judged_half": len(second), "report": _slim(rep), "label_quality": q,
                 "judged": j, "near_gain_like_area": round(gain, 3), "teacher_saw_drive": bool(seen)}
             if base_row is None:
-                base_row = _row("unadapted", j["unadapted"])
+                base_row = table_row("unadapted", j["unadapted"])
                 rows.append(base_row)
             kept = " (kept the source)" if "kept_source" in rep else ""
-            rows += [_row(f"adapted, {t} teacher{seen}{kept}", j["adapted"]),
-                     _row(f"adapted, {t} teacher, at the unadapted's flagged area", j["adapted_like_area"])]
+            rows += [table_row(f"adapted, {t} teacher{seen}{kept}", j["adapted"]),
+                     table_row(f"adapted, {t} teacher, at the unadapted's flagged area", j["adapted_like_area"])]
             if q is not None:
                 c = q["counts"]
                 quality.append(f"| {name}, {t}{seen} | {q['label_frames']} | {100 * q['v_share']:.0f} % | "

@@ -191,7 +191,7 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-def _row(name: str, r: dict[str, Any]) -> str:
+def table_row(name: str, r: dict[str, Any]) -> str:
     c = r["counts"]
     falls = " / ".join(f"{100 * r['falls'][k]:.0f}" for k in FALLS)
     return (f"| {name} ({r['threshold']:.2f}) | {frac(c['vehicles_near'])} | {frac(c['people_near'])} | "
@@ -221,11 +221,11 @@ def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report | No
         probs, guess = infer_drive(engine, frames, assumed)
         r = score_masks(probs, labels, engine.threshold, masks.setdefault(name, {}) if args.pictures else None)
         result["models"][name] = {**r, "camera": guess}
-        table.append(_row(name, r))
+        table.append(table_row(name, r))
         if args.like_area and reference is not None:
             like = score_masks(probs, labels, like_area_threshold(probs, reference))
             result["models"][name]["like_area"] = like
-            table.append(_row(f"{name} at the first's flagged area", like))
+            table.append(table_row(f"{name} at the first's flagged area", like))
         reference = r["flagged"] if reference is None else reference
     md = [f"# Real road users marked: CamVid drive {args.drive}, by pixel labels", "",
           f"{len(frames)} labelled frames, 1 s apart, held out of every training run, each run as `bsn-run` runs a "
