@@ -34,6 +34,7 @@ from bsn_edge.alerts.sectors import SECTORS, SectorGeometry
 from bsn_edge.runtime.camera_state import CameraState
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.visibility import CameraHealth, VisibilityConfig
+from bsn_edge.sequence.media import read_video
 
 from .bench_realcam import REAL
 from .corruptions import CORRUPTIONS, ONE_SEVERITY, SEVERITIES, sensor_noise
@@ -59,19 +60,6 @@ class Clip:
         return len(self.frames) / self.fps
 
 
-def video_frames(path: Path) -> list[np.ndarray]:
-    """Every frame of a video, in order (none for a file OpenCV cannot read)."""
-    cap = cv2.VideoCapture(str(path))
-    frames = []
-    while True:
-        ok, frame = cap.read()
-        if not ok:
-            break
-        frames.append(frame)
-    cap.release()
-    return frames
-
-
 def _rate(path: Path) -> float:
     cap = cv2.VideoCapture(str(path))
     fps = cap.get(cv2.CAP_PROP_FPS) or 25.0
@@ -84,7 +72,7 @@ def real_clips(root: Path = REAL) -> list[Clip]:
     out = []
     for name in ("dashcam_highway.mp4", "mountain_highway.mp4", "udacity_test_video.mp4",
                  "udacity_challenge_352x288.avi"):
-        frames, fps = video_frames(root / name), _rate(root / name)
+        frames, fps = read_video(root / name), _rate(root / name)
         if frames:
             out.append(Clip(name, frames, fps))
     garage = root / "garage_drive"

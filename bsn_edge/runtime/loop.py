@@ -242,10 +242,14 @@ class FramePipeline:
         (the send cycle's status) and to the frame's record."""
         if cap.frame is None:
             return
+        t0 = time.perf_counter()
         vis = self.visibility.look(cap.t, cap.frame, buf[0])
         self.health.camera(vis.reason)
         self.blind.add(cap.t, vis.reason)
         rec.visibility = vis
+        seconds = time.perf_counter() - t0
+        self.timer.add("visibility", seconds)
+        rec.stage_ms["visibility"] = 1e3 * seconds
 
     def sectors(self, cap: Captured, mf: ModelFrame, prob: np.ndarray,
                 depth: np.ndarray, unseen: tuple[bool, ...] = ()) -> tuple[Hazard, np.ndarray]:
@@ -329,10 +333,7 @@ class FramePipeline:
         rec.stage_ms.update(decode=1e3 * cap.decode_s, preprocess=1e3 * item.warp_s)
         drawn = None
         if self.read(cap, rec) and item.mf is not None and item.buf is not None:
-            t_look = time.perf_counter()
             self.look(cap, item.buf, rec)
-            self.timer.add("visibility", time.perf_counter() - t_look)
-            rec.stage_ms["visibility"] = 1e3 * (time.perf_counter() - t_look)
             began, drawn = self.answer(item, item.mf, item.buf, inflight, rec)
             t0 = min(t0, began)          # the frame's path began with its inference at the latest
         t4 = time.perf_counter()

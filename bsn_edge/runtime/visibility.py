@@ -124,6 +124,14 @@ class CameraHealth:
     _last_t: float | None = None
     _held: _Held = field(default_factory=_Held)
     _held_sectors: list[_Held] = field(default_factory=list)
+    _cell_cols: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int8))
+
+    def __post_init__(self) -> None:
+        # the sector of each cell column (the model-frame column at its centre) and each sector's hold: fixed
+        # for the run, made once, not on every frame
+        w, n = len(self.columns), CELLS[1]
+        self._cell_cols = self.columns[np.clip(((np.arange(n) + 0.5) * w / n).astype(int), 0, w - 1)]
+        self._held_sectors = [_Held() for _ in range(self.sectors)]
 
     def look(self, t: float, frame: np.ndarray, model_frame: np.ndarray) -> Visibility:
         """The camera's word at time ``t``: ``frame`` the source frame (BGR or grey), ``model_frame`` what the
@@ -141,8 +149,6 @@ class CameraHealth:
         raw = whole if whole is not Blindness.CLEAR else (Blindness.PARTIAL if any(unseen_now) else Blindness.CLEAR)
         if raw is Blindness.CLEAR:
             self._learn(sharp, cells, dt)
-        if len(self._held_sectors) != self.sectors:
-            self._held_sectors = [_Held() for _ in range(self.sectors)]
         reason = _hold(self._held, raw, t, self.cfg)
         marks = [_hold(h, Blindness.PARTIAL if u else Blindness.CLEAR, t, self.cfg) is not Blindness.CLEAR
                  for h, u in zip(self._held_sectors, unseen_now, strict=True)]
@@ -194,18 +200,11 @@ class CameraHealth:
             covered = known & (cells < cfg.cell_flat)
         blind = covered | saturated
         out = []
-        cols = self._cell_sector(cells.shape[1])
         for s in range(self.sectors):
-            mine = cols == s
+            mine = self._cell_cols == s
             weight = (known | saturated)[:, mine].sum()
             out.append(bool(weight) and blind[:, mine].sum() / max(weight, 1) >= cfg.sector_saturated)
         return out
-
-    def _cell_sector(self, n: int) -> np.ndarray:
-        """The sector of each cell column: the sector of the model-frame column at its centre."""
-        w = len(self.columns)
-        centres = ((np.arange(n) + 0.5) * w / n).astype(int)
-        return self.columns[np.clip(centres, 0, w - 1)]
 
     def _learn(self, sharp: np.ndarray, cells: np.ndarray, dt: float) -> None:
         """A clear frame teaches the running baselines (sharpness, each cell's spread)."""

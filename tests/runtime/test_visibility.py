@@ -10,13 +10,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from benchmarks.bench_camera_health import video_frames
 from benchmarks.corruptions import CORRUPTIONS, sensor_noise
 from bsn_edge.alerts.blindness import Blindness
 from bsn_edge.alerts.sectors import SECTORS, SectorGeometry
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime.visibility import CameraHealth, VisibilityConfig
+from bsn_edge.sequence.media import read_video
 
 HIGHWAY = REAL_DATA / "dashcam_highway.mp4"
 FPS = 25.0
@@ -31,7 +31,7 @@ def drive():
     from bsn_edge.runtime.camera_state import CameraState
     from bsn_edge.runtime.engine import Engine
 
-    frames = video_frames(HIGHWAY)
+    frames = read_video(HIGHWAY)
     card = Engine(DEFAULT_MODEL).card
     state = CameraState(card, None, background=False)
     warp = state.frame_for(frames[0])
