@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +24,12 @@ from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import IMAGE_EXTS, is_image, picture_damage
 from bsn_edge.sequence.picture_header import declared_size, within_budget
 from bsn_edge.user_file import read_user_file
+
+
+# the folder's size is the commonest of its first pictures' (their headers only); a JPEG's frame header
+# sits after its EXIF and tables, within the first 64 KiB of any camera's file
+SIZE_FROM = 9
+HEADER_BYTES = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -42,6 +48,37 @@ def capture_size(cap) -> tuple[int, int] | None:
     return (w, h) if w > 0 and h > 0 else None
 
 
+MJPEG = cv2.VideoWriter_fourcc(*"MJPG")
+
+
+def as_packets(cap) -> bool:
+    """Switch an MJPEG capture (a file or a stream) to its packets, each decoded here as its own
+    picture: FFmpeg scales every picture of such a stream to the first one's size, so a portrait
+    picture in a landscape stream would arrive squashed to the stream's size and run as if nothing
+    had changed. Whether the capture now delivers packets."""
+    try:
+        if int(cap.get(cv2.CAP_PROP_FOURCC)) != MJPEG:
+            return False
+        return bool(cap.set(cv2.CAP_PROP_FORMAT, -1))
+    except (cv2.error, AttributeError, TypeError):    # a backend (or a test's stand-in) without the setting
+        return False
+
+
+def read_frame(cap, packets: bool) -> tuple[bool, np.ndarray | None]:
+    """``cap.read()``; with ``packets`` the packet decoded at the size its own header declares (None for
+    a packet that is no picture within the pixel budget: a frame that did not decode)."""
+    ok, frame = cap.read()
+    if not ok or frame is None or not packets:
+        return ok, frame
+    data = np.ascontiguousarray(frame).reshape(-1)
+    if not within_budget(declared_size(data[:HEADER_BYTES].tobytes())):
+        return True, None
+    try:
+        return True, cv2.imdecode(data, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    except cv2.error:
+        return True, None
+
+
 class Source:
     """Base: iterate to get frames; ``dropped`` counts frames a live source had to skip while the loop
     ran (``before_start`` those it replaced before the loop first asked: the model was still warming
@@ -53,6 +90,7 @@ class Source:
     :meth:`_frames`, which may stop early by watching :attr:`stopped`."""
 
     live = False
+    pace = False                 # a file's or folder's frames handed out no sooner than their own times
     fps = 10.0                   # frames per second of the source's own clock (a file's, a folder's; nominal when live)
     dropped = 0
     before_start = 0
@@ -68,17 +106,29 @@ class Source:
         """Whether every frame comes from one camera (a folder of unrelated photos does not)."""
         return self.cameras is None or self.cameras.cameras is FolderCameras.ONE
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic,
+                 wait: Callable[[float], bool] | None = None) -> None:
+        """``clock`` and ``wait``: what pacing reads and how it waits (``wait(s)`` is True when a stop
+        came meanwhile; by default a wait a stop ends at once); injected in tests."""
         self._stop = threading.Event()
+        self._clock = clock
+        self._wait = wait or self._stop.wait
 
     @property
     def stopped(self) -> bool:
         return self._stop.is_set()
 
     def __iter__(self) -> Iterator[Captured]:
+        start = None
         for cap in self._frames():
             if self.stopped:
                 return
+            if self.pace and not self.live:        # a live source is paced by its camera
+                start = self._clock() - cap.t if start is None else start
+                # a stop wakes the wait at once: the run ends on a signal, not after the frame's time
+                due = start + cap.t - self._clock()
+                if due > 0 and self._wait(due):
+                    return
             yield cap
 
     def _frames(self) -> Iterator[Captured]:
@@ -107,13 +157,14 @@ class VideoFileSource(Source):
     frames after it keep their true times and indices. A file that stops decoding for ``give_up``
     frames in a row before its end has failed."""
 
-    def __init__(self, path: str | Path, pace: bool = False, give_up: int = 250, decode_threads: int = 1) -> None:
+    def __init__(self, path: str | Path, pace: bool = False, give_up: int = 250, decode_threads: int = 1,
+                 clock: Callable[[], float] = time.monotonic, wait: Callable[[float], bool] | None = None) -> None:
         """``decode_threads``: FFmpeg's decoding threads (0: its own choice, one per core). One by default:
         the frame is then decoded on the thread that reads it, at that thread's priority (the loop's
         feeder runs below the model's), and with less CPU than frame threading takes."""
         if decode_threads < 0:
             raise ValueError(f"decode_threads must be >= 0, got {decode_threads}")
-        super().__init__()
+        super().__init__(clock, wait)
         self.path = Path(path)
         self.cap = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, decode_threads])
         if not self.cap.isOpened():          # a file FFmpeg does not read: whichever backend can
@@ -121,8 +172,10 @@ class VideoFileSource(Source):
         if not self.cap.isOpened():
             raise ValueError(f"{self.path}: OpenCV cannot open this video")
         self.fps = self.cap.get(cv2.CAP_PROP_FPS) or 10.0
-        self.total = int(self.cap.get(cv2.CAP_PROP_FRAME_COUNT)) or None
+        count = int(self.cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        self.total = count if count > 0 else None        # a stream of pictures says -2**63: not known
         self.size = capture_size(self.cap)
+        self.packets = as_packets(self.cap)
         self.picture = self.path if is_image(self.path) else None
         self.pace, self.give_up = pace, give_up
         self.skipped = 0                 # frames the decoder jumped over or could not decode
@@ -135,12 +188,11 @@ class VideoFileSource(Source):
         return max(expected, round(ms * self.fps / 1000.0))
 
     def _frames(self) -> Iterator[Captured]:
-        start = time.monotonic()
         i = 0            # the index the next frame should have
         failures = 0     # failed reads since the last frame
         while not self.stopped:
             t0 = time.perf_counter()
-            ok, frame = self.cap.read()
+            ok, frame = read_frame(self.cap, self.packets)
             dt = time.perf_counter() - t0
             if not ok:
                 failures += 1
@@ -154,12 +206,7 @@ class VideoFileSource(Source):
                 self.skipped += 1
                 yield Captured(j / self.fps, None, j, 0.0)
             failures = 0
-            t = k / self.fps
-            if self.pace:
-                wait = start + t - time.monotonic()
-                if wait > 0:
-                    time.sleep(wait)
-            yield Captured(t, frame, k, dt)
+            yield Captured(k / self.fps, frame, k, dt)
             i = k + 1
 
     def _release(self) -> None:
@@ -176,14 +223,11 @@ class VideoFileSource(Source):
                         "frames unread")
 
 
-# the folder's size is the commonest of its first pictures' (their headers only); a JPEG's frame header
-# sits after its EXIF and tables, within the first 64 KiB of any camera's file
-SIZE_FROM = 9
-HEADER_BYTES = 1 << 16
-
 class ImageFolderSource(Source):
-    def __init__(self, folder: str | Path, fps: float = 10.0) -> None:
-        super().__init__()
+    def __init__(self, folder: str | Path, fps: float = 10.0, pace: bool = False,
+                 clock: Callable[[], float] = time.monotonic, wait: Callable[[float], bool] | None = None) -> None:
+        super().__init__(clock, wait)
+        self.pace = pace
         self.folder = Path(folder)
         rgb = SequenceFolder(self.folder).dir(SequenceFolder.RGB)
         root = rgb if rgb.is_dir() else self.folder
@@ -282,6 +326,7 @@ class LiveSource(Source):
         super().__init__()
         self.target, self.policy = target, reconnect or Reconnect()
         self._opener = opener or (lambda t: open_capture(t, self.policy.stall_s))
+        self._packets = False
         self.cap = self._open()
         if self.cap is None:
             raise ValueError(f"cannot open camera or stream {target!r}")
@@ -301,6 +346,7 @@ class LiveSource(Source):
         if not cap.isOpened():
             cap.release()
             return None
+        self._packets = as_packets(cap)         # a reopened stream may come back in another format
         return cap
 
     def _reopen(self) -> bool:
@@ -334,11 +380,11 @@ class LiveSource(Source):
         while not self._stop.is_set():
             t0 = time.perf_counter()
             try:
-                ok, frame = self.cap.read()
+                ok, frame = read_frame(self.cap, self._packets)
             except Exception:   # a backend that raises has lost the camera as one that returns nothing
                 ok, frame = False, None
             dt = time.perf_counter() - t0
-            if not ok or frame is None or dt > self.policy.stall_s:
+            if not ok or (frame is None and not self._packets) or dt > self.policy.stall_s:
                 if not self._reopen():
                     self._ended.set()
                     self._slot.end()
@@ -393,7 +439,7 @@ def open_source(spec: str, pace: bool = False, fps: float = 10.0, decode_threads
         return LiveSource(spec, policy)
     p = Path(spec)
     if p.is_dir():
-        return ImageFolderSource(p, fps)
+        return ImageFolderSource(p, fps, pace)
     if p.is_file():
         return VideoFileSource(p, pace, decode_threads=decode_threads)
     raise FileNotFoundError(f"source {spec!r} is not a file, a folder, a camera index or a URL")
