@@ -25,7 +25,6 @@ from bsn_edge.sequence.media import IMAGE_EXTS, is_image, picture_damage
 from bsn_edge.sequence.picture_header import declared_size, within_budget
 from bsn_edge.user_file import read_user_file
 
-
 # the folder's size is the commonest of its first pictures' (their headers only); a JPEG's frame header
 # sits after its EXIF and tables, within the first 64 KiB of any camera's file
 SIZE_FROM = 9
