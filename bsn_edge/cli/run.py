@@ -59,8 +59,8 @@ def _model_and_source(p: argparse.ArgumentParser) -> None:
                    help="run a model that is unsigned or signed by a key not trusted here (your own experiments); "
                         "the status then says Model_Unsigned on every cycle and the summary says whose it is not. "
                         "A signature that does not match its model is refused even so")
-    g.add_argument("--pace", action="store_true", help="play a video file at its own frame rate, a folder at 10 pictures a second "
-                   "(else as fast as the model runs)")
+    g.add_argument("--pace", action="store_true", help="play a video file at its own frame rate, a folder at 10 "
+                   "pictures a second (else as fast as the model runs)")
     g.add_argument("--stall", type=float, default=None, metavar="SECONDS",
                    help="a camera or stream that delivers no frame for this long is lost: the bus says "
                         "UNAVAILABLE and it is reopened with back-off (source.stall_s; default 2)")
