@@ -47,7 +47,7 @@ def capture_size(cap) -> tuple[int, int] | None:
     return (w, h) if w > 0 and h > 0 else None
 
 
-MJPEG = cv2.VideoWriter_fourcc(*"MJPG")
+MJPEG = cv2.VideoWriter.fourcc(*"MJPG")
 
 
 def as_packets(cap) -> bool:
