@@ -273,6 +273,8 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
         # the outputs being free, said in the summary
         engine, camera, source, maps = _start(args, cfg)
     except (FileNotFoundError, ValueError, OSError) as e:
+        if stopper.event.is_set():     # the first signal decides, even over a refusal it came during
+            return _stopped_early(args, stopper, senders)
         return refuse(senders, str(e), args.summary)
     if stopper.event.is_set():
         source.close()

@@ -6,12 +6,62 @@ moment of its start-up is handled.
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 from typing import Any
 
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGINT", "SIGHUP", "SIGQUIT")
                      if hasattr(signal, name))
+
+
+class _Arrivals:
+    """The order the terminating signals arrived in. Python runs its handlers in the order of the signals'
+    numbers, not of their arrival (a TERM then an INT at once would run INT's handler first); the C-level
+    handler writes each signal's number to the wakeup pipe as it arrives, so the pipe knows. One per
+    process (there is one wakeup descriptor), set up from the main thread."""
+
+    def __init__(self) -> None:
+        self.read_fd, write_fd = os.pipe()
+        os.set_blocking(self.read_fd, False)
+        os.set_blocking(write_fd, False)
+        self.write_fd = write_fd
+        self.old_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+        self.held: list[int] = []        # signals caught before a StopOnSignal took over (hold_signals)
+
+    def first(self, fallback: int) -> int:
+        """The first terminating signal the pipe holds (``fallback`` when it holds none); the pipe is emptied."""
+        data = b""
+        try:
+            while chunk := os.read(self.read_fd, 4096):
+                data += chunk
+        except BlockingIOError:
+            pass
+        return next((b for b in data if b in STOP_SIGNALS), fallback)
+
+    def close(self) -> None:
+        signal.set_wakeup_fd(self.old_fd)
+        for fd in (self.read_fd, self.write_fd):
+            os.close(fd)
+
+
+_arrivals: _Arrivals | None = None
+
+
+def _hold(signum: int, _frame: Any) -> None:
+    if _arrivals is not None:
+        _arrivals.held.append(signum)
+
+
+def hold_signals() -> None:
+    """Catch the terminating signals from a command's first instruction, before its modules are imported
+    (they take a while), for the :class:`StopOnSignal` its ``main`` enters to act on: a signal during the
+    imports then ends the run cleanly instead of by the default action. Main thread only."""
+    global _arrivals
+    if _arrivals is None:
+        _arrivals = _Arrivals()
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, _hold)
 
 
 def exit_code(signame: str | None) -> int:
@@ -41,6 +91,8 @@ class StopOnSignal:
         if self.event.is_set():
             self.later += 1
             return
+        if _arrivals is not None:            # the first to arrive, which is not always the first handled
+            signum = _arrivals.first(signum)
         self.signal = signal.Signals(signum).name
         self.event.set()
         if self.source is not None:
@@ -53,18 +105,29 @@ class StopOnSignal:
             source.stop()
 
     def __enter__(self) -> StopOnSignal:
+        global _arrivals
         if threading.current_thread() is threading.main_thread():
+            if _arrivals is None:
+                _arrivals = _Arrivals()
             for sig in STOP_SIGNALS:
-                self._old[sig] = signal.signal(sig, self._handle)
+                old = signal.signal(sig, self._handle)
+                self._old[sig] = signal.SIG_DFL if old is _hold else old
+            held, _arrivals.held = _arrivals.held, []
+            for signum in held:              # caught while the command started (hold_signals)
+                self._handle(signum, None)
         return self
 
     def __exit__(self, *exc) -> None:
+        global _arrivals
         if self.keep and self.event.is_set():
             # ignored, not handled: Python puts back the default action of the signals it handles while it
             # shuts down, and a late signal would then kill the process after its clean stop
             for sig in self._old:
                 signal.signal(sig, signal.SIG_IGN)
-            return
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
+        else:
+            for sig, old in self._old.items():
+                signal.signal(sig, old)
+        if self._old and _arrivals is not None:
+            _arrivals.close()
+            _arrivals = None
 
