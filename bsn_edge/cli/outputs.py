@@ -69,7 +69,8 @@ def prepare_output(kind: OutputKind, path: str | os.PathLike) -> Path:
         raise ValueError(f"{name}: its folder cannot be made ({e.strerror or e})") from e
     probe = p.parent / f".{p.name}.{os.getpid()}.probe"      # what the disk says, read-only or full
     try:
-        probe.open("xb").close()
+        with probe.open("xb") as f:      # a byte, not only a name: a full disk still makes empty files
+            f.write(b"\0")
         probe.unlink()
     except OSError as e:
         raise ValueError(f"{name}: cannot be written here ({e.strerror or e})") from e

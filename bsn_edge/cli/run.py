@@ -12,6 +12,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from bsn_edge.cli.common import fail
+from bsn_edge.cli.console import console_streams, lost
 from bsn_edge.cli.outputs import OutputKind, check_not_inputs, check_outputs
 from bsn_edge.cli.run_report import PROG, early_summary, report
 from bsn_edge.cli.stop_signal import StopOnSignal, exit_code
@@ -224,8 +225,9 @@ def refuse(senders: list[Sender], message: str, summary: str | None = None) -> i
 def main(argv: list[str] | None = None) -> int:
     # signals first: from here on SIGINT and SIGTERM end the run cleanly, during start-up included; once
     # the outputs are open, every way out ends with UNAVAILABLE on the bus
-    with StopOnSignal(keep=argv is None) as stopper:
+    with StopOnSignal(keep=argv is None) as stopper, console_streams(keep=argv is None) as console:
         args = build_parser().parse_args(argv)
+        args.console = console
         if args.max_frames is not None and args.max_frames < 1:
             return fail(PROG, "--max-frames must be >= 1")
         if args.stall is not None and not args.stall > 0:
@@ -309,7 +311,7 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
     from bsn_edge.runtime.config_file import digest, to_dict
     from bsn_edge.runtime.run_summary import machine
     summary.update(signal=stopper.signal, source=args.source, machine=machine(), settings=to_dict(cfg),
-                   settings_digest=digest(cfg))
+                   settings_digest=digest(cfg), console=lost(args.console))
     return report(summary, args, camera, senders, stopper.signal)
 
 

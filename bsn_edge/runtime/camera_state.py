@@ -29,7 +29,10 @@ from bsn_edge.card import ModelCard
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.mounting import Mounting
 from bsn_edge.runtime.calibrator import OnlineCalibrator
+from bsn_edge.runtime.sinks import SinkFailure
 from bsn_edge.runtime.source_config import CalibrationConfig
+
+CAMERA_FILE = "camera file"      # the output --save-calib names, as the summary's sinks name it
 
 
 class CameraState:
@@ -60,6 +63,7 @@ class CameraState:
         self.card = card
         self.calibration = calibration
         self.save_to = Path(save_to) if save_to else None
+        self.save_failure: SinkFailure | None = None    # the camera file could not be written (a full disk)
         self.intrinsics_from = "assumed: the model camera's, rescaled (no camera file)" if calibration is None \
             else intrinsics_from
         self.height_m = height_m or (calibration.mounting.height_m if calibration and calibration.mounting
@@ -221,8 +225,12 @@ class CameraState:
                     "frame": self._observed,
                     "seconds": None if self._fps is None else round(self._observed / self._fps, 2)}
                 if self.save_to is not None:
-                    cam.with_mounting(m, **report).write(self.save_to)
-                    self.report["saved"] = str(self.save_to)
+                    try:
+                        cam.with_mounting(m, **report).write(self.save_to)
+                        self.report["saved"] = str(self.save_to)
+                    except OSError as e:      # an output that failed: the drive goes on, DEGRADED (the loop)
+                        self.save_failure = SinkFailure(CAMERA_FILE, self._observed,
+                                                        f"{self.save_to}: {e.strerror or e}")
         if m is not None:
             self._calibrator.close()
 

@@ -35,7 +35,7 @@ from bsn_edge.alerts.sectors import blind_spots
 from bsn_edge.alerts.senders import Sender
 from bsn_edge.config_toml import check_fields, setting
 from bsn_edge.model_frame import ModelFrame
-from bsn_edge.runtime.camera_state import CameraState
+from bsn_edge.runtime.camera_state import CAMERA_FILE, CameraState
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat, StallWatch
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.feeder import Feeder, Prepared
@@ -161,6 +161,7 @@ class FramePipeline:
         self.frames = self.valid = 0
         self.shape: tuple[int, ...] | None = None      # the source's frames' shape: its first frame's
         self.reconnects_seen = 0
+        self._camera_file_failed = False
         self.last_t = 0.0
 
     # -- the stages ------------------------------------------------------------------------------
@@ -212,6 +213,9 @@ class FramePipeline:
             return None
         self.camera.picture(cap.picture, frame)
         self.camera.observe(frame)
+        if self.camera.save_failure is not None and not self._camera_file_failed:
+            self._camera_file_failed = True            # the saved camera file is an output like the others
+            self.health.fault(Fault.SINK_ERRORS)
         mf = self.camera.frame_for(frame)
         mf.to_model(frame, dst=buf[0])
         return mf, self.camera.calibrating
@@ -456,8 +460,10 @@ class FramePipeline:
             heartbeat_error=self.heartbeat.last_error if self.heartbeat is not None else "",
             camera=self.camera.summary(), visibility=self.blind.to_json(),
             maps_written=0 if maps is None else maps.written,
-            sinks={name: SinkSummary(k.written, k.dropped, None if k.ok else vars(k.failure))
-                   for name, k in self.sinks.items()},
+            sinks={**{name: SinkSummary(k.written, k.dropped, None if k.ok else vars(k.failure))
+                      for name, k in self.sinks.items()},
+                   **({} if self.camera.save_failure is None
+                      else {CAMERA_FILE: SinkSummary(0, 0, vars(self.camera.save_failure))})},
             model=ModelSummary(card.variant, card.input_size, self.engine.threshold, card.quantization,
                                self.engine.kernels, self.engine.self_test, self.engine.signer,
                                self.engine.authentic, self.engine.verdict.note, card.graph_sha256 or "",

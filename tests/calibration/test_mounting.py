@@ -206,6 +206,54 @@ def test_bsn_run_leaves_calibrating_and_saves_the_camera_file(long_drive, small_
     assert f"calibrated: pitch {got.pitch_deg:+.2f} yaw {got.yaw_deg:+.2f} deg, converged at frame {said[1]}" in last
 
 
+def test_a_camera_file_that_cannot_be_saved_when_calibration_converges_degrades_the_drive_not_ends_it(
+        long_drive, small_light_onnx, tmp_path, capsys, monkeypatch):
+    """--save-calib on a disk that fills up before calibration converges: once stopped the whole drive
+    (exit 2, "could not start", no summary); now the drive runs to its end, the failure named with its file
+    and frame in the summary's outputs, DEGRADED on the bus from then on."""
+    import errno
+    import json
+
+    import can
+
+    from bsn_edge.alerts import SystemState
+    from bsn_edge.alerts.can_codec import decode
+    from bsn_edge.calibration import camera_file
+    from bsn_edge.cli import run as run_cli
+
+    truth = Calibration.read(long_drive / "calibration.json")
+    Calibration.of(truth.intrinsics, truth.dist, None).write(tmp_path / "intrinsics.json")
+    saved, summary = tmp_path / "cam.json", tmp_path / "s.json"
+    real = camera_file.atomic_write_bytes
+
+    def full(target, data, *a, **k):
+        if str(target) == str(saved):
+            raise OSError(errno.ENOSPC, "No space left on device", str(target))
+        return real(target, data, *a, **k)
+
+    monkeypatch.setattr(camera_file, "atomic_write_bytes", full)
+    frames = len(list((long_drive / "rgb").iterdir()))
+    with can.Bus(interface="virtual", channel="bsn-calib-full") as rx:
+        code = run_cli.main(["--model", str(small_light_onnx((128, 256))), "--source", str(long_drive / "rgb"),
+                             "--calib", str(tmp_path / "intrinsics.json"), "--height", f"{truth.mounting.height_m}",
+                             "--save-calib", str(saved), "--summary", str(summary), "--can", "virtual:bsn-calib-full"])
+        states = []
+        while (m := rx.recv(timeout=0.2)) is not None:
+            d = decode(m.arbitration_id, m.data)
+            if d is not None and d.name == "BSN_Status":
+                states.append(d.signals["System_State"])
+    s = json.loads(summary.read_text())
+    err = capsys.readouterr().err
+    assert code == 0 and s["frames"] == frames, (code, s["frames"], err[-400:])
+    failure = s["sinks"]["camera file"]["failure"]
+    assert str(saved) in failure["error"] and "No space left" in failure["error"] and failure["frame"] > 0, failure
+    assert s["faults"]["sink_errors"] == 1 and not saved.exists()
+    assert "camera file output failed at frame" in err, err[-400:]
+    # converged, then never OK again: DEGRADED (a failed output), or UNAVAILABLE at a stall or the end
+    after = states[len(states) - states[::-1].index(SystemState.CALIBRATING):]
+    assert after and SystemState.DEGRADED in after and SystemState.OK not in after, after
+
+
 def test_road_normal_of_exact_correspondences_is_the_plane_down_direction():
     """Road corners seen from a known camera before and after a known motion (analytic, no picture):
     the plane solve gives the road's down direction in the camera frame; a car ahead moving with the

@@ -75,3 +75,23 @@ def test_a_video_too_small_or_too_wide_is_refused_before_its_first_frame(setup, 
         r = bsn_run("--model", str(model), "--source", str(video), "--summary", str(summary))
         assert r.returncode == 2 and f"frames of {w}x{h}" in r.stderr, (r.returncode, r.stderr[-300:])
         assert json.loads(summary.read_text())["frames"] == 0
+
+
+def test_a_full_stdout_or_stderr_loses_only_what_was_printed(setup, tmp_path):
+    """Standard error on a full disk once lost the summary (rc 1, silent), standard output ended in a
+    traceback: the drive, the bus and the summary go on; what could not be printed is named in the summary."""
+    model, clip = setup
+    env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
+    for stream in ("stdout", "stderr"):
+        summary, log = tmp_path / f"{stream}.json", tmp_path / f"{stream}.log"
+        with open("/dev/full", "w") as full:
+            r = subprocess.run([sys.executable, "-m", "bsn_edge.cli.run", "--model", str(model), "--source",
+                                str(clip / "video.mp4"), "--summary", str(summary), "--can-log", str(log),
+                                "--allow-unsigned"], env=env, timeout=6 * BUSY_S,
+                               **{stream: full, "stdout" if stream == "stderr" else "stderr": subprocess.PIPE})
+        s = json.loads(summary.read_text())
+        assert r.returncode == 0 and s["frames"] == 15, (stream, r.returncode)
+        if stream == "stderr":           # the progress line and the warnings were lost while it ran
+            assert s["console"]["stderr"]["error"] == "No space left on device", s["console"]
+        else:                            # the end lines come after the summary is written
+            assert "Traceback" not in r.stderr.decode(), r.stderr.decode()[-400:]
