@@ -8,12 +8,21 @@ at any moment of start-up ends the run cleanly.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from typing import TYPE_CHECKING
 
 from bsn_edge.cli.common import fail
 from bsn_edge.cli.console import console_streams, lost
-from bsn_edge.cli.outputs import OutputKind, check_not_inputs, check_outputs
+from bsn_edge.cli.outputs import (
+    OutputKind,
+    OutputsRefusedError,
+    check_distinct,
+    check_not_inputs,
+    check_outputs,
+    judge_output,
+    prepare_output,
+)
 from bsn_edge.cli.run_report import PROG, early_summary, report
 from bsn_edge.cli.stop_signal import StopOnSignal, exit_code
 from bsn_edge.default_model import DEFAULT_MODEL
@@ -202,14 +211,30 @@ def make_senders(args: argparse.Namespace, bus: BusConfig | None = None) -> list
     return open_senders(bus_outputs(args.can, args.serial, args.can_log, bus), bus)
 
 
-def _refuse_outputs(args: argparse.Namespace, message: str) -> int:
-    """Outputs that cannot be written: nothing is written (no CAN log, no summary), and a vehicle bus or
-    serial link asked for hears UNAVAILABLE."""
+def _refuse_outputs(args: argparse.Namespace, message: str, writable: bool = False) -> int:
+    """Outputs refused. A vehicle bus or serial link asked for hears UNAVAILABLE. ``writable``: the refusal is
+    the disk's (a read-only folder, a file where a folder should be): the CAN log and the summary, each that
+    can itself be written, get UNAVAILABLE and the reason. Otherwise (a file that exists, a suffix the writer
+    does not know, two outputs or an output and an input naming one file) nothing is written: a command line
+    to mend, not a run."""
+    usable = {kind.flag: path for kind, path in _output_files(args)
+              if writable and path and kind.flag in ("--can-log", "--summary") and _can_write(kind, path)}
     try:
-        senders = make_senders(argparse.Namespace(**{**vars(args), "can_log": None}))
+        senders = make_senders(argparse.Namespace(**{**vars(args), "can_log": usable.get("--can-log")}))
     except ValueError:
         senders = []
-    return refuse(senders, message)
+    return refuse(senders, message, usable.get("--summary"))
+
+
+def _can_write(kind: OutputKind, path: str) -> bool:
+    """Whether this one output could be written (neither there already nor on a disk that refuses it)."""
+    if judge_output(kind, path, force=False) is not None:
+        return False
+    try:
+        prepare_output(kind, path)
+    except ValueError:
+        return False
+    return True
 
 
 def refuse(senders: list[Sender], message: str, summary: str | None = None) -> int:
@@ -228,11 +253,16 @@ def main(argv: list[str] | None = None) -> int:
     with StopOnSignal(keep=argv is None) as stopper, console_streams(keep=argv is None) as console:
         args = build_parser().parse_args(argv)
         args.console = console
-        if args.max_frames is not None and args.max_frames < 1:
-            return fail(PROG, "--max-frames must be >= 1")
-        if args.stall is not None and not args.stall > 0:
-            return fail(PROG, f"--stall must be a positive number of seconds, got {args.stall:g}")
         return _run(args, stopper)
+
+
+def _wrong_numbers(args: argparse.Namespace) -> str | None:
+    """What is wrong with the command line's numbers (None: nothing)."""
+    if args.max_frames is not None and args.max_frames < 1:
+        return f"--max-frames must be >= 1, got {args.max_frames}"
+    if args.stall is not None and not (args.stall > 0 and math.isfinite(args.stall)):
+        return f"--stall must be a positive number of seconds, got {args.stall:g}"
+    return None
 
 
 def _stopped_early(args: argparse.Namespace, stopper: StopOnSignal, senders: list[Sender] | None = None) -> int:
@@ -264,13 +294,21 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
         check_not_inputs([(k.flag, path) for k, path in _output_files(args)] + [("--save-maps", args.save_maps)],
                          [("--source", args.source), ("--calib", args.calib), ("--model", args.model),
                           ("--config", args.config), *(("--trust", t) for t in args.trust)])
-        check_outputs(_output_files(args), args.force)
+        check_distinct(_output_files(args))
     except (ValueError, OSError) as e:
         return _refuse_outputs(args, str(e))
+    try:
+        check_outputs(_output_files(args), args.force)
+    except OutputsRefusedError as e:                  # a command line to mend: a file there, a wrong suffix
+        return _refuse_outputs(args, str(e))
+    except (ValueError, OSError) as e:                # the disk's: a folder that cannot be made or written
+        return _refuse_outputs(args, str(e), writable=True)
     configured = _configured(args)
     if isinstance(configured, int):
         return configured
     cfg, senders = configured
+    if (wrong := _wrong_numbers(args)) is not None:
+        return refuse(senders, wrong, args.summary)
     try:                                              # from here a refusal is UNAVAILABLE on the bus and,
         # the outputs being free, said in the summary
         engine, camera, source, maps = _start(args, cfg)

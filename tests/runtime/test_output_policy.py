@@ -67,11 +67,42 @@ def test_missing_folders_are_made_for_every_output(setup, tmp_path):
     assert json.loads((tmp_path / "d/s.json").read_text())["frames"] == 3
 
 
-def test_an_output_under_a_file_is_refused_before_the_first_frame(setup, tmp_path, capsys):
+def _last_status(can_log):
+    import can
+
+    from bsn_edge.alerts.can_codec import decode
+
+    msgs = [decode(m.arbitration_id, bytes(m.data)) for m in can.LogReader(str(can_log))]
+    return [d.signals["System_State"] for d in msgs if d is not None and d.name == "BSN_Status"][-1]
+
+
+@pytest.mark.parametrize("flag,name", [("--log", "f.jsonl"), ("--overlay", "o.mp4"), ("--save-calib", "cam.json")])
+def test_an_output_under_a_file_is_refused_with_unavailable_on_the_can_log_and_the_summary(setup, tmp_path, capsys,
+                                                                                          flag, name):
+    """The disk refuses it (a file where its folder should be): the bus asked for (here the CAN log) hears
+    UNAVAILABLE and the summary says why, as for every other refusal (once nothing was written at all)."""
+    from bsn_edge.alerts import SystemState
+
     model, clip = setup
     (tmp_path / "file").write_text("x")
-    assert _run(model, clip, "--log", str(tmp_path / "file" / "f.jsonl")) == 2
+    can_log, summary = tmp_path / "c.log", tmp_path / "s.json"
+    assert _run(model, clip, flag, str(tmp_path / "file" / name), "--can-log", str(can_log),
+                "--summary", str(summary)) == 2
     assert "its folder cannot be made" in capsys.readouterr().err
+    assert _last_status(can_log) == SystemState.UNAVAILABLE
+    assert "its folder cannot be made" in json.loads(summary.read_text())["refused"]
+
+
+@pytest.mark.parametrize("wrong", [("--max-frames", "0"), ("--stall", "nan"), ("--stall", "-1")])
+def test_numbers_no_run_can_use_are_refused_with_unavailable_and_the_summary(setup, tmp_path, capsys, wrong):
+    from bsn_edge.alerts import SystemState
+
+    model, clip = setup
+    can_log, summary = tmp_path / "c.log", tmp_path / "s.json"
+    assert _run(model, clip, *wrong, "--can-log", str(can_log), "--summary", str(summary)) == 2
+    named = {"--max-frames": "--max-frames", "--stall": "stall_s"}[wrong[0]]      # the flag, or the key it sets
+    assert named in json.loads(summary.read_text())["refused"]
+    assert _last_status(can_log) == SystemState.UNAVAILABLE
 
 
 def test_the_contact_sheet_and_the_demo_keep_what_is_there_without_force(setup, tmp_path, capsys):
