@@ -117,6 +117,9 @@ def transmit_buffer_full(e: Exception) -> bool:
     return getattr(e, "error_code", None) == errno.ENOBUFS or "transmit buffer full" in str(e).lower()
 
 
+BLF_BLOCK_BYTES = 1024
+
+
 class CanSender(Sender):
     """python-can on any interface (``socketcan``, ``virtual``, vendor ones), loaded lazily.
     Optionally logs every sent frame (``.log`` candump, ``.asc``, ``.blf``) through python-can's
@@ -135,6 +138,10 @@ class CanSender(Sender):
         self.bus = bus if bus is not None else can.Bus(interface=interface, channel=channel)
         self.timeout_s = timeout_s
         self.logger = can.Logger(log_path) if log_path else None
+        if self.logger is not None and hasattr(self.logger, "max_container_size"):
+            # BLF writes compressed blocks, 128 KiB by default: over a minute of this bus's frames, all of it
+            # lost at a kill; a block of BLF_BLOCK_BYTES is about half a second of them
+            self.logger.max_container_size = BLF_BLOCK_BYTES
 
     def _send(self, frames: list[tuple[int, bytes]]) -> None:
         for fid, data in frames:

@@ -45,6 +45,21 @@ def test_can_round_trip_on_a_virtual_bus(tmp_path):
     assert log.read_text().count("Rx") + log.read_text().count("Tx") >= 40
 
 
+def test_a_blf_can_log_holds_all_but_its_last_block_while_the_run_lives(tmp_path):
+    """What a kill leaves: the file as it is before the log is closed. BLF's default block (128 KiB, about a
+    minute of cycles) once left a 40 s drive's log empty; a reader other than the writer counts the frames."""
+    log = tmp_path / "alerts.blf"
+    with can.Bus(interface="virtual", channel="bsn-test-blf") as _, \
+            CanSender("virtual", "bsn-test-blf", log_path=str(log)) as tx:
+        for k in range(100):                        # 5 s of cycles: 200 frames
+            assert tx.send(frame(k * 0.05))
+        killed = tmp_path / "killed.blf"
+        shutil.copyfile(log, killed)
+    frames = sum(1 for _ in can.BLFReader(str(killed)))
+    assert 200 - 40 <= frames < 200, frames        # a block is about 20 frames, half a second of them
+    assert sum(1 for _ in can.BLFReader(str(log))) == 200
+
+
 def test_corrupted_crc_is_rejected():
     with can.Bus(interface="virtual", channel="bsn-test-2") as rx, CanSender("virtual", "bsn-test-2") as tx:
         tx.send(frame())
