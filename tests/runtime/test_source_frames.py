@@ -117,3 +117,26 @@ def test_a_stop_ends_a_paced_wait_at_once(setup):
     next(frames)
     threading.Timer(0.2, src.stop).start()
     assert list(frames) == []        # returns on the stop, not after 100 s (the suite's timeout would catch it)
+
+
+def test_a_picture_replaced_by_a_fifo_mid_run_is_a_damaged_frame_not_a_hang(setup, tmp_path):
+    """The folder is listed when the run starts; a picture that becomes a FIFO afterwards (nobody writes
+    into it) once blocked the read for good, and only SIGKILL ended the run."""
+    import os
+    import shutil
+
+    from tests.fakes import BUSY_S
+
+    _, clip = setup
+    frames = tmp_path / "frames"
+    shutil.copytree(clip / "rgb", frames)
+    src = ImageFolderSource(frames)
+    victim = src.files[5]
+    victim.unlink()
+    os.mkfifo(victim)
+    got: list = []
+    reader = threading.Thread(target=lambda: got.extend(c.frame is None for c in src), daemon=True)
+    reader.start()
+    reader.join(BUSY_S)
+    assert not reader.is_alive(), "the read of the FIFO blocked"
+    assert got == [i == 5 for i in range(15)], got
