@@ -211,14 +211,20 @@ def make_senders(args: argparse.Namespace, bus: BusConfig | None = None) -> list
     return open_senders(bus_outputs(args.can, args.serial, args.can_log, bus), bus)
 
 
+def _inputs(args: argparse.Namespace) -> list[tuple[str, str | None]]:
+    """The files a run reads, by flag."""
+    return [("--source", args.source), ("--calib", args.calib), ("--model", args.model), ("--config", args.config),
+            *(("--trust", t) for t in args.trust)]
+
+
 def _refuse_outputs(args: argparse.Namespace, message: str, writable: bool = False) -> int:
     """Outputs refused. A vehicle bus or serial link asked for hears UNAVAILABLE. ``writable``: the refusal is
-    the disk's (a read-only folder, a file where a folder should be): the CAN log and the summary, each that
-    can itself be written, get UNAVAILABLE and the reason. Otherwise (a file that exists, a suffix the writer
-    does not know, two outputs or an output and an input naming one file) nothing is written: a command line
-    to mend, not a run."""
+    not the CAN log's or the summary's own doing (a read-only folder, a file where another output's folder
+    should be, an output naming an input): each of the two that can itself be written gets UNAVAILABLE and
+    the reason. Otherwise (a file that exists without --force, a suffix the writer does not know) nothing is
+    written: a command line to mend, not a run, and the next try is not refused for a file this one left."""
     usable = {kind.flag: path for kind, path in _output_files(args)
-              if writable and path and kind.flag in ("--can-log", "--summary") and _can_write(kind, path)}
+              if writable and path and kind.flag in ("--can-log", "--summary") and _can_write(kind, path, args)}
     try:
         senders = make_senders(argparse.Namespace(**{**vars(args), "can_log": usable.get("--can-log")}))
     except ValueError:
@@ -226,13 +232,18 @@ def _refuse_outputs(args: argparse.Namespace, message: str, writable: bool = Fal
     return refuse(senders, message, usable.get("--summary"))
 
 
-def _can_write(kind: OutputKind, path: str) -> bool:
-    """Whether this one output could be written (neither there already nor on a disk that refuses it)."""
-    if judge_output(kind, path, force=False) is not None:
+def _can_write(kind: OutputKind, path: str, args: argparse.Namespace) -> bool:
+    """Whether this one output could be written: not there already (unless --force), no input and no other
+    output of the run, on a disk that takes it."""
+    if judge_output(kind, path, force=args.force) is not None:
         return False
+    others = [(k, p) for k, p in _output_files(args) if p and k.flag != kind.flag]
     try:
+        check_not_inputs([(kind.flag, path)], _inputs(args))
+        for other in others:
+            check_distinct([(kind, path), other])
         prepare_output(kind, path)
-    except ValueError:
+    except (ValueError, OSError):
         return False
     return True
 
@@ -292,11 +303,10 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
         return _stopped_early(args, stopper)
     try:                                              # every output judged before any is written
         check_not_inputs([(k.flag, path) for k, path in _output_files(args)] + [("--save-maps", args.save_maps)],
-                         [("--source", args.source), ("--calib", args.calib), ("--model", args.model),
-                          ("--config", args.config), *(("--trust", t) for t in args.trust)])
+                         _inputs(args))
         check_distinct(_output_files(args))
-    except (ValueError, OSError) as e:
-        return _refuse_outputs(args, str(e))
+    except (ValueError, OSError) as e:                # the summary and the CAN log, where they are free, say so
+        return _refuse_outputs(args, str(e), writable=True)
     try:
         check_outputs(_output_files(args), args.force)
     except OutputsRefusedError as e:                  # a command line to mend: a file there, a wrong suffix

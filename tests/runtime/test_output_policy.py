@@ -179,7 +179,10 @@ def test_a_pipe_given_as_the_summary_is_written_into_and_stays_a_pipe(setup, tmp
 
 
 @pytest.mark.parametrize("link", [False, True])
-def test_two_outputs_naming_one_file_are_refused_before_anything_is_written(setup, tmp_path, capsys, link):
+def test_two_outputs_naming_one_file_are_refused_and_neither_is_written(setup, tmp_path, capsys, link):
+    """Neither of the two is written; the CAN log, free, hears UNAVAILABLE (the bus's last word)."""
+    from bsn_edge.alerts import SystemState
+
     model, clip = setup
     first = tmp_path / "out.json"
     second = first
@@ -191,7 +194,7 @@ def test_two_outputs_naming_one_file_are_refused_before_anything_is_written(setu
     assert _run(model, clip, "--summary", str(first), "--save-calib", str(second), "--can-log",
                 str(tmp_path / "c.log")) == 2
     assert "--summary and --save-calib both name" in capsys.readouterr().err
-    assert not first.exists() and not (tmp_path / "c.log").exists()
+    assert not first.exists() and _last_status(tmp_path / "c.log") == SystemState.UNAVAILABLE
 
 
 @pytest.mark.parametrize("flag,what", [("--overlay", "source"), ("--summary", "calib"), ("--summary", "model"),
@@ -211,11 +214,18 @@ def test_an_output_that_names_an_input_is_refused_even_with_force(setup, tmp_pat
         target = tmp_path / "also.jsonl"
         os.link(video, target)
     before = {p: p.read_bytes() for p in (video, calib, mine)}
+    # the CAN log and, when it is not the culprit, the summary are free: they say why
+    free = [("--can-log", tmp_path / "c.log")] + ([] if flag == "--summary" else [("--summary", tmp_path / "s.json")])
     code = run_cli.main(["--model", str(mine), "--source", str(video), "--calib", str(calib), "--max-frames", "3",
-                         flag, str(target), "--force"])
+                         flag, str(target), "--force", *(x for f, p in free for x in (f, str(p)))])
     err = capsys.readouterr().err
     assert code == 2 and "an output never replaces what the run reads" in err, err
     assert {p: p.read_bytes() for p in before} == before, "an input was written"
+    from bsn_edge.alerts import SystemState
+
+    assert _last_status(tmp_path / "c.log") == SystemState.UNAVAILABLE
+    if flag != "--summary":
+        assert "an output never replaces" in json.loads((tmp_path / "s.json").read_text())["refused"]
 
 
 def test_maps_saved_into_the_source_folder_are_refused(setup, tmp_path, capsys):
