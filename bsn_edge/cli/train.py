@@ -7,9 +7,6 @@ import json
 import sys
 
 from bsn_edge.cli.common import fail
-from bsn_edge.train.config import load_config
-from bsn_edge.train.teacher_training import train_teacher_alone
-from bsn_edge.train.trainer import train
 
 PROG = "bsn-train"
 
@@ -48,6 +45,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # training's modules (torch) after the command line: --help needs none of them
+    from bsn_edge.train.config import load_config
+    from bsn_edge.train.teacher_training import train_teacher_alone
+    from bsn_edge.train.trainer import train
+
     try:
         cfg = load_config(args.config, args.overrides)
     except (FileNotFoundError, ValueError) as e:
