@@ -77,7 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from bsn_edge.adapt.pipeline import AdaptError, adapt    # torch: after the command line, which needs none
+    from bsn_edge.adapt.pipeline import AdaptError, adapt  # torch: after the command line, which needs none
 
     if args.sign:
         if not args.export:
