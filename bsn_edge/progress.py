@@ -83,8 +83,9 @@ class LineProgress:
         count = f"{self.n:g}" + (f"/{self.total:g} {self.unit} ({100 * self.n / self.total:.0f} %)"
                                  if self.total else f" {self.unit}")
         parts = [f"{self.desc}: {count}" if self.desc else count, f"{rate:.3g} {self.unit}/s"]
-        if done:
-            parts.append(f"done in {_duration(took)}")
+        if done:        # a run stopped short of its total (a signal, --max-frames) did not get "done"
+            parts.append(f"{'stopped after' if self.total and self.n < self.total else 'done in'} "
+                         f"{_duration(took)}")
         elif self.total and self.first is not None and self.n > self.first[1] and now > self.first[0]:
             steady = (self.n - self.first[1]) / (now - self.first[0])
             parts.append(f"{_duration((self.total - self.n) / steady)} left")

@@ -31,6 +31,15 @@ def test_a_line_every_interval_and_one_at_the_end():
     assert lines[-1] == "train: 400/400 step (100 %), 2 step/s, done in 2 min, loss=0.123"
 
 
+def test_work_stopped_short_of_its_total_is_not_done():
+    """After SIGINT at 14 % the line once ended "done in 4 s"."""
+    out, clock = io.StringIO(), Clock()
+    with LineProgress(desc="bsn-run", unit="frame", total=100, file=out, clock=clock) as bar:
+        clock.t = 4.0
+        bar.update(14)
+    assert out.getvalue().splitlines()[-1] == "bsn-run: 14/100 frame (14 %), 3.5 frame/s, stopped after 4 s"
+
+
 def test_work_of_unknown_size_counts_without_a_total():
     out, clock = io.StringIO(), Clock()
     with LineProgress(desc="frames", unit="frame", file=out, clock=clock) as bar:

@@ -123,8 +123,10 @@ class Calibration:
         known = {f.name for f in fields(cls)}     # fields of other versions are left out, not guessed at
         lens = ("fx", "fy", "cx", "cy", "width", "height")
         if not any(k in d for k in lens):
-            has = ", ".join(sorted(k for k in d if k in known)) or "nothing a camera file holds"
-            raise ValueError(f"{p}: holds no lens ({', '.join(lens)}), only {has}. A camera file starts from "
+            has = ", ".join(sorted(k for k in d if k in known))
+            raise ValueError(f"{p}: holds no lens ({', '.join(lens)})"
+                             + (f", only {has}" if has else ", nor anything else a camera file holds")
+                             + ". A camera file starts from "
                              "its lens: bsn-calibrate VIDEO --hfov DEG --out CALIB.json for a lens known by its "
                              "field of view (or from a chessboard's pictures); bsn-calibrate --mount then adds the "
                              "mounting and the hood to it")

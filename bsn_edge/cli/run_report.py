@@ -74,6 +74,8 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
             source += f", converged at frame {at['frame']}" + (f", {at['seconds']:g} s in" if at["seconds"] else "")
         lines.append(f"  camera: height {m['height_m']:.2f} m, pitch {m['pitch_deg']:+.2f}, yaw {m['yaw_deg']:+.2f}, "
                      f"roll {m['roll_deg']:+.2f} deg ({source})")
+        if at and at["frame"] > 1 and camera.assumed():   # the levels sent before it were an assumed camera's
+            lines.append(f"  levels before frame {at['frame']} computed with an assumed camera: {camera.assumed()}")
     guess = summary["camera"].get("first_guess")
     if guess:
         lines.append("  first guess: " + (f"pitch {guess['pitch_deg']:+.2f} yaw {guess['yaw_deg']:+.2f} deg from the "

@@ -49,7 +49,8 @@ def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
         if s < len(alert.sectors) - 1:
             cv2.line(img, (x1, 22), (x1, h), (255, 255, 255), 1)
     camera = "" if alert.camera is Blindness.CLEAR else f"  camera {alert.camera.name}"
-    cv2.putText(img, f"{alert.state.name} {alert.fps:.0f} fps{camera}", (4, h - 6), cv2.FONT_HERSHEY_SIMPLEX,
+    rate = f" {alert.fps:.0f} fps" if alert.fps > 0 else ""      # none yet on the first frames: not "0 fps"
+    cv2.putText(img, f"{alert.state.name}{rate}{camera}", (4, h - 6), cv2.FONT_HERSHEY_SIMPLEX,
                 0.38, (255, 255, 255), 1, cv2.LINE_AA)
     return img
 

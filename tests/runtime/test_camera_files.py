@@ -68,6 +68,10 @@ def test_a_camera_file_of_a_hood_alone_is_refused_with_how_to_make_the_rest(tmp_
     said = str(refused.value)
     assert said.startswith(f"{only}: holds no lens (fx, fy, cx, cy, width, height), only hood.")
     assert "bsn-calibrate VIDEO --hfov DEG --out CALIB.json" in said and "'fx' is missing" not in said
+    empty = tmp_path / "empty.json"           # once "..., only nothing a camera file holds."
+    empty.write_text("{}")
+    with pytest.raises(ValueError, match=r"holds no lens \(fx, fy, cx, cy, width, height\), nor anything else"):
+        Calibration.read(empty)
     # a file with part of a lens is still refused by the field it lacks
     part = tmp_path / "part.json"
     part.write_text(json.dumps({"fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "width": 640}))
