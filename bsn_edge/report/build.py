@@ -43,8 +43,9 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
     if can_log is not None:
         say(f"checking the bus: {can_log}")
         bus = read_bus(can_log)
-        record["bus_check"] = {**check(drive.onsets, bus.onsets), "hazard_frames": bus.hazard_frames,
-                               "damaged_frames": bus.damaged, "unreadable": bus.unreadable}
+        record["bus_check"] = {**check(drive.onsets, bus.onsets, bus.statuses, bus.start),
+                               "hazard_frames": bus.hazard_frames, "damaged_frames": bus.damaged,
+                               "unreadable": bus.unreadable}
         if bus.damaged or bus.unreadable:
             say(f"the CAN log has damaged frames ({', '.join(f'{n} {k}' for k, n in bus.damaged.items())})"
                 + (f"; {bus.unreadable}" if bus.unreadable else "") + ": counted, never taken as onsets")

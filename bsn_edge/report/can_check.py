@@ -40,6 +40,8 @@ class BusRead:
     hazard_frames: int
     damaged: dict[str, int]
     unreadable: str = ""
+    statuses: tuple[tuple[float, str], ...] = ()      # (time, state) of every trusted status frame, in order
+    start: float = 0.0                                # the log's first frame's time
 
 
 def read_bus(can_log: str | Path) -> BusRead:
@@ -57,6 +59,8 @@ def read_bus(can_log: str | Path) -> BusRead:
         unreadable.append(f"{where}: {why}")
 
     pending: tuple[dict[str, Any], int, float] | None = None     # a cycle's hazard, until its status says
+    statuses: list[tuple[float, str]] = []
+    start: float | None = None
 
     def apply(signals: dict[str, Any], k: int, t: float) -> None:
         for name in SECTORS:
@@ -66,12 +70,15 @@ def read_bus(can_log: str | Path) -> BusRead:
             last[name] = level
 
     for f in read_log(can_log, bad):
+        start = f.timestamp if start is None else start
         c = check(f.frame_id, f.data)
         if c is None:
             continue
         if c.decoded is not None and c.decoded.name != HAZARD:
             # the status after a hazard frame is its cycle's: an UNAVAILABLE cycle (a stall, the last word)
             # carries no hazard, so its levels of NONE are no fall and what follows no new onset
+            if c.trusted:
+                statuses.append((f.timestamp, SystemState(int(c.decoded.signals["System_State"])).name))
             if pending is not None and c.trusted and int(c.decoded.signals["System_State"]) != SystemState.UNAVAILABLE:
                 apply(*pending)
             pending = None
@@ -86,7 +93,7 @@ def read_bus(can_log: str | Path) -> BusRead:
         apply(*pending)
     damaged = {v.value: k for v, k in check.counts.items() if k and v not in (Verdict.OK, Verdict.REPEATED)}
     said = f"{len(unreadable)} unreadable line(s), the first {unreadable[0]}" if unreadable else ""
-    return BusRead(out, n, damaged, said)
+    return BusRead(out, n, damaged, said, tuple(statuses), start or 0.0)
 
 
 def bus_onsets(can_log: str | Path) -> list[BusOnset]:
@@ -94,27 +101,55 @@ def bus_onsets(can_log: str | Path) -> list[BusOnset]:
     return read_bus(can_log).onsets
 
 
-def check(log_onsets: list[Onset], on_bus: list[BusOnset]) -> dict[str, Any]:
+AROUND = 2      # status cycles shown on each side of a disagreement
+
+
+def check(log_onsets: list[Onset], on_bus: list[BusOnset], statuses: tuple[tuple[float, str], ...] = (),
+          start: float | None = None) -> dict[str, Any]:
     """Sector by sector, the onsets of the log and of the bus matched in order: the k-th rise to a level in
-    one is the k-th rise to it in the other. Returns per sector the counts and what is in one only."""
-    out: dict[str, Any] = {"agree": True, "sectors": {}}
+    one is the k-th rise to it in the other. Returns per sector the counts and what is in one only, and every
+    disagreement with its time (the log's clock, or seconds into the CAN log), the bus's states around it
+    (``statuses`` and ``start``: :attr:`BusRead.statuses` and :attr:`BusRead.start`) and what explains it."""
+    out: dict[str, Any] = {"agree": True, "sectors": {}, "disagreements": []}
+    t0 = start if start is not None else statuses[0][0] if statuses else on_bus[0].timestamp if on_bus else 0.0
     for name in SECTORS:
-        mine = [o.level for o in log_onsets if o.sector == name]
-        theirs = [o.level for o in on_bus if o.sector == name]
-        only_log, only_bus = _difference(mine, theirs), _difference(theirs, mine)
-        out["sectors"][name] = {"log": len(mine), "bus": len(theirs), "only_in_log": only_log,
-                                "only_on_bus": only_bus, "log_levels": mine, "bus_levels": theirs}
+        mine = [o for o in log_onsets if o.sector == name]
+        theirs = [o for o in on_bus if o.sector == name]
+        only_log = _unmatched(mine, theirs)
+        only_bus = _unmatched(theirs, mine)
+        out["sectors"][name] = {"log": len(mine), "bus": len(theirs), "only_in_log": [o.level for o in only_log],
+                                "only_on_bus": [o.level for o in only_bus], "log_levels": [o.level for o in mine],
+                                "bus_levels": [o.level for o in theirs]}
         out["agree"] &= not only_log and not only_bus
+        out["disagreements"] += [
+            {"sector": name, "level": o.level, "where": "frame log only", "t_s": round(o.t, 3), "frame": o.frame,
+             "around": [], "why": "a rise the bus never carried: the level fell again before the next send cycle, "
+                                  "or that cycle was lost"} for o in only_log]
+        out["disagreements"] += [_on_bus_only(o, statuses, t0) for o in only_bus]
+    out["disagreements"].sort(key=lambda d: (d["where"], d["t_s"]))
     return out
 
 
-def _difference(a: list[str], b: list[str]) -> list[str]:
-    """The onsets of ``a`` (by level, with multiplicity) that ``b`` does not have."""
-    left = list(b)
-    missing = []
-    for level in a:
-        if level in left:
-            left.remove(level)
+def _on_bus_only(o: BusOnset, statuses: tuple[tuple[float, str], ...], t0: float) -> dict[str, Any]:
+    """A bus onset no onset of the frame log explains, with the bus's states of the cycles around it."""
+    k = next((i for i, (t, _) in enumerate(statuses) if t >= o.timestamp), len(statuses))
+    around = [{"t_s": round(t - t0, 3), "state": st} for t, st in statuses[max(0, k - AROUND): k + AROUND + 1]]
+    before = [st for _, st in statuses[max(0, k - AROUND): k]]
+    why = ("no rise of the frame log to this level explains it; the bus said UNAVAILABLE just before (a stall or the "
+           "camera: no levels then), so the level on either side of it was one rise in the frame log"
+           if "UNAVAILABLE" in before else "no rise of the frame log to this level explains it")
+    return {"sector": o.sector, "level": o.level, "where": "bus only", "t_s": round(o.timestamp - t0, 3),
+            "frame": o.frame, "around": around, "why": why}
+
+
+def _unmatched(a: list[Any], b: list[Any]) -> list[Any]:
+    """The onsets of ``a`` that ``b`` has no partner for: the k-th rise to a level pairs with the k-th rise to
+    it in ``b``; the rest, in order."""
+    partners = {level: sum(1 for o in b if o.level == level) for level in {o.level for o in a}}
+    out = []
+    for o in a:
+        if partners[o.level] > 0:
+            partners[o.level] -= 1
         else:
-            missing.append(level)
-    return missing
+            out.append(o)
+    return out

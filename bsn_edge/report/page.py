@@ -192,6 +192,13 @@ def _bus_section(check: dict[str, Any] | None) -> list[str]:
              _table([[e(n), s["log"], s["bus"], e(", ".join(s["only_in_log"]) or "-"),
                       e(", ".join(s["only_on_bus"]) or "-")] for n, s in check["sectors"].items()],
                     ["sector", "onsets in the log", "on the bus", "only in the log", "only on the bus"])]
+    if check.get("disagreements"):
+        parts.append("<p>Each disagreement, with its time (the frame log's clock, or seconds into the CAN log), "
+                     "the bus's states of the cycles around it and what explains it:</p>")
+        parts.append(_table([[e(d["where"]), e(d["sector"]), e(d["level"]), f"{d['t_s']:.2f} s",
+                              e(", ".join(f"{a['t_s']:.2f} s {a['state']}" for a in d["around"]) or "-"), e(d["why"])]
+                             for d in check["disagreements"]],
+                            ["where", "sector", "level", "at", "the bus around it", "why"]))
     damaged = check.get("damaged_frames") or {}
     if damaged or check.get("unreadable"):
         parts.append("<p>Damaged frames on the bus, counted and never taken as onsets: "

@@ -200,3 +200,34 @@ def test_a_stall_cycle_on_the_bus_is_no_fall_and_the_level_after_it_no_new_onset
     _can_log(can_log, fs)
     onsets = [(o.sector, o.level) for o in read_bus(can_log).onsets]
     assert onsets == [("RIGHT", "WARNING")], onsets
+
+
+def test_every_disagreement_is_shown_with_its_time_the_bus_around_it_and_why(tmp_path):
+    """The log has one RIGHT WARNING; the bus has it, falls to NONE in an OK cycle, goes UNAVAILABLE, and
+    rises again: the second rise is on the bus only, at its cycle's time, with the UNAVAILABLE before it
+    named. The log's LEFT CAUTION never reached the bus: the frame log only, at its frame's time."""
+    from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+    from bsn_edge.alerts.can_codec import CanEncoder
+
+    enc = CanEncoder()
+    none, warn = SectorAlert(0.0, Level.NONE, None), SectorAlert(0.9, Level.WARNING, 3.0)
+    fs = []
+    plan = [(SystemState.OK, none), (SystemState.OK, warn), (SystemState.OK, none), (SystemState.UNAVAILABLE, none),
+            (SystemState.OK, warn)]
+    for k, (state, right) in enumerate(plan):
+        fs += enc.encode(AlertFrame.unavailable(k * 0.1) if state == SystemState.UNAVAILABLE
+                         else AlertFrame(k * 0.1, (none, none, right), state, 10.0, {}))
+    can_log, log = tmp_path / "c.log", tmp_path / "log.jsonl"
+    _can_log(can_log, fs)                    # two frames a cycle, 0.05 s apart: cycle k's status at 0.1 k + 0.05
+    n, c, w = "NONE", "CAUTION", "WARNING"
+    log.write_text("".join(_line(k, (c if k == 2 else n, n, w if k >= 1 else n)) + "\n" for k in range(5)))
+    record = make_report(log, tmp_path / "r", can_log=can_log, say=lambda s: None)
+    found = {(d["where"], d["sector"], d["level"]): d for d in record["bus_check"]["disagreements"]}
+    assert set(found) == {("bus only", "RIGHT", "WARNING"), ("frame log only", "LEFT", "CAUTION")}, found
+    bus_only = found[("bus only", "RIGHT", "WARNING")]
+    assert bus_only["t_s"] == pytest.approx(0.4), bus_only          # cycle 4's hazard, from the CAN log's first frame
+    assert [a["state"] for a in bus_only["around"]] == ["OK", "UNAVAILABLE", "OK"], bus_only["around"]
+    assert "UNAVAILABLE just before" in bus_only["why"]
+    assert found[("frame log only", "LEFT", "CAUTION")]["t_s"] == pytest.approx(0.2)
+    page = (tmp_path / "r" / "report.html").read_text()
+    assert "UNAVAILABLE just before" in page and "0.40 s" in page
