@@ -1,26 +1,32 @@
-"""What the car carries: the base install's size, bsn-run's import time and memory, against the full install.
+"""Light on the car: the runtime's CPU per frame and its latency at the camera's own rate, not flat out.
 
-    python -m benchmarks.bench_footprint --out benchmarks/results [--full-python .venv/bin/python]
+    python -m benchmarks.bench_footprint --out benchmarks/results [--code DIR ...]
 
-Makes a fresh virtual environment with the base install only (``pip install .``: numpy, OpenCV,
-onnxruntime, python-can, cantools, pyserial, tqdm), checks that ``import torch`` fails there, runs
-``bsn-run`` on a synthetic clip with the shipped model (overlay, JSON lines and CAN log written),
-and measures, beside the full install (``--full-python``, the development environment):
+A dashcam delivers 25-30 frames a second and the same two cores run the rest of the vehicle's software:
+what an integrator budgets is how much of the two cores ``bsn-run`` takes at the camera's rate and how long a
+frame takes from the camera to the bus. Each row is a fresh process running the runtime as ``bsn-run`` does
+(the shipped int8 model, the vehicle file's defaults, a frame log and a CAN log on python-can's virtual
+bus), on a real clip paced at 15 or 30 frames a second:
 
-- install size: the environment's site-packages, MB;
-- import time of what ``bsn-run`` loads before its first frame (``RUN_MODULES``: the entry module,
-  which imports only the standard library so that signals are watched first, then the runtime;
-  median of 7 fresh interpreters, interpreter start-up
-  subtracted), against the base dependencies alone and against the old path (torch, onnx and the
-  quantization tools loaded with it, as before the core was split);
-- peak RSS of ``bsn-run`` after its first frame (``--max-frames 1``), MB.
+- the Udacity clip, 1280x720, with its camera file (the chessboard photos and the mounting step), played
+  8 times over (``LOOPS``: 304 frames; its own codec decodes every frame);
+- the dashcam highway, 960x540, 221 frames, with no camera file (online calibration runs, as for a user
+  who has none).
+
+Figures: the process's CPU per frame (user + system from ``getrusage``, between frame ``WARM`` and the last,
+so start-up is apart), its share of two cores at that rate, peak memory (``ru_maxrss``), latency from the
+frame's decode to its cycle on the bus (the frame log's ``latency_ms``, p50/p95/p99) and per stage; beside
+them the int8 model's own CPU per frame, measured in the same process after the run on the last frame,
+paced at the same rate, its threads not spinning. ``--code`` runs the rows against other source trees too
+(the code before a change, side by side in one sitting), each named by its commit.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import statistics
+import os
+import platform
 import subprocess
 import sys
 import tempfile
@@ -29,121 +35,102 @@ from pathlib import Path
 from typing import Any
 
 from bsn_edge.cli.common import CHECKOUT
-from bsn_edge.default_model import DEFAULT_MODEL
 
+from .bench_realcam import REAL
 from .runner import Report, run
 
-BASE_MODULES = "numpy, cv2, onnxruntime, can, cantools, serial, tqdm"
-OLD_PATH = "torch, onnx, onnxruntime.quantization"
-RUN_MODULES = "bsn_edge.cli.run, bsn_edge.runtime, bsn_edge.calibration.camera_file, tqdm"
-GOAL_IMPORT = 1.15       # bsn-run's import within 15 % of the base dependencies alone
-GOAL_RSS_MB = 150.0
-MODEL = DEFAULT_MODEL
+LOOPS = 8
+RATES = (15.0, 30.0)
+WORKER = Path(__file__).with_name("footprint_worker.py")    # a script: it imports the tree it is given
+CLIPS = {"udacity 1280x720, camera file": "udacity_test_video.mp4", "highway 960x540, no camera file":
+         "dashcam_highway.mp4"}
 
 
-def site_mb(python: str) -> float:
-    code = "import site, json; print(json.dumps(site.getsitepackages()))"
-    dirs = json.loads(subprocess.run([python, "-c", code], capture_output=True, text=True, check=True).stdout)
-    total = sum(f.stat().st_size for d in dirs for f in Path(d).rglob("*") if f.is_file() and not f.is_symlink())
-    return total / 1e6
+def _commit(code: Path) -> str:
+    r = subprocess.run(["git", "-C", str(code), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    dirty = subprocess.run(["git", "-C", str(code), "status", "--porcelain", "--untracked-files=no"],
+                           capture_output=True, text=True).stdout.strip()
+    return (r.stdout.strip() or code.name) + ("+" if dirty else "")
 
 
-def import_s(python: str, modules: str, repeats: int = 7) -> float:
-    """Median seconds to import ``modules`` in a fresh interpreter, start-up subtracted."""
-    def once(code: str) -> float:
-        t = time.perf_counter()
-        subprocess.run([python, "-c", code], check=True, cwd="/")
-        return time.perf_counter() - t
+def cpu_name() -> str:
+    """The CPU's model and its int8 instruction sets (from /proc/cpuinfo)."""
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return platform.processor() or "unknown CPU"
+    model = next((ln.split(":", 1)[1].strip() for ln in info.splitlines() if ln.startswith("model name")), "?")
+    flags = set(next((ln.split(":", 1)[1].split() for ln in info.splitlines() if ln.startswith("flags")), []))
+    sets = [n for f, n in (("avx2", "AVX2"), ("avx512f", "AVX-512"), ("avx512_vnni", "VNNI"),
+                           ("avx_vnni", "AVX-VNNI"), ("avx512_bf16", "AVX512-BF16"), ("amx_int8", "AMX")) if f in flags]
+    return f"{model} ({', '.join(sets)}), {os.cpu_count()} cores"
 
-    empty = statistics.median(once("pass") for _ in range(repeats))
-    return statistics.median(once(f"import {modules}") for _ in range(repeats)) - empty
+
+def measure(args: argparse.Namespace, _p: argparse.ArgumentParser) -> Report | None:
+    missing = [c for c in CLIPS.values() if not (REAL / c).exists()]
+    if missing:
+        print(f"no real clips {missing} in {REAL}: nothing to measure")
+        return None
+    from .bench_realcam import udacity_camera
+
+    codes = [Path(c).resolve() for c in args.code] or [CHECKOUT]
+    rows: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        calib = Path(tmp) / "udacity.json"
+        udacity_camera()[1].write(calib)
+        for code in codes:
+            name = _commit(code)
+            for label, clip in CLIPS.items():
+                for rate in RATES:
+                    env = {**os.environ, "PYTHONPATH": str(code)}      # the tree's bsn_edge, not the install's
+                    argv = [sys.executable, str(WORKER), str(REAL / clip), str(rate), "--loops",
+                            str(LOOPS if clip.startswith("udacity") else 1)]
+                    if clip.startswith("udacity"):
+                        argv += ["--calib", str(calib)]
+                    out = subprocess.run(argv, capture_output=True, text=True, env=env, cwd=tmp, check=True).stdout
+                    row = {"code": name, "clip": label, **json.loads(out.strip().splitlines()[-1])}
+                    if not Path(row["bsn_edge"]).resolve().is_relative_to(code):
+                        raise RuntimeError(f"the worker ran {row['bsn_edge']}, not {code}'s bsn_edge")
+                    rows.append(row)
+                    print(f"{name} {label} {rate:g}/s: {row['cpu_ms_per_frame']:.1f} ms CPU a frame "
+                          f"({row['cpu_over_model']:.2f}x the model's {row['model_cpu_ms_per_frame']:.1f}), "
+                          f"latency p99 {row['latency_ms']['99']:.1f} ms", flush=True)
+    md = ["# Light on the car: CPU and latency at the camera's rate", "",
+          f"Measured on {cpu_name()}, onnxruntime with `intra_op_num_threads=2`, nothing else running; "
+          f"{time.strftime('%Y-%m-%d')}. Each row a fresh process (the runtime as `bsn-run` runs it, the shipped "
+          "int8 model, a frame log and a CAN log); CPU per frame from `getrusage` between frame "
+          "20 and the last (footprint_worker.WARM); the model's own in the same process, paced the same, not "
+          "spinning.", "",
+          "| code | clip | rate | CPU per frame | the model's own | ratio | share of 2 cores | latency p50 / p95 / p99 "
+          "| peak memory |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lat = r["latency_ms"]
+        md.append(f"| {r['code']} | {r['clip']} | {r['rate']:g}/s | {r['cpu_ms_per_frame']:.1f} ms | "
+                  f"{r['model_cpu_ms_per_frame']:.1f} ms | {r['cpu_over_model']:.2f}x | "
+                  f"{100 * r['share_of_two_cores']:.0f} % | {lat['50']:.1f} / {lat['95']:.1f} / {lat['99']:.1f} ms | "
+                  f"{r['peak_rss_mb']:.0f} MB |")
+    md += ["", "Per stage, p50 / p99 ms (30 frames a second):", "",
+           "| code | clip | " + " | ".join(STAGES) + " |", "|---|---|" + "---|" * len(STAGES)]
+    for r in rows:
+        if r["rate"] == 30.0:
+            md.append(f"| {r['code']} | {r['clip']} | " + " | ".join(
+                f"{r['stage_ms'][s]['50']:.2f} / {r['stage_ms'][s]['99']:.2f}" if s in r["stage_ms"] else "-"
+                for s in STAGES) + " |")
+    md += ["", "Targets at 30 frames a second, 1280x720: CPU per frame at most 1.4x the model's own; latency p99 at "
+           "most 12 ms.", "", "Clips: `../shared/data/real` (their sources and licences in its README)."]
+    return Report({"cpu": cpu_name(), "rows": rows}, md, [f"{len(rows)} rows"])
 
 
-def run_rss_mb(python: str, clip: Path, summary: Path) -> float:
-    """Peak RSS of bsn-run after one frame, MB (its own process); its summary written to ``summary`` (a new file:
-    bsn-run overwrites nothing)."""
-    code = ("import resource, sys; from bsn_edge.cli import run; "
-            f"rc = run.main(['--model', {str(MODEL)!r}, '--source', {str(clip)!r}, '--max-frames', '1', "
-            f"'--summary', {str(summary)!r}]); "
-            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024); sys.exit(rc)")
-    res = subprocess.run([python, "-c", code], capture_output=True, text=True, check=True, cwd="/")
-    return float(res.stdout.strip().splitlines()[-1])
+STAGES = ("decode", "preprocess", "visibility", "inference", "postprocess", "send")
 
 
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="benchmarks/results")
-    p.add_argument("--full-python", default=sys.executable, help="python of the full install (default: this one)")
     p.add_argument("--name", default="footprint", help="the report's name in --out")
+    p.add_argument("--code", nargs="*", default=[], metavar="DIR",
+                   help="source trees to measure side by side (default: this checkout)")
     return p
-
-
-def _base_install(tmp: Path) -> tuple[str, float, bool]:
-    """A fresh venv with ``pip install .`` only: its python, the install's seconds, whether torch is missing."""
-    venv = tmp / "base"
-    t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
-    base_py = str(venv / "bin" / "python")
-    subprocess.run([base_py, "-m", "pip", "install", "--quiet", str(CHECKOUT)], check=True)
-    install_s = time.perf_counter() - t0
-    torch_missing = subprocess.run([base_py, "-c", "import torch"], capture_output=True).returncode != 0
-    return base_py, install_s, torch_missing
-
-
-def _markdown(res: dict[str, Any]) -> list[str]:
-    b, f = res["rows"]["base"], res["rows"]["full"]
-    ran = res["bsn_run_in_base"]
-    return ["# The car's footprint: base install vs full install", "",
-            "A fresh virtual environment with `pip install .` only, beside the development environment "
-            "(`.[full,dev]`), measured in one run.", "",
-            "| | base install | full install |", "|---|---|---|",
-            f"| site-packages, MB | {b['site_packages_mb']:.0f} | {f['site_packages_mb']:.0f} |",
-            f"| import `bsn-run`, s | {b['import_bsn_run_s']:.2f} | {f['import_bsn_run_s']:.2f} "
-            f"(old path with torch, onnx, quantization: {f['import_old_path_s']:.2f}) |",
-            f"| import numpy, OpenCV, onnxruntime, python-can, cantools, pyserial, tqdm alone, s | "
-            f"{b['import_base_deps_s']:.2f} | {f['import_base_deps_s']:.2f} |",
-            f"| peak RSS of `bsn-run` after its first frame, MB | {b['rss_after_first_frame_mb']:.0f} | "
-            f"{f['rss_after_first_frame_mb']:.0f} |", "",
-            f"In the base install `import torch` {'fails' if res['torch_missing_in_base'] else 'WORKS (it must not)'}; "
-            f"`bsn-run` on a 30-frame clip exited {ran['rc']} and wrote "
-            f"{', '.join(k for k, v in ran['written'].items() if v) or 'nothing'}. bsn-run's import is "
-            f"{res['import_ratio']:.2f}x the base dependencies' (goal <= {GOAL_IMPORT}); RSS goal < "
-            f"{GOAL_RSS_MB:.0f} MB ({'met' if res['passes'] else 'NOT met'})."]
-
-
-def measure(args: argparse.Namespace, p: argparse.ArgumentParser) -> Report:
-    with tempfile.TemporaryDirectory() as tmp_name:
-        tmp = Path(tmp_name)
-        base_py, install_s, torch_missing = _base_install(tmp)
-        clip = tmp / "clip"
-        subprocess.run([str(Path(base_py).parent / "bsn-synth"), str(clip), "--frames", "30", "--seed", "3"],
-                       check=True, capture_output=True)
-        outs = tmp / "run"
-        outs.mkdir()
-        rc = subprocess.run([str(Path(base_py).parent / "bsn-run"), "--model", str(MODEL), "--source",
-                             str(clip / "video.mp4"), "--overlay", str(outs / "overlay.mp4"), "--log",
-                             str(outs / "alerts.jsonl"), "--can-log", str(outs / "alerts.log")],
-                            capture_output=True, text=True)
-        written = {n: (outs / n).is_file() and (outs / n).stat().st_size > 0
-                   for n in ("overlay.mp4", "alerts.jsonl", "alerts.log")}
-        rows = {}
-        for name, py in (("base", base_py), ("full", args.full_python)):
-            rows[name] = {
-                "site_packages_mb": round(site_mb(py), 1),
-                "import_bsn_run_s": round(import_s(py, RUN_MODULES), 3),
-                "import_base_deps_s": round(import_s(py, BASE_MODULES), 3),
-                "rss_after_first_frame_mb": round(run_rss_mb(py, clip / "video.mp4", outs / f"rss_{name}.json"), 1),
-            }
-        rows["full"]["import_old_path_s"] = round(import_s(args.full_python, f"{OLD_PATH}, {RUN_MODULES}"), 3)
-    b = rows["base"]
-    res = {"rows": rows, "base_install_s": round(install_s, 1), "torch_missing_in_base": torch_missing,
-           "bsn_run_in_base": {"rc": rc.returncode, "written": written},
-           "import_ratio": b["import_bsn_run_s"] / b["import_base_deps_s"],
-           "goal_import_ratio": GOAL_IMPORT, "goal_rss_mb": GOAL_RSS_MB}
-    res["passes"] = (torch_missing and rc.returncode == 0 and all(written.values())
-                     and res["import_ratio"] <= GOAL_IMPORT and b["rss_after_first_frame_mb"] < GOAL_RSS_MB)
-    md = _markdown(res)
-    return Report(res, md, md)
 
 
 def main(argv: list[str] | None = None) -> int:

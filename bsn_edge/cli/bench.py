@@ -24,15 +24,15 @@ CHECKOUT_ENV = "BSN_EDGE_CHECKOUT"
 MARKS = (Path("benchmarks") / "report.py", Path("configs") / "quick.toml", Path("models") / "README.md")
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
-NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "footprint",
-         "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive", "prune",
-         "calibration", "first_guess", "optimizer", "label_classes", "camera_health", "adapt_real")
+NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "install",
+         "footprint", "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive",
+         "prune", "calibration", "first_guess", "optimizer", "label_classes", "camera_health", "adapt_real", "ways_out")
 # the campaign's own benchmarks: they judge a leg's run folder against held-out sets the campaign makes
 # (models/campaign/judge*.sh run them), so they have nothing to measure outside it
 CAMPAIGN_TOOLS = ("bench_cameras", "bench_tradeoff", "bench_campaign")
 # what of the source tree a benchmark needs beyond the package (an installed wheel runs the rest)
 NEEDS_TREE = {"arch": "configs/quick.toml", "quant": "configs/quick.toml", "accuracy": "configs/quick.toml",
-              "adapt": "configs/quick.toml", "footprint": "the source tree it installs twice",
+              "adapt": "configs/quick.toml", "install": "the source tree it installs twice",
               "realteacher": "the default's training run (models/default)",
               "alive": "the training runs' weights (models/)", "prune": "the default's training run (models/default)",
               "adapt_real": "the default's training run (models/default)"}
@@ -133,9 +133,11 @@ BY_OUT_ONLY = {"labels": "benchmarks.bench_labels", "realcam": "benchmarks.bench
                "camvid": "benchmarks.bench_camvid", "realteacher": "benchmarks.bench_realteacher",
                "vanishing": "benchmarks.bench_vanishing",
                "floor": "benchmarks.bench_floor", "int8_cpu": "benchmarks.bench_int8_cpu",
-               "footprint": "benchmarks.bench_footprint", "alive": "benchmarks.bench_alive",
+               "install": "benchmarks.bench_install", "footprint": "benchmarks.bench_footprint",
+               "alive": "benchmarks.bench_alive",
                "prune": "benchmarks.bench_prune", "first_guess": "benchmarks.bench_first_guess",
-               "optimizer": "benchmarks.bench_optimizer", "camera_health": "benchmarks.bench_camera_health"}
+               "optimizer": "benchmarks.bench_optimizer", "camera_health": "benchmarks.bench_camera_health",
+               "ways_out": "benchmarks.bench_ways_out"}
 
 
 def main(argv: list[str] | None = None) -> int:
