@@ -37,11 +37,28 @@ def early_summary(path: str | None, **record: Any) -> bool:
     return not error
 
 
+def _cpu_said(summary: dict[str, Any]) -> str:
+    """", CPU 14.2 ms a frame (21 % of 2 cores)" from the summary's ``cpu`` ("" for a run too short)."""
+    import os
+
+    cpu = summary.get("cpu") or {}
+    if cpu.get("cpu_ms_per_frame") is None:
+        return ""
+    cores = os.cpu_count() or 1
+    busy = cpu.get("cores_busy")
+    return f", CPU {cpu['cpu_ms_per_frame']:.1f} ms a frame" + (
+        f" ({100 * busy / cores:.0f} % of {cores} cores)" if busy is not None else "")
+
+
 def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: CameraState) -> str:
     """The end of a run in a few lines (the whole record goes to ``--summary``)."""
     lines = [f"{PROG}: {summary['frames']} frames ({summary['valid_frames']} valid) in {summary['seconds']:.1f} s: "
              f"{summary['fps']:.1f} frames/s, latency p50 {summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms"
-             + (f", {summary['dropped']} dropped" if summary["dropped"] else "")]
+             + (f", {summary['dropped']} dropped" if summary["dropped"] else "")
+             + _cpu_said(summary)]
+    if getattr(args, "profile", None):
+        lines.append("  per stage, ms a frame (mean): " + ", ".join(
+            f"{k} {v:.2f}" for k, v in summary["stage_ms"].items()))
     from bsn_edge.alerts.health import Fault
 
     # an unsigned model is said on its own line below, not as a fault
@@ -89,6 +106,9 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
                if getattr(args, key)]
     if outputs:
         lines.append("  outputs: " + ", ".join(f"{name} {path}" for name, path in outputs))
+    if getattr(args, "profile", None):
+        lines.append(f"  the profile's page: bsn-report {args.log} --summary {args.summary} "
+                     f"--out {args.profile}/report (needs the [full] or [report] install)")
     return "\n".join(lines)
 
 

@@ -22,7 +22,7 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
     exists unless ``force`` (then only the report's two files are replaced); nothing is written until the
     report is whole. ``say`` is told each step."""
     from bsn_edge.report.can_check import check, read_bus
-    from bsn_edge.report.page import MAX_THUMBS, page, thumbnails, timelines
+    from bsn_edge.report.page import MAX_THUMBS, latency_histogram, page, thumbnails, timelines
 
     out = Path(out)
     if out.exists() and not force:
@@ -50,13 +50,14 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
             say(f"the CAN log has damaged frames ({', '.join(f'{n} {k}' for k, n in bus.damaged.items())})"
                 + (f"; {bus.unreadable}" if bus.unreadable else "") + ": counted, never taken as onsets")
     say(f"drawing {len(drive.records)} frames")
-    picture = timelines(drive)
+    picture, histogram = timelines(drive), latency_histogram(drive)
+    record["cpu"] = drive.summary.get("cpu") or {}
     thumbs = {}
     if overlay is not None:
         say(f"cutting {min(len(drive.onsets), MAX_THUMBS)} onset thumbnails from {overlay}")
         thumbs = thumbnails(overlay, drive.onsets)
     try:
-        html = page(drive, record, picture, thumbs, f"bsn-run drive report: {Path(log).name}")
+        html = page(drive, record, picture, thumbs, f"bsn-run drive report: {Path(log).name}", histogram)
     except (AttributeError, TypeError, KeyError) as e:
         raise ValueError(f"{summary}: not a run's summary ({type(e).__name__}: {str(e)[:80]})") from None
     out.parent.mkdir(parents=True, exist_ok=True)

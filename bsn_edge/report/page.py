@@ -10,7 +10,6 @@ from __future__ import annotations
 import base64
 import html
 import io
-import json
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +20,7 @@ from bsn_edge.alerts.state_machine import AlertConfig
 from bsn_edge.report.drive import Drive, Onset
 from bsn_edge.runtime.loop import STAGES
 
+DISTANCE_AXIS_M = 50.0      # the distance axis of a sector with no distance measured
 LEVEL_COLOURS = {"CAUTION": "#f2c14e", "WARNING": "#e4572e"}
 STATE_COLOURS = {"OK": "#59a14f", "CALIBRATING": "#76b7b2", "DEGRADED": "#f28e2b", "UNAVAILABLE": "#e15759"}
 THUMB_WIDTH = 320
@@ -71,12 +71,18 @@ def timelines(drive: Drive) -> str:
         dist = np.array([np.nan if s.distance_m is None else s.distance_m for s in sectors], np.float64)
         twin = ax.twinx()
         twin.plot(t, dist, ".", ms=2, color="#4e79a7", label="distance")
-        twin.set_ylabel("m", color="#4e79a7")
+        twin.set_ylabel("distance (m)", color="#4e79a7")
+        if not np.isfinite(dist).any():       # no blind spot measured: the axis's range, not -0.04 to 0.04 m
+            twin.set_ylim(0, DISTANCE_AXIS_M)
         if k == 0:
             ax.legend(loc="upper left", fontsize=7, ncol=3)
     state_ax, lat_ax = axes[len(SECTORS)], axes[len(SECTORS) + 1]
-    for a, b, state in drive.states():
-        state_ax.axvspan(a, b if b > a else a + 1e-3, color=STATE_COLOURS.get(state, "#999"), lw=0)
+    spans = drive.states()
+    step = float(np.median(np.diff(t))) if len(t) > 1 else 0.1
+    for k, (a, b, state) in enumerate(spans):
+        # each band runs to the next one's start: no white gaps, and a one-frame UNAVAILABLE a frame wide
+        end = spans[k + 1][0] if k + 1 < len(spans) else b + step
+        state_ax.axvspan(a, end, color=STATE_COLOURS.get(state, "#999"), lw=0)
     for tf, _, _fault in drive.faults():
         state_ax.plot([tf], [0.5], "kx", ms=5)
     state_ax.set_yticks([])
@@ -95,6 +101,31 @@ def timelines(drive: Drive) -> str:
         for ax in axes:
             ax.axvline(t_conv, color="k", lw=0.8, ls=":")
         axes[0].annotate("calibrated", (t_conv, 1.0), fontsize=7, ha="left", va="top")
+    fig.tight_layout()
+    out = _png(fig)
+    plt.close(fig)
+    return out
+
+
+def latency_histogram(drive: Drive) -> str:
+    """The frames' latency (decode to the bus) as a histogram with its p50 and p99 marked (base64 PNG; "" for
+    a log without latencies)."""
+    lat = np.array([r.latency_ms for r in drive.records if r.latency_ms is not None and np.isfinite(r.latency_ms)])
+    if not lat.size:
+        return ""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 2.4))
+    ax.hist(lat, bins=min(60, max(10, lat.size // 10)), color="#4e79a7")
+    for q, ls in ((50, "--"), (99, ":")):
+        v = float(np.percentile(lat, q))
+        ax.axvline(v, color="k", ls=ls, lw=1, label=f"p{q} {v:.1f} ms")
+    ax.set_xlabel("latency of a frame, decode to the bus (ms)")
+    ax.set_ylabel("frames")
+    ax.legend(fontsize=7)
     fig.tight_layout()
     out = _png(fig)
     plt.close(fig)
@@ -126,14 +157,50 @@ def thumbnails(overlay: str | Path, onsets: list[Onset]) -> dict[int, str]:
     return out
 
 
-def _table(rows: list[list[Any]], head: list[str]) -> str:
-    cells = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+def _table(rows: list[list[Any]], head: list[str] | None = None) -> str:
+    """A table; ``head`` None for one of names and values (no header row)."""
+    cells = "".join(f"<th>{html.escape(h)}</th>" for h in head) if head else ""
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><tr>{cells}</tr>{body}</table>"
+    return f"<table>{f'<tr>{cells}</tr>' if cells else ''}{body}</table>"
 
 
-def page(drive: Drive, record: dict[str, Any], picture: str, thumbs: dict[int, str], title: str) -> str:
-    """The HTML page: ``record`` is ``report.json``'s content, ``picture`` the timelines (base64 PNG)."""
+UNITS = {"_m": "m", "_deg": "deg", "_s": "s", "_ms": "ms", "_px": "px"}
+
+
+def plain(value: Any) -> str:
+    """A value of the summary in words and units: ``height 1.50 m, pitch -2.88 deg`` for
+    ``{"height_m": 1.5, "pitch_deg": -2.884}``, ``-`` for nothing, numbers rounded to what they are."""
+    if value is None or value == {} or value == []:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return f"{value:.3g}" if abs(value) < 1e-3 or abs(value) >= 1e4 else f"{value:.2f}".rstrip("0").rstrip(".")
+    if isinstance(value, dict):
+        said = []
+        for k, v in value.items():
+            unit = next((u for suffix, u in UNITS.items() if str(k).endswith(suffix)), "")
+            name = str(k)[: -len(next(s for s in UNITS if str(k).endswith(s)))] if unit else str(k)
+            said.append(f"{name.replace('_', ' ')} {plain(v)}{' ' + unit if unit and not isinstance(v, dict) else ''}")
+        return ", ".join(said)
+    if isinstance(value, list | tuple):
+        return ", ".join(plain(v) for v in value)
+    return str(value)
+
+
+def _converged(cal: dict[str, Any]) -> str:
+    at = cal.get("converged_at")
+    if at:
+        return f"at frame {at['frame']}" + (f", {at['seconds']:g} s in" if at.get("seconds") is not None else "")
+    if cal.get("source") in (None, "online"):
+        return "no" if cal.get("source") == "online" else "-"
+    return f"not calibrated online: the mounting is the {cal['source']}'s"
+
+
+def page(drive: Drive, record: dict[str, Any], picture: str, thumbs: dict[int, str], title: str,
+         histogram: str = "") -> str:
+    """The HTML page: ``record`` is ``report.json``'s content, ``picture`` the timelines and ``histogram`` the
+    frames' latency (base64 PNGs)."""
     e = html.escape
     ident, cal = record["identity"], record["calibration"]
     model = ident["model"]
@@ -144,14 +211,14 @@ def page(drive: Drive, record: dict[str, Any], picture: str, thumbs: dict[int, s
                                  f"config {model.get('config_digest')}, threshold {model.get('threshold')}")],
                      ["signed by", e(str(model.get("signer")) if model.get("authentic") else "NOT a trusted key")],
                      ["settings digest", e(str(ident.get("settings_digest")))],
-                     ["machine", e(json.dumps(ident.get("machine")))],
-                     ["frames", f"{record['frames']} ({record['valid_frames']} with levels)"]], ["", ""]),
+                     ["machine", e(plain(ident.get("machine")))],
+                     ["frames", f"{record['frames']} ({record['valid_frames']} with levels)"]]),
              "<h2>Calibration</h2>",
-             _table([["camera from", e(str(cal.get("source")))],
-                     ["first guess", e(json.dumps(cal.get("first_guess")))],
-                     ["converged", e(json.dumps(cal.get("converged_at")) if cal.get("converged_at") else "no")],
-                     ["mounting", e(json.dumps(cal.get("mounting")))],
-                     ["hood", e(json.dumps(cal.get("hood")))]], ["", ""]),
+             _table([["camera from", e(plain(cal.get("source")))],
+                     ["first guess", e(plain(cal.get("first_guess")))],
+                     ["converged", e(_converged(cal))],
+                     ["mounting", e(plain(cal.get("mounting")))],
+                     ["hood", e(plain(cal.get("hood")))]]),
              "<h2>Timelines</h2>",
              f'<img alt="timelines" src="data:image/png;base64,{picture}" style="max-width:100%">',
              "<p>Per sector: the smoothed score (line) against the CAUTION and WARNING thresholds (dashed), the "
@@ -168,9 +235,16 @@ def page(drive: Drive, record: dict[str, Any], picture: str, thumbs: dict[int, s
     parts.append(_table(rows, ["sector", "level", "time", "frame", "distance", "overlay"]) if rows
                  else "<p>No level was raised.</p>")
     lat = record["latency_ms"]
-    parts += ["<h2>Latency (ms)</h2>",
-              _table([[e(s), *(f"{v:.2f}" for v in p.values())] for s, p in lat.items()],
+    cpu = record.get("cpu") or {}
+    parts += ["<h2>Latency and CPU</h2>",
+              _table([[e(s), *(f"{v:.2f} ms" for v in p.values())] for s, p in lat.items()],
                      ["stage", "p50", "p95", "p99"])]
+    if cpu.get("cpu_ms_per_frame") is not None:
+        parts.append(f"<p>CPU: {cpu['cpu_ms_per_frame']:.1f} ms a frame (every thread of the process, from the 20th "
+                     f"frame to the last), {plain(cpu.get('cores_busy'))} cores busy over those frames.</p>")
+    if histogram:
+        parts.append(f'<img alt="latency histogram" src="data:image/png;base64,{histogram}">')
+    parts += _states_section(drive)
     parts += _bus_section(record.get("bus_check")) + _camera_section(record.get("camera") or [])
     if record["damaged_lines"]:
         parts += ["<h2>Damaged lines of the frame log</h2>",
@@ -206,6 +280,32 @@ def _bus_section(check: dict[str, Any] | None) -> list[str]:
                          or "none") + (f"; {e(check['unreadable'])}" if check.get("unreadable") else "")
                      + f" (of {check.get('hazard_frames', 0)} hazard frames).</p>")
     return parts
+
+
+def _states_section(drive: Drive) -> list[str]:
+    """Every stretch the bus said other than OK, with why (from the frames of the stretch)."""
+    rows = []
+    for a, b, state in drive.states():
+        if state == "OK":
+            continue
+        inside = [r for r in drive.records if a <= r.t <= b]
+        faults = sorted({r.fault.value for r in inside if r.fault is not None})
+        blind = sorted({r.visibility.reason.name for r in inside if r.visibility is not None
+                        and r.visibility.reason.name != "CLEAR"})
+        if blind:
+            why = "the camera: " + ", ".join(blind)
+        elif faults:
+            why = "faults: " + ", ".join(faults)
+        elif state == "CALIBRATING":
+            why = "online calibration not yet converged (levels from an assumed camera)"
+        elif state == "DEGRADED":
+            why = "valid frames a second under health.fps_floor, or an output or a bus that failed"
+        else:
+            why = "no valid frame within health.deadline_s (a stall), or the run's start or end"
+        rows.append([f"{a:.2f} s", f"{b:.2f} s", html.escape(state), html.escape(why)])
+    if not rows:
+        return []
+    return ["<h2>When the bus did not say OK</h2>", _table(rows, ["from", "to", "state", "why"])]
 
 
 def _camera_section(spans: list[dict[str, Any]]) -> list[str]:

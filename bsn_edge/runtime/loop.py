@@ -36,6 +36,7 @@ from bsn_edge.alerts.senders import Sender
 from bsn_edge.config_toml import check_fields, setting
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CAMERA_FILE, CameraState
+from bsn_edge.runtime.cpu import CpuMeter
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat, StallWatch
 from bsn_edge.runtime.engine import Engine
 from bsn_edge.runtime.feeder import Feeder, Prepared
@@ -153,6 +154,7 @@ class FramePipeline:
         self.emitter = CycleEmitter(senders, self.health, cfg.cycle_s, self.wall, cfg.messages, cfg.bus.down_after_s)
         self.timer = StageTimer()
         self.latency = LatencyStats()
+        self.cpu = CpuMeter()
         self.waiting = LatencyStats()        # warped frames waiting for the model (overlap)
         self.sinks: dict[str, GuardedSink] = {}
         self.heartbeat: Heartbeat | None = None
@@ -428,6 +430,7 @@ class FramePipeline:
                 """Step the oldest frames until ``keep`` are left in flight; whether the run is done."""
                 while len(pending) > keep and not done():
                     self.step(*pending.popleft())
+                    self.cpu.frame(self.frames)
                     if progress:
                         progress(1)
                 return done()
@@ -458,7 +461,7 @@ class FramePipeline:
             senders_down=self.health.senders_down, source_failure=self.source.failure,
             stopped=bool(stop is not None and stop.is_set()),
             heartbeat_error=self.heartbeat.last_error if self.heartbeat is not None else "",
-            camera=self.camera.summary(), visibility=self.blind.to_json(),
+            camera=self.camera.summary(), visibility=self.blind.to_json(), cpu=self.cpu.figures(),
             maps_written=0 if maps is None else maps.written,
             sinks={**{name: SinkSummary(k.written, k.dropped, None if k.ok else vars(k.failure))
                       for name, k in self.sinks.items()},

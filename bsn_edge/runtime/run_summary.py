@@ -14,7 +14,9 @@ send at the end), ``source_failure`` (why the source ended early, or null), ``st
 or the caller), ``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report, hood: share of the rows,
 spread, columns agreeing, arch; null while still looked for), ``visibility`` (what the camera-health check
 raised: frames and seconds per reason, and its stretches),
-``maps_written``, ``sinks`` (per output: written, dropped, failure), ``model`` (variant, size,
+``maps_written``, ``cpu`` (``cpu_ms_per_frame``: the process's CPU, every thread, per frame from the 20th to the
+last; ``cores_busy``: CPU seconds a second over those frames), ``sinks`` (per output: written, dropped,
+failure), ``model`` (variant, size,
 threshold, quantization, kernels, self-test, signer, authentic, trust note, graph and config digests); ``bsn-run`` adds
 ``signal``, ``source`` (what it read) and ``machine`` (CPU, its int8 instruction sets, cores, Python).
 """
@@ -98,6 +100,7 @@ class RunSummary:
     camera: dict[str, Any]
     visibility: dict[str, Any]
     maps_written: int
+    cpu: dict[str, float | None] = field(default_factory=dict)   # CpuMeter.figures: CPU per frame, cores busy
     sinks: dict[str, SinkSummary] = field(default_factory=dict)
     model: ModelSummary | None = None
 

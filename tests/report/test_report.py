@@ -231,3 +231,19 @@ def test_every_disagreement_is_shown_with_its_time_the_bus_around_it_and_why(tmp
     assert found[("frame log only", "LEFT", "CAUTION")]["t_s"] == pytest.approx(0.2)
     page = (tmp_path / "r" / "report.html").read_text()
     assert "UNAVAILABLE just before" in page and "0.40 s" in page
+
+
+def test_the_page_says_values_in_words_and_units_not_json():
+    """Once: empty header rows, raw JSON (``{"height_m": 1.5, "pitch_deg": -2.8842130437072666}``), bare null, and
+    "converged: no" for a run whose camera file gave the mounting."""
+    from bsn_edge.report.page import _converged, _table, plain
+
+    assert plain({"height_m": 1.5, "pitch_deg": -2.8842130437072666, "yaw_deg": 0.0}) == \
+        "height 1.5 m, pitch -2.88 deg, yaw 0 deg"
+    assert plain(None) == "-" and plain({}) == "-" and plain(True) == "yes"
+    assert plain({"cpu": "AMD EPYC", "cores": 2}) == "cpu AMD EPYC, cores 2"
+    assert "<th>" not in _table([["a", "b"]]) and "<th>x</th>" in _table([["a"]], ["x"])
+    assert _converged({"source": "camera file", "converged_at": None}) == \
+        "not calibrated online: the mounting is the camera file's"
+    assert _converged({"source": "online", "converged_at": {"frame": 82, "seconds": 3.28}}) == "at frame 82, 3.28 s in"
+    assert _converged({"source": "online", "converged_at": None}) == "no"
