@@ -17,15 +17,17 @@ class CpuMeter:
     opening and the first cycles are start-up, not the frame's cost. ``cpu`` and ``wall``: the clocks read
     (injected in tests)."""
 
-    def __init__(self, skip: int = 20, cpu: Callable[[], float] = process_cpu_s,
+    def __init__(self, skip: int = 20, every: int = 10, cpu: Callable[[], float] = process_cpu_s,
                  wall: Callable[[], float] = time.perf_counter) -> None:
-        self.skip, self._cpu, self._wall = skip, cpu, wall
+        """Read at frame ``skip`` and every ``every`` frames after it (the process's CPU clock sums every
+        thread's: not a read for every frame)."""
+        self.skip, self.every, self._cpu, self._wall = skip, every, cpu, wall
         self._first: tuple[int, float, float] | None = None
         self._last: tuple[int, float, float] | None = None
 
     def frame(self, n: int) -> None:
         """Frame ``n`` (counted from 1) is done."""
-        if n < self.skip:
+        if n < self.skip or (n - self.skip) % self.every:
             return
         mark = (n, self._cpu(), self._wall())
         if self._first is None:

@@ -10,9 +10,9 @@ class Clocks:
 
 def test_cpu_per_frame_counts_from_the_skipped_frames_on():
     c = Clocks()
-    m = CpuMeter(skip=3, cpu=lambda: c.cpu, wall=lambda: c.wall)
-    for n in range(1, 11):
-        c.cpu += 1.0 if n <= 3 else 0.012          # start-up is dear; then 12 ms of CPU a frame
+    m = CpuMeter(skip=3, every=7, cpu=lambda: c.cpu, wall=lambda: c.wall)
+    for n in range(1, 14):                          # read at frames 3 and 10: 11-13 are not counted
+        c.cpu += 1.0 if n <= 3 else 0.012 if n <= 10 else 5.0   # start-up is dear; then 12 ms of CPU a frame
         c.wall += 0.5 if n <= 3 else 1 / 30        # at 30 frames a second
         m.frame(n)
     got = m.figures()
