@@ -48,15 +48,19 @@ def worker(clip: Path, rate: float, calib: str | None, loops: int) -> dict[str, 
         def __init__(self) -> None:
             super().__init__()
             first = VideoFileSource(clip)
-            self.size, self.total, self.fps, self.pace = first.size, (first.total or 0) * loops, rate, True
+            # paced here, not by the base class: the code before a change may not pace a source of its own
+            self.size, self.total, self.fps = first.size, (first.total or 0) * loops, rate
             first.close()
             self._open: VideoFileSource | None = None
 
         def _frames(self) -> Iterator[Captured]:
-            k = 0
+            k, start = 0, time.monotonic()
             for _ in range(loops):
                 self._open = VideoFileSource(clip)
                 for c in self._open:
+                    wait = start + k / rate - time.monotonic()
+                    if wait > 0:
+                        time.sleep(wait)
                     yield Captured(k / rate, c.frame, k, c.decode_s)
                     k += 1
                 self._open.close()
