@@ -32,7 +32,25 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--serial", metavar="URL", help="listen on this serial port (pyserial URL)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (live inputs)")
     p.add_argument("--max", type=int, default=None, help="stop after this many frames")
+    p.add_argument("--onsets", action="store_true",
+                   help="with --can-log: print only the level onsets, in bsn-report's form (seconds into the log, "
+                        "sector, level, the hazard frame's number), as the report matches them with the frame log")
     return p
+
+
+def print_onsets(path: Path) -> int:
+    """``--onsets``: each level rise the log's trusted hazard frames carry, one a line; damage counted below."""
+    from bsn_edge.alerts.bus_onsets import read_bus
+
+    bus = read_bus(path)
+    print(f"{'at':>10}  {'sector':<7} {'level':<8} hazard frame")
+    for o in bus.onsets:
+        print(f"{o.timestamp - bus.start:>8.2f} s  {o.sector:<7} {o.level:<8} #{o.frame}")
+    damaged = ", ".join(f"{n} {k}" for k, n in bus.damaged.items())
+    print(f"{len(bus.onsets)} onsets in {bus.hazard_frames} hazard frames"
+          + (f"; damaged: {damaged}" if damaged else "") + (f"; {bus.unreadable}" if bus.unreadable else ""),
+          file=sys.stderr)
+    return 1 if damaged or bus.unreadable else 0
 
 
 class Printer:
@@ -137,7 +155,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _listen(argv: list[str] | None) -> int:
-    args = build_parser().parse_args(argv)
+    p = build_parser()
+    args = p.parse_args(argv)
+    if args.onsets and not args.can_log:
+        p.error("--onsets reads a CAN log: give --can-log FILE")
     show = Printer()
     deadline = None if args.duration is None else time.monotonic() + args.duration
 
@@ -152,6 +173,8 @@ def _listen(argv: list[str] | None) -> int:
             if not is_log(path):
                 return fail(PROG, f"{path}: not a CAN log this tool reads (.log, as bsn-run --can-log writes, or "
                                   f"python-can's {' '.join(PYTHON_CAN_LOGS)})")
+            if args.onsets:
+                return print_onsets(path)
             for f in read_log(path, show.bad_line):
                 if not more():
                     break

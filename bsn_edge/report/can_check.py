@@ -8,97 +8,13 @@ bus onset no frame explains are both flagged.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-from bsn_edge.alerts.bus_check import FrameChecker, Verdict
-from bsn_edge.alerts.can_codec import HAZARD, signal_name
-from bsn_edge.alerts.can_log import read_log
-from bsn_edge.alerts.health import SystemState
+from bsn_edge.alerts.bus_onsets import BusOnset, BusRead, bus_onsets, read_bus
 from bsn_edge.alerts.sectors import SECTORS
-from bsn_edge.alerts.state_machine import Level
 from bsn_edge.report.drive import Onset
 
-
-@dataclass(frozen=True)
-class BusOnset:
-    """A sector's level rising on the bus: the hazard frame's number among the hazard frames, and its time."""
-
-    sector: str
-    level: str
-    frame: int
-    timestamp: float
-
-
-@dataclass(frozen=True)
-class BusRead:
-    """What a CAN log says: the level onsets of its trusted hazard frames, and what could not be read
-    (damaged frames by what was wrong; lines or records that could not be read, counted and the first named)."""
-
-    onsets: list[BusOnset]
-    hazard_frames: int
-    damaged: dict[str, int]
-    unreadable: str = ""
-    statuses: tuple[tuple[float, str], ...] = ()      # (time, state) of every trusted status frame, in order
-    start: float = 0.0                                # the log's first frame's time
-
-
-def read_bus(can_log: str | Path) -> BusRead:
-    """Every level onset the hazard frames of ``can_log`` (``.log`` candump, ``.asc``, ``.blf``) carry, read as
-    ``bsn-listen`` reads them (:func:`~bsn_edge.alerts.can_log.read_log`) and judged as it judges them
-    (:class:`FrameChecker`): a damaged frame (bad CRC or counter, an undefined level, a layout that does not
-    decode) and a line that cannot be read are counted, never an onset."""
-    check = FrameChecker()
-    last = dict.fromkeys(SECTORS, 0)
-    out: list[BusOnset] = []
-    unreadable: list[str] = []
-    n = 0
-
-    def bad(where: str, why: str) -> None:
-        unreadable.append(f"{where}: {why}")
-
-    pending: tuple[dict[str, Any], int, float] | None = None     # a cycle's hazard, until its status says
-    statuses: list[tuple[float, str]] = []
-    start: float | None = None
-
-    def apply(signals: dict[str, Any], k: int, t: float) -> None:
-        for name in SECTORS:
-            level = int(signals[signal_name(name, "Level")])
-            if level > last[name]:
-                out.append(BusOnset(name, Level(level).name, k, t))
-            last[name] = level
-
-    for f in read_log(can_log, bad):
-        start = f.timestamp if start is None else start
-        c = check(f.frame_id, f.data)
-        if c is None:
-            continue
-        if c.decoded is not None and c.decoded.name != HAZARD:
-            # the status after a hazard frame is its cycle's: an UNAVAILABLE cycle (a stall, the last word)
-            # carries no hazard, so its levels of NONE are no fall and what follows no new onset
-            if c.trusted:
-                statuses.append((f.timestamp, SystemState(int(c.decoded.signals["System_State"])).name))
-            if pending is not None and c.trusted and int(c.decoded.signals["System_State"]) != SystemState.UNAVAILABLE:
-                apply(*pending)
-            pending = None
-            continue
-        n += 1
-        if pending is not None:        # a hazard frame with no status of its own (status sent less often)
-            apply(*pending)
-            pending = None
-        if c.decoded is not None and c.trusted:
-            pending = (c.decoded.signals, n - 1, f.timestamp)
-    if pending is not None:
-        apply(*pending)
-    damaged = {v.value: k for v, k in check.counts.items() if k and v not in (Verdict.OK, Verdict.REPEATED)}
-    said = f"{len(unreadable)} unreadable line(s), the first {unreadable[0]}" if unreadable else ""
-    return BusRead(out, n, damaged, said, tuple(statuses), start or 0.0)
-
-
-def bus_onsets(can_log: str | Path) -> list[BusOnset]:
-    """The level onsets of :func:`read_bus`."""
-    return read_bus(can_log).onsets
+__all__ = ["BusOnset", "BusRead", "bus_onsets", "check", "read_bus"]
 
 
 AROUND = 2      # status cycles shown on each side of a disagreement

@@ -247,3 +247,24 @@ def test_the_page_says_values_in_words_and_units_not_json():
         "not calibrated online: the mounting is the camera file's"
     assert _converged({"source": "online", "converged_at": {"frame": 82, "seconds": 3.28}}) == "at frame 82, 3.28 s in"
     assert _converged({"source": "online", "converged_at": None}) == "no"
+
+
+def test_bsn_listen_prints_the_onsets_the_report_matches(tmp_path, capsys):
+    """``bsn-listen --onsets``: the log's rises in the report's form, a stall's UNAVAILABLE cycle no new one."""
+    from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+    from bsn_edge.alerts.can_codec import CanEncoder
+    from bsn_edge.cli import listen
+
+    enc = CanEncoder()
+    none = SectorAlert(0.0, Level.NONE, None)
+    caution, warn = SectorAlert(0.5, Level.CAUTION, 9.0), SectorAlert(0.9, Level.WARNING, 3.0)
+    plan = [(none, none), (caution, none), (caution, warn), None, (caution, warn)]   # None: a stall cycle
+    fs = []
+    for k, p in enumerate(plan):
+        fs += enc.encode(AlertFrame.unavailable(k * 0.1) if p is None
+                         else AlertFrame(k * 0.1, (p[0], none, p[1]), SystemState.OK, 10.0, {}))
+    can_log = tmp_path / "c.log"
+    _can_log(can_log, fs)                   # cycle k's hazard at 0.1 k s into the log
+    assert listen.main(["--can-log", str(can_log), "--onsets"]) == 0
+    rows = [ln.split() for ln in capsys.readouterr().out.splitlines()[1:]]
+    assert rows == [["0.10", "s", "LEFT", "CAUTION", "#1"], ["0.20", "s", "RIGHT", "WARNING", "#2"]], rows
