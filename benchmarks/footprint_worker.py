@@ -30,7 +30,8 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def worker(clip: Path, rate: float, calib: str | None, loops: int) -> dict[str, Any]:
+def worker(clip: Path, rate: float, calib: str | None, loops: int, settings: dict[str, Any] | None = None
+           ) -> dict[str, Any]:
     """One row, in this process: the runtime on ``clip`` paced at ``rate``; the figures as a dict."""
     from bsn_edge.alerts.senders import CanSender
     from bsn_edge.calibration import Calibration
@@ -69,7 +70,7 @@ def worker(clip: Path, rate: float, calib: str | None, loops: int) -> dict[str, 
             if self._open is not None:
                 self._open.close()
 
-    cfg = RuntimeConfig()
+    cfg = RuntimeConfig(**(settings or {}))       # [runtime] settings to compare (a profile's A/B)
     engine = Engine(DEFAULT_MODEL, cfg.engine_threads, cfg.spin, trust=TrustPolicy.default([], False))
     camera = CameraState(engine.card, Calibration.read(calib) if calib else None)
     source = Looped()
@@ -87,8 +88,11 @@ def worker(clip: Path, rate: float, calib: str | None, loops: int) -> dict[str, 
     (w0, c0), (w1, c1) = marks[WARM], marks[last]
     stage_ms: dict[str, list[float]] = {}
     lat = []
+    per_loop = source.total // loops
     for line in (tmp / "frames.jsonl").read_text().splitlines()[WARM:]:
         rec = json.loads(line)
+        if loops > 1 and rec["frame"] % per_loop == 0:
+            continue            # the first frame of a replay waits for the file's reopening: no camera does
         lat.append(rec["latency_ms"])
         for k, v in rec["stage_ms"].items():
             stage_ms.setdefault(k, []).append(v)
@@ -118,10 +122,11 @@ def main() -> int:
     p.add_argument("rate", type=float)
     p.add_argument("--calib")
     p.add_argument("--loops", type=int, default=1)
+    p.add_argument("--runtime", default="{}", help="[runtime] settings as JSON, e.g. {\"opencv_threads\": 0}")
     a = p.parse_args()
     import bsn_edge
 
-    row = worker(Path(a.clip), a.rate, a.calib, a.loops)
+    row = worker(Path(a.clip), a.rate, a.calib, a.loops, json.loads(a.runtime))
     print(json.dumps({**row, "bsn_edge": str(Path(bsn_edge.__file__).parent)}))
     return 0
 
