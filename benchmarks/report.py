@@ -27,8 +27,8 @@ ORDER = ("synth", "labels", "train_step", "train_step_avx2_research", "train_ste
          "runtime", "runtime_s3", "runtime_avx2", "runtime_avx2_decode", "runtime_avx2_flight", "runtime_avx2_shared",
          "runtime_avx2_s3", "runtime_avx2_s3fast", "runtime_avx2_s3warp", "runtime_avx2_s3flight",
          "runtime_avx2_budget", "tradeoff", "tradeoff_avx2",
-         "calibration", "calibration_avx2", "install", "footprint", "realcam", "realview", "cameras", "remap", "remap_mirror",
-         "warp", "overlay_behind")
+         "calibration", "calibration_avx2", "install", "footprint", "realcam", "realview", "cameras", "remap",
+         "remap_mirror", "warp", "overlay_behind")
 
 
 def _load(results: Path, name: str) -> dict | None:
