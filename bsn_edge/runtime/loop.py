@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from bsn_edge.alerts import (
@@ -83,7 +82,6 @@ class RuntimeConfig:
     in_flight: int = setting(1, 1, MAX_IN_FLIGHT, "frames")  # each inference on a thread of its own
     threads: int = setting(0, 0, MAX_THREADS, "threads")     # onnxruntime's per inference; 0: as in_flight suits
     spin: bool = False           # idle onnxruntime threads spin-wait instead of sleeping
-    opencv_threads: int = setting(1, 0, MAX_THREADS, "threads")   # OpenCV's for decoding and warping; 0: its own
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -413,16 +411,6 @@ class FramePipeline:
         its own (an engine of one intra-op thread each: two on two cores do more frames a second than
         one inference split over both, each frame's answer later); everything after the inference
         happens on this thread, in the frames' order, as with one in flight."""
-        opencv_threads = cv2.getNumThreads()
-        if self.cfg.opencv_threads:
-            cv2.setNumThreads(self.cfg.opencv_threads)
-        try:
-            return self._run(max_frames, progress, stop)
-        finally:
-            cv2.setNumThreads(opencv_threads)      # the process's again: the runtime may be one part of a program
-
-    def _run(self, max_frames: int | None, progress: Callable[[int], Any] | None,
-             stop: threading.Event | None) -> dict[str, Any]:
         self.engine.warmup(self.cfg.warmup)
         t_start = time.perf_counter()
         overlap, held = self.cfg.overlap, self.cfg.in_flight

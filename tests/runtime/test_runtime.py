@@ -416,18 +416,3 @@ def test_a_picture_of_another_size_in_a_folder_gets_no_model_frame_of_its_own(se
     summary = run(engine, ImageFolderSource(folder), [], camera=Sizes(engine.card))
     assert summary["frames"] == 8 and summary["valid_frames"] == 7 and summary["faults"]["size_changes"] == 1
     assert set(built) == set(observed) == {(96, 192)}
-
-
-def test_opencv_runs_on_the_threads_the_settings_say_while_the_loop_runs_and_is_given_back(setup):
-    """OpenCV's pool of both cores woke for every small resize and remap beside the model's two threads; the
-    runtime runs it on ``runtime.opencv_threads`` (1) and gives the process its own number back after."""
-    model, clip = setup
-    before = cv2.getNumThreads()
-    seen: list[int] = []
-    run(Engine(model), open_source(str(clip / "video.mp4")), [], RuntimeConfig(opencv_threads=1),
-        progress=lambda _n: seen.append(cv2.getNumThreads()), max_frames=5)
-    assert seen == [1] * 5 and cv2.getNumThreads() == before
-    seen.clear()
-    run(Engine(model), open_source(str(clip / "video.mp4")), [], RuntimeConfig(opencv_threads=0),
-        progress=lambda _n: seen.append(cv2.getNumThreads()), max_frames=5)
-    assert seen == [before] * 5                 # 0: OpenCV's own choice, untouched
