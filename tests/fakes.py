@@ -120,3 +120,21 @@ def car(x0, y0, x1, y1, h=1.5) -> Boxes:
 
 def world_with(layout: RoadLayout, boxes: Boxes) -> World:
     return World(layout, boxes, Agents.empty())
+
+
+def full_disk_for(path, monkeypatch, module=None) -> None:
+    """Writing ``path`` through ``module``'s ``atomic_write_bytes`` (the project's one whole-file writer, as
+    ``module`` imported it; default ``bsn_edge.sequence.images``) fails as on a full disk: checked writable
+    before the run, it fills up by the time it is written."""
+    import errno
+
+    if module is None:
+        from bsn_edge.sequence import images as module
+    real = module.atomic_write_bytes
+
+    def write(target, data, *a, **k):
+        if str(target) == str(path):
+            raise OSError(errno.ENOSPC, "No space left on device", str(target))
+        return real(target, data, *a, **k)
+
+    monkeypatch.setattr(module, "atomic_write_bytes", write)

@@ -211,7 +211,6 @@ def test_a_camera_file_that_cannot_be_saved_when_calibration_converges_degrades_
     """--save-calib on a disk that fills up before calibration converges: once stopped the whole drive
     (exit 2, "could not start", no summary); now the drive runs to its end, the failure named with its file
     and frame in the summary's outputs, DEGRADED on the bus from then on."""
-    import errno
     import json
 
     import can
@@ -220,18 +219,12 @@ def test_a_camera_file_that_cannot_be_saved_when_calibration_converges_degrades_
     from bsn_edge.alerts.can_codec import decode
     from bsn_edge.calibration import camera_file
     from bsn_edge.cli import run as run_cli
+    from tests.fakes import full_disk_for
 
     truth = Calibration.read(long_drive / "calibration.json")
     Calibration.of(truth.intrinsics, truth.dist, None).write(tmp_path / "intrinsics.json")
     saved, summary = tmp_path / "cam.json", tmp_path / "s.json"
-    real = camera_file.atomic_write_bytes
-
-    def full(target, data, *a, **k):
-        if str(target) == str(saved):
-            raise OSError(errno.ENOSPC, "No space left on device", str(target))
-        return real(target, data, *a, **k)
-
-    monkeypatch.setattr(camera_file, "atomic_write_bytes", full)
+    full_disk_for(saved, monkeypatch, camera_file)
     frames = len(list((long_drive / "rgb").iterdir()))
     with can.Bus(interface="virtual", channel="bsn-calib-full") as rx:
         code = run_cli.main(["--model", str(small_light_onnx((128, 256))), "--source", str(long_drive / "rgb"),

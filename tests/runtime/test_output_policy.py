@@ -8,6 +8,7 @@ import pytest
 
 from bsn_edge.cli import demo, sheet
 from bsn_edge.cli import run as run_cli
+from tests.fakes import full_disk_for
 
 
 def _run(model, clip, *extra):
@@ -118,26 +119,10 @@ def test_the_contact_sheet_and_the_demo_keep_what_is_there_without_force(setup, 
     assert "holds files already; pass --force" in capsys.readouterr().err
 
 
-def _full_disk_for(path, monkeypatch):
-    """Writing ``path`` fails as on a full disk (checked writable before the run, it fills up by the end)."""
-    import errno
-
-    from bsn_edge.sequence import images
-
-    real = images.atomic_write_bytes
-
-    def write(target, data, *a, **k):
-        if str(target) == str(path):
-            raise OSError(errno.ENOSPC, "No space left on device", str(target))
-        return real(target, data, *a, **k)
-
-    monkeypatch.setattr(images, "atomic_write_bytes", write)
-
-
 def test_a_summary_that_cannot_be_written_at_the_end_fails_the_run(setup, tmp_path, capsys, monkeypatch):
     model, clip = setup
     out = tmp_path / "s.json"
-    _full_disk_for(out, monkeypatch)
+    full_disk_for(out, monkeypatch)
     assert _run(model, clip, "--summary", str(out)) == 1
     err = capsys.readouterr().err
     assert f"error: cannot write the summary {out}" in err and "No space left on device" in err
@@ -147,7 +132,7 @@ def test_a_summary_that_cannot_be_written_at_the_end_fails_the_run(setup, tmp_pa
 def test_a_summary_that_cannot_be_written_after_a_stop_at_start_up_fails_too(setup, tmp_path, capsys, monkeypatch):
     """A signal before the first frame: the summary is written with the signal's code, or the run fails."""
     out = tmp_path / "early.json"
-    _full_disk_for(out, monkeypatch)
+    full_disk_for(out, monkeypatch)
 
     def stopped_at_once(self):
         self.signal = "SIGTERM"          # TERM alone ends a run with 0: only the summary's failure makes it 1
