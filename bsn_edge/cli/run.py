@@ -316,14 +316,9 @@ def _stopped_early(args: argparse.Namespace, stopper: StopOnSignal, senders: lis
     return 1 if not written and code == 0 else code
 
 
-def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
-    if stopper.event.is_set():
-        return _stopped_early(args, stopper)
-    from bsn_edge.progress import progress_bar
-    from bsn_edge.runtime import run
-    if stopper.event.is_set():          # a signal while the runtime loaded
-        return _stopped_early(args, stopper)
-    try:                                              # every output judged before any is written
+def _judge_outputs(args: argparse.Namespace) -> int | None:
+    """Every output judged before any is written: None when all can be, else the refusal's exit code."""
+    try:
         check_not_inputs([(k.flag, path) for k, path in _output_files(args)] + [("--save-maps", args.save_maps)],
                          _inputs(args))
         check_distinct(_output_files(args))
@@ -335,6 +330,18 @@ def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
         return _refuse_outputs(args, str(e))
     except (ValueError, OSError) as e:                # the disk's: a folder that cannot be made or written
         return _refuse_outputs(args, str(e), writable=True)
+    return None
+
+
+def _run(args: argparse.Namespace, stopper: StopOnSignal) -> int:
+    if stopper.event.is_set():
+        return _stopped_early(args, stopper)
+    from bsn_edge.progress import progress_bar
+    from bsn_edge.runtime import run
+    if stopper.event.is_set():          # a signal while the runtime loaded
+        return _stopped_early(args, stopper)
+    if (refused := _judge_outputs(args)) is not None:
+        return refused
     configured = _configured(args)
     if isinstance(configured, int):
         return configured

@@ -41,6 +41,30 @@ def _thresholds(summary: dict[str, Any]) -> dict[str, float]:
             "WARNING": float((alerts.get("warning") or {}).get("on", default.warning.on))}
 
 
+def _sector_axis(ax, name: str, k: int, t: np.ndarray, recs: list, on: dict[str, float]) -> None:
+    """One sector's row: its smoothed score against the thresholds, its level shaded, its distance."""
+    sectors = [r.hazard.sectors[k] for r in recs if r.hazard is not None]
+    score = np.array([s.score for s in sectors])
+    levels = [s.level.name for s in sectors]
+    for level, colour in LEVEL_COLOURS.items():
+        mask = np.array([lv == level for lv in levels])
+        if mask.any():
+            ax.fill_between(t, 0, 1, where=mask, color=colour, alpha=0.35, step="post", lw=0,
+                            label=f"{level.lower()} level")
+        ax.axhline(on[level], color=colour, ls="--", lw=1, label=f"{level.lower()} starts at")
+    ax.plot(t, score, color="#333", lw=1, label="score (smoothed)")
+    ax.set_ylim(0, 1.02)
+    ax.set_ylabel(f"{name}\nscore")
+    dist = np.array([np.nan if s.distance_m is None else s.distance_m for s in sectors], np.float64)
+    twin = ax.twinx()
+    twin.plot(t, dist, ".", ms=2, color="#4e79a7", label="distance")
+    twin.set_ylabel("distance (m)", color="#4e79a7")
+    if not np.isfinite(dist).any():       # no blind spot measured: the axis's range, not -0.04 to 0.04 m
+        twin.set_ylim(0, DISTANCE_AXIS_M)
+    if k == 0:
+        ax.legend(loc="upper left", fontsize=7, ncol=3)
+
+
 def timelines(drive: Drive) -> str:
     """The sectors', the state's and the latency's timelines in one picture (base64 PNG)."""
     import matplotlib
@@ -56,26 +80,7 @@ def timelines(drive: Drive) -> str:
     fig, axes = plt.subplots(len(SECTORS) + 2, 1, figsize=(12, 2.0 * (len(SECTORS) + 2)), sharex=True,
                              gridspec_kw={"height_ratios": [3] * len(SECTORS) + [1, 3]})
     for k, (name, ax) in enumerate(zip(SECTORS, axes, strict=False)):
-        sectors = [r.hazard.sectors[k] for r in recs if r.hazard is not None]
-        score = np.array([s.score for s in sectors])
-        levels = [s.level.name for s in sectors]
-        for level, colour in LEVEL_COLOURS.items():
-            mask = np.array([lv == level for lv in levels])
-            if mask.any():
-                ax.fill_between(t, 0, 1, where=mask, color=colour, alpha=0.35, step="post", lw=0,
-                                label=f"{level.lower()} level")
-            ax.axhline(on[level], color=colour, ls="--", lw=1, label=f"{level.lower()} starts at")
-        ax.plot(t, score, color="#333", lw=1, label="score (smoothed)")
-        ax.set_ylim(0, 1.02)
-        ax.set_ylabel(f"{name}\nscore")
-        dist = np.array([np.nan if s.distance_m is None else s.distance_m for s in sectors], np.float64)
-        twin = ax.twinx()
-        twin.plot(t, dist, ".", ms=2, color="#4e79a7", label="distance")
-        twin.set_ylabel("distance (m)", color="#4e79a7")
-        if not np.isfinite(dist).any():       # no blind spot measured: the axis's range, not -0.04 to 0.04 m
-            twin.set_ylim(0, DISTANCE_AXIS_M)
-        if k == 0:
-            ax.legend(loc="upper left", fontsize=7, ncol=3)
+        _sector_axis(ax, name, k, t, recs, on)
     state_ax, lat_ax = axes[len(SECTORS)], axes[len(SECTORS) + 1]
     spans = drive.states()
     step = float(np.median(np.diff(t))) if len(t) > 1 else 0.1
