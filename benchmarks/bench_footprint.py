@@ -42,6 +42,7 @@ from .runner import Report, run
 
 LOOPS = 8
 RATES = (15.0, 30.0)
+REPEATS = 2              # each tree's row twice, interleaved: the spread between the two is this VM's noise
 WORKER = Path(__file__).with_name("footprint_worker.py")    # a script: it imports the tree it is given
 CLIPS = {"udacity 1280x720, camera file": "udacity_test_video.mp4", "highway 960x540, no camera file":
          "dashcam_highway.mp4"}
@@ -79,10 +80,12 @@ def measure(args: argparse.Namespace, _p: argparse.ArgumentParser) -> Report | N
     with tempfile.TemporaryDirectory() as tmp:
         calib = Path(tmp) / "udacity.json"
         udacity_camera()[1].write(calib)
-        for code in codes:
-            name = _commit(code)
-            for label, clip in CLIPS.items():
-                for rate in RATES:
+        # the trees side by side row by row: a VM's speed drifts over minutes, and a tree measured after the
+        # other would carry the drift
+        for label, clip in CLIPS.items():
+            for rate in RATES:
+                for code in [c for _ in range(REPEATS) for c in codes]:
+                    name = _commit(code)
                     env = {**os.environ, "PYTHONPATH": str(code)}      # the tree's bsn_edge, not the install's
                     argv = [sys.executable, str(WORKER), str(REAL / clip), str(rate), "--loops",
                             str(LOOPS if clip.startswith("udacity") else 1)]
