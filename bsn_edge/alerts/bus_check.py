@@ -31,6 +31,7 @@ class Checked:
     verdict: Verdict
     lost: int = 0
     detail: str = ""
+    number: int | None = None       # its number among its message's frames sent, from 0 (lost ones counted)
 
     @property
     def trusted(self) -> bool:
@@ -44,6 +45,7 @@ class FrameChecker:
     """Judges a stream of frames in order; keeps each message's last good counter and the counts."""
 
     last: dict[str, int] = field(default_factory=dict)
+    numbers: dict[str, int] = field(default_factory=dict)     # each message's last good frame's number
     counts: dict[Verdict, int] = field(default_factory=lambda: dict.fromkeys(Verdict, 0))
     lost: int = 0
 
@@ -63,10 +65,13 @@ class FrameChecker:
         self.last[d.name] = d.counter
         lost = 0 if prev == d.counter else counter_gap(prev, d.counter)
         self.lost += lost
+        # the first frame heard is taken as the sender's frame of its counter (a log from the sender's start)
+        number = d.counter if prev is None else self.numbers[d.name] + (prev != d.counter) + lost
+        self.numbers[d.name] = number
         bad = invalid_fields(d)
         if bad:
-            return self._count(Checked(d, Verdict.UNDEFINED, lost, ", ".join(bad)))
-        return self._count(Checked(d, Verdict.REPEATED if prev == d.counter else Verdict.OK, lost))
+            return self._count(Checked(d, Verdict.UNDEFINED, lost, ", ".join(bad), number))
+        return self._count(Checked(d, Verdict.REPEATED if prev == d.counter else Verdict.OK, lost, number=number))
 
     def _count(self, c: Checked) -> Checked:
         self.counts[c.verdict] += 1

@@ -28,6 +28,18 @@ class BusOnset:
 
 
 @dataclass(frozen=True)
+class BusCycle:
+    """A send cycle as the bus carried it: its hazard frame's number among those the sender sent (from 0, by the
+    alive counter, the frames lost before it included), its time, each sector's level, and the state of the
+    status frame that closed the cycle (None when the cycle had none: the status goes out less often)."""
+
+    number: int
+    timestamp: float
+    levels: tuple[str, ...]
+    state: str | None
+
+
+@dataclass(frozen=True)
 class BusRead:
     """What a CAN log says: the level onsets of its trusted hazard frames, and what could not be read
     (damaged frames by what was wrong; lines or records that could not be read, counted and the first named)."""
@@ -38,6 +50,7 @@ class BusRead:
     unreadable: str = ""
     statuses: tuple[tuple[float, str], ...] = ()      # (time, state) of every trusted status frame, in order
     start: float = 0.0                                # the log's first frame's time
+    cycles: tuple[BusCycle, ...] = ()                 # every trusted hazard frame with its cycle's state
 
 
 def read_bus(can_log: str | Path) -> BusRead:
@@ -54,11 +67,16 @@ def read_bus(can_log: str | Path) -> BusRead:
     def bad(where: str, why: str) -> None:
         unreadable.append(f"{where}: {why}")
 
-    pending: tuple[dict[str, Any], int, float] | None = None     # a cycle's hazard, until its status says
+    pending: tuple[dict[str, Any], int, float, int] | None = None     # a cycle's hazard, until its status says
     statuses: list[tuple[float, str]] = []
+    cycles: list[BusCycle] = []
     start: float | None = None
 
-    def apply(signals: dict[str, Any], k: int, t: float) -> None:
+    def close(signals: dict[str, Any], number: int, t: float, state: str | None) -> None:
+        levels = tuple(Level(int(signals[signal_name(name, "Level")])).name for name in SECTORS)
+        cycles.append(BusCycle(number, t, levels, state))
+
+    def apply(signals: dict[str, Any], k: int, t: float, _number: int) -> None:
         for name in SECTORS:
             level = int(signals[signal_name(name, "Level")])
             if level > last[name]:
@@ -73,23 +91,28 @@ def read_bus(can_log: str | Path) -> BusRead:
         if c.decoded is not None and c.decoded.name != HAZARD:
             # the status after a hazard frame is its cycle's: an UNAVAILABLE cycle (a stall, the last word)
             # carries no hazard, so its levels of NONE are no fall and what follows no new onset
-            if c.trusted:
-                statuses.append((f.timestamp, SystemState(int(c.decoded.signals["System_State"])).name))
-            if pending is not None and c.trusted and int(c.decoded.signals["System_State"]) != SystemState.UNAVAILABLE:
-                apply(*pending)
+            state = SystemState(int(c.decoded.signals["System_State"])).name if c.trusted else None
+            if state is not None:
+                statuses.append((f.timestamp, state))
+            if pending is not None:
+                close(pending[0], pending[3], pending[2], state)
+                if state is not None and state != SystemState.UNAVAILABLE.name:
+                    apply(*pending)
             pending = None
             continue
         n += 1
         if pending is not None:        # a hazard frame with no status of its own (status sent less often)
+            close(pending[0], pending[3], pending[2], None)
             apply(*pending)
             pending = None
         if c.decoded is not None and c.trusted:
-            pending = (c.decoded.signals, n - 1, f.timestamp)
+            pending = (c.decoded.signals, n - 1, f.timestamp, c.number or 0)
     if pending is not None:
+        close(pending[0], pending[3], pending[2], None)
         apply(*pending)
     damaged = {v.value: k for v, k in check.counts.items() if k and v not in (Verdict.OK, Verdict.REPEATED)}
     said = f"{len(unreadable)} unreadable line(s), the first {unreadable[0]}" if unreadable else ""
-    return BusRead(out, n, damaged, said, tuple(statuses), start or 0.0)
+    return BusRead(out, n, damaged, said, tuple(statuses), start or 0.0, tuple(cycles))
 
 
 def bus_onsets(can_log: str | Path) -> list[BusOnset]:

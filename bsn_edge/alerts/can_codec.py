@@ -113,10 +113,13 @@ def invalid_fields(d: Decoded) -> list[str]:
             if not 0 <= int(d.signals[f"{side}_Level"]) < len(LEVEL_NAMES)]
 
 
-def to_alert_text(d: Decoded) -> str:
-    """One line a person can read (a field outside its value table reads ``LEVEL?N``)."""
+def to_alert_text(d: Decoded, number: int | None = None) -> str:
+    """One line a person can read (a field outside its value table reads ``LEVEL?N``): the message, its
+    ``number`` among its message's frames when known (what ``bsn-report`` calls the cycle), its alive
+    counter (0-14, wrapping) and its values."""
     s = d.signals
     flag = "" if d.crc_ok else "  CRC MISMATCH"
+    which = f"{'hazard' if d.name == HAZARD else 'status'} {'' if number is None else f'{number} '}[alive {d.counter}]"
     if d.name == HAZARD:
         parts = []
         for side in SIDES:
@@ -126,9 +129,9 @@ def to_alert_text(d: Decoded) -> str:
             where = "" if dist >= NO_DISTANCE else f" {dist:.1f} m"
             unseen = " UNSEEN" if int(s.get(f"{side}_Unseen", 0)) else ""
             parts.append(f"{side.upper()} {lv} {s[f'{side}_Score']:.2f}{where}{unseen}")
-        return f"hazard #{d.counter}: " + " | ".join(parts) + flag
+        return f"{which}: " + " | ".join(parts) + flag
     state = SystemState(int(s["System_State"])).name
-    return (f"status #{d.counter}: {state} {s['Frame_Rate']:.1f} fps, decode errors {int(s['Decode_Errors'])}, "
+    return (f"{which}: {state} {s['Frame_Rate']:.1f} fps, decode errors {int(s['Decode_Errors'])}, "
             f"dropped {int(s['Dropped_Frames'])}, invalid outputs {int(s['Invalid_Outputs'])}, "
             f"tx errors {int(s['Tx_Errors'])}, sink errors {int(s.get('Sink_Errors', 0))}"
             + (", model UNSIGNED" if int(s.get("Model_Unsigned", 0)) else "") + _camera_text(s) + flag)

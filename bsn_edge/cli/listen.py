@@ -43,9 +43,9 @@ def print_onsets(path: Path) -> int:
     from bsn_edge.alerts.bus_onsets import read_bus
 
     bus = read_bus(path)
-    print(f"{'at':>10}  {'sector':<7} {'level':<8} hazard frame")
+    print(f"{'at':>10}  {'sector':<7} {'level':<8} hazard frame in the log")
     for o in bus.onsets:
-        print(f"{o.timestamp - bus.start:>8.2f} s  {o.sector:<7} {o.level:<8} #{o.frame}")
+        print(f"{o.timestamp - bus.start:>8.2f} s  {o.sector:<7} {o.level:<8} {o.frame}")
     damaged = ", ".join(f"{n} {k}" for k, n in bus.damaged.items())
     print(f"{len(bus.onsets)} onsets in {bus.hazard_frames} hazard frames"
           + (f"; damaged: {damaged}" if damaged else "") + (f"; {bus.unreadable}" if bus.unreadable else ""),
@@ -104,7 +104,7 @@ class Printer:
                     self.gaps += 1
                     note += f"  (the bus was silent {t - self.last_status_t:.2f} s)"
                 self.last_status_t = t
-        print(stamp + to_alert_text(c.decoded) + note, file=self.out or sys.stdout)
+        print(stamp + to_alert_text(c.decoded, c.number) + note, file=self.out or sys.stdout)
 
     def bad_line(self, where: str, why: str) -> None:
         self.bad_lines += 1

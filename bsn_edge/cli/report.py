@@ -48,7 +48,11 @@ def main(argv: list[str] | None = None) -> int:
         return fail(PROG, str(e))
     check = record.get("bus_check")
     if check is not None and not check["agree"]:
-        print(f"{PROG}: the bus and the frame log disagree on the level onsets (see the report)", file=sys.stderr)
+        cycles = check.get("cycles") or {}
+        first = (check["disagreements"] or cycles.get("disagreements") or [{}])[0]
+        where = f" (the first at {first['t_s']:.2f} s: {first['why']})" if first else ""
+        print(f"{PROG}: the bus and the frame log disagree: {len(check['disagreements'])} onset(s), "
+              f"{cycles.get('disagree', 0)} cycle(s){where}; the report shows each", file=sys.stderr)
         return 1
     return 0
 

@@ -21,7 +21,7 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
     thumbnails (``overlay``); write ``out``/report.html and report.json, returned. ``out`` is refused when it
     exists unless ``force`` (then only the report's two files are replaced); nothing is written until the
     report is whole. ``say`` is told each step."""
-    from bsn_edge.report.can_check import check, read_bus
+    from bsn_edge.report.can_check import check, check_cycles, read_bus
     from bsn_edge.report.page import MAX_THUMBS, latency_histogram, page, thumbnails, timelines
 
     out = Path(out)
@@ -43,7 +43,9 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
     if can_log is not None:
         say(f"checking the bus: {can_log}")
         bus = read_bus(can_log)
-        record["bus_check"] = {**check(drive.onsets, bus.onsets, bus.statuses, bus.start),
+        onsets, cycles = check(drive.onsets, bus.onsets, bus.statuses, bus.start), \
+            check_cycles(drive.records, bus.cycles, bus.start)
+        record["bus_check"] = {**onsets, "agree": onsets["agree"] and not cycles["disagree"], "cycles": cycles,
                                "hazard_frames": bus.hazard_frames, "damaged_frames": bus.damaged,
                                "unreadable": bus.unreadable}
         if bus.damaged or bus.unreadable:

@@ -4,17 +4,23 @@ frame log's sector by sector, in order. Damaged frames are counted, never onsets
 
 A frame log's onset that never reached the bus (a level that rose and fell within one send cycle) and a
 bus onset no frame explains are both flagged.
+
+Cycle by cycle (:func:`check_cycles`): each trusted hazard frame's levels against those of the frame whose
+hazard it carried (the frame log's ``bus_from`` numbers them), every one that differs shown with its time, the
+cycles around it and why. A cycle that said UNAVAILABLE carries no levels and is not compared.
 """
 
 from __future__ import annotations
 
+import bisect
 from typing import Any
 
-from bsn_edge.alerts.bus_onsets import BusOnset, BusRead, bus_onsets, read_bus
+from bsn_edge.alerts.bus_onsets import BusCycle, BusOnset, BusRead, bus_onsets, read_bus
 from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.report.drive import Onset
+from bsn_edge.runtime.frame_record import FrameRecord
 
-__all__ = ["BusOnset", "BusRead", "bus_onsets", "check", "read_bus"]
+__all__ = ["BusOnset", "BusRead", "bus_onsets", "check", "check_cycles", "read_bus"]
 
 
 AROUND = 2      # status cycles shown on each side of a disagreement
@@ -69,3 +75,57 @@ def _unmatched(a: list[Any], b: list[Any]) -> list[Any]:
         else:
             out.append(o)
     return out
+
+
+MAX_SHOWN = 50      # cycle disagreements listed one by one; the rest counted
+
+
+def check_cycles(records: list[FrameRecord], cycles: tuple[BusCycle, ...], start: float = 0.0) -> dict[str, Any]:
+    """Each cycle of the bus against the frame whose hazard it carried: the last frame of the log whose
+    ``bus_from`` is at most the cycle's number (before any, no levels: every sector NONE). Returns the counts
+    (compared, agreeing, not compared: UNAVAILABLE or a lost status with no levels) and the first
+    :data:`MAX_SHOWN` disagreements, each with its time (seconds into the CAN log), the frame, both levels, the
+    cycles around it and why. ``numbered`` is False for a frame log without ``bus_from`` (nothing compared)."""
+    made = [r for r in records if r.hazard is not None and r.bus_from is not None]
+    out: dict[str, Any] = {"numbered": bool(made), "compared": 0, "agree": 0, "not_compared": 0,
+                           "disagree": 0, "disagreements": []}
+    if not made:
+        return out
+    made.sort(key=lambda r: r.bus_from or 0)
+    keys = [r.bus_from or 0 for r in made]
+    for i, c in enumerate(cycles):
+        none = all(lv == "NONE" for lv in c.levels)
+        if c.state == "UNAVAILABLE" or (c.state is None and none):
+            out["not_compared"] += 1
+            continue
+        k = bisect.bisect_right(keys, c.number) - 1
+        rec = made[k] if k >= 0 else None
+        mine = tuple(s.level.name for s in rec.hazard.sectors) if rec is not None and rec.hazard else \
+            ("NONE",) * len(c.levels)
+        out["compared"] += 1
+        if mine == c.levels:
+            out["agree"] += 1
+            continue
+        out["disagree"] += 1
+        if len(out["disagreements"]) < MAX_SHOWN:
+            out["disagreements"].append(_cycle_disagreement(c, rec, mine, cycles[max(0, i - AROUND): i + AROUND + 1],
+                                                            start, records))
+    return out
+
+
+def _cycle_disagreement(c: BusCycle, rec: FrameRecord | None, mine: tuple[str, ...], around: tuple[BusCycle, ...],
+                        start: float, records: list[FrameRecord]) -> dict[str, Any]:
+    """One cycle whose levels are not its frame's, with the cycles around it and what explains it."""
+    frames = {r.frame for r in records}
+    gap = rec is not None and any(f not in frames for f in range(rec.frame + 1, rec.frame + 3)) \
+        and rec.frame != max(frames)
+    if rec is None:
+        why = "the bus carried levels before the frame log's first hazard"
+    elif gap:
+        why = "the frame log lacks lines after this frame (dropped or cut): the frame this cycle carried is not in it"
+    else:
+        why = "the bus carried levels no frame of the log had at this cycle"
+    return {"cycle": c.number, "t_s": round(c.timestamp - start, 3), "frame": None if rec is None else rec.frame,
+            "bus": list(c.levels), "log": list(mine), "state": c.state,
+            "around": [{"cycle": a.number, "t_s": round(a.timestamp - start, 3), "state": a.state,
+                        "levels": list(a.levels)} for a in around], "why": why}

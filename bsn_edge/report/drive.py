@@ -138,7 +138,7 @@ def read_drive(log: str | Path, summary: str | Path | None = None) -> Drive:
                 if not line.strip():
                     continue
                 records.append(FrameRecord.from_json(json.loads(line)))
-            except (UnicodeDecodeError, ValueError, KeyError, TypeError, RecursionError) as e:
+            except (UnicodeDecodeError, ValueError, KeyError, TypeError, RecursionError, OverflowError) as e:
                 damage.append(Damage(n, f"{type(e).__name__}: {e}"[:200]))
     if not records:
         raise ValueError(f"{log}: no line is a frame of bsn-run's log ({len(damage)} unreadable)")

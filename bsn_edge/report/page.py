@@ -278,12 +278,33 @@ def _bus_section(check: dict[str, Any] | None) -> list[str]:
                               e(", ".join(f"{a['t_s']:.2f} s {a['state']}" for a in d["around"]) or "-"), e(d["why"])]
                              for d in check["disagreements"]],
                             ["where", "sector", "level", "at", "the bus around it", "why"]))
+    parts += _cycles_part(check.get("cycles"))
     damaged = check.get("damaged_frames") or {}
     if damaged or check.get("unreadable"):
         parts.append("<p>Damaged frames on the bus, counted and never taken as onsets: "
                      + e(", ".join(f"{n} with a {k}" if k == "bad CRC" else f"{n}: {k}" for k, n in damaged.items())
                          or "none") + (f"; {e(check['unreadable'])}" if check.get("unreadable") else "")
                      + f" (of {check.get('hazard_frames', 0)} hazard frames).</p>")
+    return parts
+
+
+def _cycles_part(cycles: dict[str, Any] | None) -> list[str]:
+    """The bus cycle by cycle against the frames whose levels each cycle carried."""
+    e = html.escape
+    if not cycles:
+        return []
+    if not cycles["numbered"]:
+        return ["<p>This frame log does not number the bus's cycles (written before <code>bus_from</code>): "
+                "the bus is compared by its onsets only.</p>"]
+    parts = [f"<p>Cycle by cycle: {cycles['compared']} hazard frames compared with the frame each carried, "
+             f"{cycles['agree']} agree, {cycles['disagree']} differ; {cycles['not_compared']} not compared "
+             "(UNAVAILABLE, or no status to say the cycle had levels).</p>"]
+    if cycles["disagreements"]:
+        parts.append(_table([[d["cycle"], f"{d['t_s']:.2f} s", "-" if d["frame"] is None else d["frame"],
+                              e(" ".join(d["bus"])), e(" ".join(d["log"])),
+                              e("; ".join(f"#{a['cycle']} {a['t_s']:.2f} s {a['state'] or '?'} {' '.join(a['levels'])}"
+                                          for a in d["around"])), e(d["why"])] for d in cycles["disagreements"]],
+                            ["cycle", "at", "frame", "bus levels", "frame's levels", "the cycles around it", "why"]))
     return parts
 
 

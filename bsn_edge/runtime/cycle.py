@@ -8,6 +8,7 @@ import time
 from collections.abc import Callable
 
 from bsn_edge.alerts.bus_config import BusConfig, MessageRates
+from bsn_edge.alerts.can_codec import HAZARD
 from bsn_edge.alerts.frame import AlertFrame, Hazard
 from bsn_edge.alerts.health import Fault, Health
 from bsn_edge.alerts.senders import Sender
@@ -41,6 +42,8 @@ class CycleEmitter:
         self.down_after_s = down_after_s
         self.ticks = 0                  # cycles of the schedule sent: which messages are due
         self.latest: Hazard | None = None
+        self.hazards_sent = 0           # cycles that carried the hazard message: its frames' number on a bus
+        self.latest_from = 0            # the number of the first hazard frame that carries ``latest``
         self._last: AlertFrame | None = None       # the last cycle as it went out
         self.next_t: float | None = None
         self.sent_cycles = 0
@@ -52,9 +55,11 @@ class CycleEmitter:
         self._lock = threading.Lock()
 
     def publish(self, hazard: Hazard) -> None:
-        """The loop's latest word on the sectors, for the cycles to come."""
+        """The loop's latest word on the sectors, for the cycles to come; :attr:`latest_from` is the number
+        (from 0, among the hazard frames sent) of the first that carries it."""
         with self._lock:
             self.latest = hazard
+            self.latest_from = self.hazards_sent
 
     def last_sent(self) -> AlertFrame | None:
         """The last cycle as it went out (None before the first)."""
@@ -123,6 +128,7 @@ class CycleEmitter:
                 h.fault(fault, n)
         self._last = frame
         self.sent_cycles += 1
+        self.hazards_sent += messages is None or HAZARD in messages
         self.state_cycles[frame.state.name] = self.state_cycles.get(frame.state.name, 0) + 1
         if self.clock is not None:
             self.last_sent_at = self.clock()

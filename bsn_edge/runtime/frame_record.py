@@ -8,7 +8,9 @@ with this frame, by the names of :class:`~bsn_edge.alerts.health.Fault`: ``decod
 none), ``state`` (the system state the bus carried when the frame's hazard was made: the last status
 sent), ``camera`` and ``unseen`` (when the camera-health check raised a reason: its name, and the sectors
 it cannot see), ``latency_ms`` and ``stage_ms`` (this frame's milliseconds in each stage it went through:
-``decode``, ``preprocess``, ``inference``, ``postprocess``, ``send``).
+``decode``, ``preprocess``, ``inference``, ``postprocess``, ``send``), ``bus_from`` (the number, from 0
+among the hazard frames sent, of the first that carried this frame's levels: every hazard frame from it
+until the next frame's carries them, which lets ``bsn-report`` compare the bus cycle by cycle).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ class FrameRecord:
     latency_ms: float | None = None
     stage_ms: dict[str, float] = field(default_factory=dict)
     visibility: Visibility | None = None   # the camera-health check's word on this frame
+    bus_from: int | None = None            # the first hazard frame on the bus that carries this frame's levels
 
     def to_json(self) -> dict[str, Any]:
         """The frame log's line (rounded as written)."""
@@ -48,6 +51,8 @@ class FrameRecord:
                        distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in sectors])
             if self.status is not None:
                 out["state"] = self.status.state.name
+            if self.bus_from is not None:
+                out["bus_from"] = self.bus_from
         if self.visibility is not None and self.visibility.reason is not Blindness.CLEAR:
             out["camera"] = self.visibility.reason.name
             out["unseen"] = [s for s, u in zip(SECTORS, self.visibility.unseen, strict=True) if u]
@@ -70,6 +75,8 @@ class FrameRecord:
             rec.hazard = Hazard(rec.t, sectors)
             if "state" in d:
                 rec.status = Status(SystemState[d["state"]], 0.0)
+            if "bus_from" in d:
+                rec.bus_from = int(d["bus_from"])
         if "camera" in d:
             unseen = set(d.get("unseen") or ())
             rec.visibility = Visibility(Blindness[d["camera"]], tuple(s in unseen for s in SECTORS), 0.0)

@@ -381,6 +381,7 @@ class FramePipeline:
         prob, depth = out
         rec.hazard, mask = self.sectors(item.cap, mf, prob, depth,
                                         rec.visibility.unseen if rec.visibility is not None else ())
+        rec.bus_from = self.emitter.latest_from
         self.timer.add("postprocess", time.perf_counter() - t2)
         rec.stage_ms["postprocess"] = 1e3 * (time.perf_counter() - t2)
         return began, (mask, prob, depth)

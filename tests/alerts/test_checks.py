@@ -62,7 +62,7 @@ def test_listen_reports_bad_lines_with_their_numbers_and_goes_on(tmp_path, capsy
     out = capsys.readouterr()
     assert f"{log}:3: comment line skipped" in out.err and f"{log}:5: not a candump line" in out.err
     assert "8 frames" in out.err and "3 unreadable lines" in out.err and "0 lost" in out.err
-    assert out.out.count("hazard #") == 4 and "status #3" in out.out
+    assert out.out.count("hazard ") == 4 and "status 3 [alive 3]" in out.out
 
 
 def test_a_repeat_is_a_repeat_and_a_bad_crc_does_not_move_the_counter(tmp_path, capsys):
@@ -91,7 +91,7 @@ def test_a_level_outside_the_value_table_is_counted_not_a_crash(tmp_path, capsys
     out = capsys.readouterr()
     assert "LEFT LEVEL?3" in out.out and "undefined Left_Level=3" in out.out
     assert "50 frames" in out.err and "1 with an undefined field" in out.err
-    assert out.out.count("hazard #") == 25, "every frame after it is still decoded"
+    assert out.out.count("hazard ") == 25, "every frame after it is still decoded"
 
 
 def test_lost_frames_make_a_non_zero_exit(tmp_path, capsys):
@@ -194,7 +194,7 @@ def test_listen_on_a_can_bus_counts_lost_frames(monkeypatch, capsys):
     out = capsys.readouterr()
     assert opened == [("virtual", "bsn-listen-test")]
     assert "16 frames, 0 with a bad CRC, 4 lost, 0 repeated" in out.err
-    assert out.out.count("(2 lost)") == 2 and out.out.count("hazard #") == 8
+    assert out.out.count("(2 lost)") == 2 and out.out.count("hazard ") == 8
 
 
 def test_listen_on_a_serial_port_counts_lost_frames(monkeypatch, capsys):
@@ -215,7 +215,7 @@ def test_listen_on_a_serial_port_counts_lost_frames(monkeypatch, capsys):
     out = capsys.readouterr()
     assert opened == ["loop://"]
     assert "16 frames, 0 with a bad CRC, 4 lost, 0 repeated" in out.err
-    assert out.out.count("(2 lost)") == 2 and out.out.count("status #") == 8
+    assert out.out.count("(2 lost)") == 2 and out.out.count("status ") == 8
 
 
 def test_a_counter_outside_the_dbcs_range_is_flagged_and_moves_no_counter(tmp_path, capsys):

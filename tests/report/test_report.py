@@ -88,6 +88,12 @@ def test_the_reports_onsets_are_the_buses_decoded_with_cantools(setup, tmp_path)
     mine = [(o["sector"], o["level"]) for o in record["onsets"]]
     assert len(mine) >= 4 and sorted(mine) == sorted(bus)
     assert record["bus_check"]["agree"]
+    # cycle by cycle: every hazard frame cantools decodes against the frame the log says it carried
+    cycles = record["bus_check"]["cycles"]
+    frames = [hazard.decode(bytes(m.data), decode_choices=False) for m in can.LogReader(str(can_log))
+              if m.arbitration_id == hazard.frame_id]
+    assert cycles["numbered"] and cycles["disagree"] == 0, cycles
+    assert cycles["compared"] + cycles["not_compared"] == len(frames) and cycles["compared"] >= 50, cycles
 
 
 def test_an_existing_report_is_refused_without_force_and_a_missing_log_is_named(tmp_path, capsys):
@@ -267,4 +273,50 @@ def test_bsn_listen_prints_the_onsets_the_report_matches(tmp_path, capsys):
     _can_log(can_log, fs)                   # cycle k's hazard at 0.1 k s into the log
     assert listen.main(["--can-log", str(can_log), "--onsets"]) == 0
     rows = [ln.split() for ln in capsys.readouterr().out.splitlines()[1:]]
-    assert rows == [["0.10", "s", "LEFT", "CAUTION", "#1"], ["0.20", "s", "RIGHT", "WARNING", "#2"]], rows
+    assert rows == [["0.10", "s", "LEFT", "CAUTION", "1"], ["0.20", "s", "RIGHT", "WARNING", "2"]], rows
+
+
+def test_the_bus_is_compared_with_the_log_cycle_by_cycle(tmp_path):
+    """The log's LEFT CAUTION went out at cycle 1 (its ``bus_from``); the bus has it at cycle 3 instead. The
+    onsets agree in number and order, so only the cycle-by-cycle check sees it: cycles 1 and 3 differ, each
+    with its time, frame and the cycles around it; the UNAVAILABLE cycle 2 is not compared, and the command
+    exits 1 naming the first."""
+    from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+    from bsn_edge.alerts.can_codec import CanEncoder
+
+    enc = CanEncoder()
+    none, caution = SectorAlert(0.0, Level.NONE, None), SectorAlert(0.5, Level.CAUTION, 9.0)
+    fs = []
+    for k in range(5):
+        fs += enc.encode(AlertFrame.unavailable(k * 0.1) if k == 2
+                         else AlertFrame(k * 0.1, (caution if k == 3 else none, none, none), SystemState.OK, 10.0, {}))
+    can_log, log = tmp_path / "c.log", tmp_path / "log.jsonl"
+    _can_log(can_log, fs)
+    n, c = "NONE", "CAUTION"
+    log.write_text("".join(_line(k, (c if k == 1 else n, n, n), bus_from=k) + "\n" for k in range(5)))
+    record = make_report(log, tmp_path / "r", can_log=can_log, say=lambda s: None)
+    check = record["bus_check"]
+    assert check["sectors"]["LEFT"]["only_in_log"] == [] and check["sectors"]["LEFT"]["only_on_bus"] == []
+    cycles = check["cycles"]
+    assert (cycles["compared"], cycles["agree"], cycles["disagree"], cycles["not_compared"]) == (4, 2, 2, 1), cycles
+    one, three = cycles["disagreements"]
+    assert (one["cycle"], one["frame"], one["bus"][0], one["log"][0]) == (1, 1, "NONE", "CAUTION")
+    assert (three["cycle"], three["frame"], three["bus"][0], three["log"][0]) == (3, 3, "CAUTION", "NONE")
+    assert three["t_s"] == pytest.approx(0.3) and [a["cycle"] for a in three["around"]] == [1, 2, 3, 4]
+    assert not check["agree"]
+    assert report_cli.main([str(log), "--out", str(tmp_path / "r2"), "--can-log", str(can_log)]) == 1
+
+
+def test_a_log_without_cycle_numbers_is_compared_by_onsets_only(tmp_path):
+    from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+    from bsn_edge.alerts.can_codec import CanEncoder
+
+    enc = CanEncoder()
+    none = SectorAlert(0.0, Level.NONE, None)
+    fs = [f for k in range(3) for f in enc.encode(AlertFrame(k * 0.1, (none,) * 3, SystemState.OK, 10.0, {}))]
+    can_log, log = tmp_path / "c.log", tmp_path / "log.jsonl"
+    _can_log(can_log, fs)
+    log.write_text("".join(_line(k, ("NONE",) * 3) + "\n" for k in range(3)))
+    record = make_report(log, tmp_path / "r", can_log=can_log, say=lambda s: None)
+    assert record["bus_check"]["agree"] and not record["bus_check"]["cycles"]["numbered"]
+    assert "compared by its onsets only" in (tmp_path / "r" / "report.html").read_text()

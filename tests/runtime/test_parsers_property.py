@@ -84,17 +84,23 @@ def test_any_camera_file_is_read_or_refused_as_invalid_input(tmp_path_factory, f
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(line=VALUES, depth=DEPTH, nest=st.booleans(),
        summary=VALUES | st.dictionaries(st.sampled_from(["model", "camera", "source", "machine", "settings_digest",
-                                                         "visibility", "states_s"]), VALUES, max_size=4))
+                                                         "visibility", "states_s"]), VALUES, max_size=4),
+       field=st.sampled_from(["frame", "t", "levels", "scores", "distances", "state", "bus_from", "latency_ms",
+                              "stage_ms", "camera", "unseen", "fault"]),
+       value=VALUES | st.just(1e400) | st.just(-1e400))
 def test_any_frame_log_and_summary_make_a_report_or_are_refused_as_invalid(tmp_path_factory, line, depth, nest,
-                                                                          summary):
-    """A damaged line is counted and the drive read on; a summary of the wrong shape is refused by name."""
+                                                                          summary, field, value):
+    """A damaged line is counted and the drive read on (a field of a good line given any value included); a
+    summary of the wrong shape is refused by name."""
     from bsn_edge.report import make_report, read_drive
 
     folder = tmp_path_factory.mktemp("report")
     good = json.dumps({"frame": 0, "t": 0.0, "levels": ["NONE"] * 3, "scores": [0.0] * 3,
                        "distances": [None] * 3, "state": "OK"})
     log = folder / "log.jsonl"
-    log.write_text(good + "\n" + ("[" * depth + "]" * depth if nest else json.dumps(line)) + "\n" + good + "\n")
+    odd = json.dumps({**json.loads(good), field: value})
+    log.write_text(good + "\n" + ("[" * depth + "]" * depth if nest else json.dumps(line)) + "\n" + good + "\n"
+                   + odd + "\n")
     drive = read_drive(log)
     assert len(drive.records) >= 2
     summ = folder / "s.json"
