@@ -56,6 +56,7 @@ class AlertFrame:
     fps: float
     faults: dict[str, int] = field(default_factory=dict)
     camera: Blindness = Blindness.CLEAR
+    why: str = ""                        # the status's reason in words: for the frame log, never encoded
 
     def __post_init__(self) -> None:
         _one_per_sector(self.sectors)
@@ -66,7 +67,7 @@ class AlertFrame:
         sector unseen when the camera cannot see as a whole)."""
         if status.state == SystemState.UNAVAILABLE:
             hazard = Hazard.none(t, status.camera in WHOLE)
-        return cls(t, hazard.sectors, status.state, status.fps, dict(status.faults), status.camera)
+        return cls(t, hazard.sectors, status.state, status.fps, dict(status.faults), status.camera, status.why)
 
     @classmethod
     def unavailable(cls, t: float, faults: dict[str, int] | None = None) -> AlertFrame:
@@ -78,4 +79,4 @@ class AlertFrame:
 
     @property
     def status(self) -> Status:
-        return Status(self.state, self.fps, dict(self.faults), self.camera)
+        return Status(self.state, self.fps, dict(self.faults), self.camera, self.why)

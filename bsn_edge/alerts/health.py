@@ -55,6 +55,7 @@ class Status:
     fps: float                                   # valid inferences a second on the processing clock
     faults: dict[str, int] = field(default_factory=dict)     # the counters, by :class:`Fault`'s names
     camera: Blindness = Blindness.CLEAR          # why the camera cannot see (CLEAR: it can)
+    why: str = ""                                # why the state is not OK, in words (not on the bus)
 
 
 @dataclass(frozen=True)
@@ -159,20 +160,38 @@ class Health:
         return (len(recent) - 1) / span if span < self.cfg.window_s else len(recent) / self.cfg.window_s
 
     def _state(self, t: float, wall: float) -> SystemState:
+        return self._judge(t, wall)[0]
+
+    def _judge(self, t: float, wall: float) -> tuple[SystemState, str]:
+        """The state and, when it is not OK, the first reason for it in words."""
         # precedence: a fault outranks calibrating (UNAVAILABLE > DEGRADED > CALIBRATING > OK), so a
         # fault while the camera is still being calibrated shows as the fault
         # the deadline holds on both clocks: a file's frame time stands still while the loop is stuck on a
         # frame, the processing clock does not
-        if self._down or not self._valid or t - self._valid[-1] > self.cfg.deadline_s \
-                or wall - self._work[-1] > self.cfg.deadline_s or self._camera in WHOLE:
-            return SystemState.UNAVAILABLE
+        if self._down:
+            return SystemState.UNAVAILABLE, "the run ending"
+        if not self._valid:
+            return SystemState.UNAVAILABLE, "no valid inference yet"
+        if t - self._valid[-1] > self.cfg.deadline_s or wall - self._work[-1] > self.cfg.deadline_s:
+            return SystemState.UNAVAILABLE, "stall: no valid inference within health.deadline_s"
+        if self._camera in WHOLE:
+            return SystemState.UNAVAILABLE, f"camera {self._camera.name}"
         # the rate is judged once a floor's interval has passed since the first inference in the window:
         # before that even one inference is on time (the first frame of a run is not DEGRADED)
         judged = bool(self._work) and wall - self._work[0] >= 1.0 / max(self.cfg.fps_floor, 1e-9)
         slow = judged and self._fps(wall) < self.cfg.fps_floor
-        if slow or self._senders_down or any(self._faults[f] for f in DEGRADING) or self._camera:
-            return SystemState.DEGRADED
-        return SystemState.CALIBRATING if self._calibrating else SystemState.OK
+        if slow:
+            return SystemState.DEGRADED, "frame rate under health.fps_floor"
+        if self._senders_down:
+            return SystemState.DEGRADED, "output down: " + ", ".join(sorted(self._senders_down))
+        failed = [f.value for f in DEGRADING if self._faults[f]]
+        if failed:
+            return SystemState.DEGRADED, "faults: " + ", ".join(failed)
+        if self._camera:
+            return SystemState.DEGRADED, f"camera {self._camera.name}"
+        if self._calibrating:
+            return SystemState.CALIBRATING, "calibrating: levels from an assumed camera"
+        return SystemState.OK, ""
 
     def state(self, t: float, wall: float | None = None) -> SystemState:
         with self._lock:
@@ -183,5 +202,5 @@ class Health:
         the counters, read together."""
         w = t if wall is None else wall
         with self._lock:
-            return Status(self._state(t, w), self._fps(w), {str(f): n for f, n in self._faults.items()},
-                          self._camera)
+            state, why = self._judge(t, w)
+            return Status(state, self._fps(w), {str(f): n for f, n in self._faults.items()}, self._camera, why)

@@ -50,6 +50,13 @@ def _cpu_said(summary: dict[str, Any]) -> str:
         f" ({100 * busy / cores:.0f} % of {cores} cores)" if busy is not None else "")
 
 
+def _whys(whys: dict[str, float]) -> str:
+    """" (stall 10.0 s, no valid inference yet 0.8 s)": a state's seconds by reason, the longest first."""
+    if not whys:
+        return ""
+    return " (" + ", ".join(f"{why} {s:.1f} s" for why, s in sorted(whys.items(), key=lambda kv: -kv[1])) + ")"
+
+
 def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: CameraState) -> str:
     """The end of a run in a few lines (the whole record goes to ``--summary``)."""
     lines = [f"{PROG}: {summary['frames']} frames ({summary['valid_frames']} valid) in {summary['seconds']:.1f} s: "
@@ -69,9 +76,11 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
     if summary.get("stall_cycles"):
         said.append(f"stall cycles {summary['stall_cycles']} (the loop held up past health.deadline_s: UNAVAILABLE)")
     said += [f"bus down: {name}" for name in summary.get("senders_down") or ()]
-    states = summary.get("states_s") or {}
-    on_bus = ", ".join(f"{k} {v:.1f} s" for k, v in sorted(states.items(), key=lambda kv: -kv[1]))
-    lines.append("  faults: " + (", ".join(said) if said else "none") + (f"; on the bus: {on_bus}" if on_bus else ""))
+    states, whys = summary.get("states_s") or {}, summary.get("why_s") or {}
+    on_bus = ", ".join(f"{k} {v:.1f} s" + _whys(whys.get(k) or {})
+                       for k, v in sorted(states.items(), key=lambda kv: -kv[1]))
+    lines.append("  faults: " + (", ".join(said) if said else "none") + (f"; on the bus: {on_bus}" if on_bus else "")
+                 + ("; then UNAVAILABLE, the last word" if on_bus else ""))
     model = summary["model"]
     lines.append(f"  model: signed by key {model['signer']}" if model["authentic"]
                  else f"  model: UNSIGNED ({model['trust_note']}; run by --allow-unsigned)")

@@ -121,7 +121,20 @@ class Drive:
                 "states": [{"from_t": a, "to_t": b, "state": s} for a, b, s in self.states()],
                 "faults": [{"t": t, "frame": f, "fault": k} for t, f, k in self.faults()],
                 "camera": [{"from_t": a, "to_t": b, "reason": r, "unseen": u} for a, b, r, u in self.camera()],
-                "calibration": calibration(self.summary), "identity": identity(self.summary)}
+                "calibration": calibration(self.summary), "identity": identity(self.summary),
+                "on_bus": {"states_s": _seconds(self.summary.get("states_s")),
+                           "why_s": {k: _seconds(v) for k, v in _mapping(self.summary.get("why_s")).items()}}}
+
+
+def _mapping(x: Any) -> dict[str, Any]:
+    """``x`` when it is a JSON object, else empty (a summary's field of the wrong shape is left out)."""
+    return {str(k): v for k, v in x.items()} if isinstance(x, dict) else {}
+
+
+def _seconds(x: Any) -> dict[str, float]:
+    """The finite numbers of a JSON object of seconds by name (anything else left out)."""
+    return {k: float(v) for k, v in _mapping(x).items()
+            if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)}
 
 
 def read_drive(log: str | Path, summary: str | Path | None = None) -> Drive:
@@ -138,7 +151,8 @@ def read_drive(log: str | Path, summary: str | Path | None = None) -> Drive:
                 if not line.strip():
                     continue
                 records.append(FrameRecord.from_json(json.loads(line)))
-            except (UnicodeDecodeError, ValueError, KeyError, TypeError, RecursionError, OverflowError) as e:
+            except (UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError, RecursionError,
+                    OverflowError) as e:
                 damage.append(Damage(n, f"{type(e).__name__}: {e}"[:200]))
     if not records:
         raise ValueError(f"{log}: no line is a frame of bsn-run's log ({len(damage)} unreadable)")

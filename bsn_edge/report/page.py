@@ -217,7 +217,8 @@ def page(drive: Drive, record: dict[str, Any], picture: str, thumbs: dict[int, s
                      ["signed by", e(str(model.get("signer")) if model.get("authentic") else "NOT a trusted key")],
                      ["settings digest", e(str(ident.get("settings_digest")))],
                      ["machine", e(plain(ident.get("machine")))],
-                     ["frames", f"{record['frames']} ({record['valid_frames']} with levels)"]]),
+                     ["frames", f"{record['frames']} ({record['valid_frames']} with levels)"],
+                     ["on the bus", e(_on_bus(record.get("on_bus") or {}))]]),
              "<h2>Calibration</h2>",
              _table([["camera from", e(plain(cal.get("source")))],
                      ["first guess", e(plain(cal.get("first_guess")))],
@@ -288,6 +289,18 @@ def _bus_section(check: dict[str, Any] | None) -> list[str]:
     return parts
 
 
+def _on_bus(on_bus: dict[str, Any]) -> str:
+    """"OK 1.5 s; UNAVAILABLE 0.3 s (stall ... 0.2 s, ...)": the summary's time in each state and why ("-"
+    without a summary)."""
+    states, whys = on_bus.get("states_s") or {}, on_bus.get("why_s") or {}
+    said = []
+    for state, secs in sorted(states.items(), key=lambda kv: -float(kv[1])):
+        why = sorted((whys.get(state) or {}).items(), key=lambda kv: -float(kv[1]))
+        said.append(f"{state} {float(secs):.1f} s"
+                    + (" (" + ", ".join(f"{k} {float(v):.1f} s" for k, v in why) + ")" if why else ""))
+    return "; ".join(said) + ("; then UNAVAILABLE, the last word" if said else "") or "-"
+
+
 def _cycles_part(cycles: dict[str, Any] | None) -> list[str]:
     """The bus cycle by cycle against the frames whose levels each cycle carried."""
     e = html.escape
@@ -315,10 +328,13 @@ def _states_section(drive: Drive) -> list[str]:
         if state == "OK":
             continue
         inside = [r for r in drive.records if a <= r.t <= b]
+        said = list(dict.fromkeys(r.status.why for r in inside if r.status is not None and r.status.why))
         faults = sorted({r.fault.value for r in inside if r.fault is not None})
         blind = sorted({r.visibility.reason.name for r in inside if r.visibility is not None
                         and r.visibility.reason.name != "CLEAR"})
-        if blind:
+        if said:                  # the bus's own reasons, as the run decided them
+            why = "; ".join(said) + (" (faults of frames: " + ", ".join(faults) + ")" if faults else "")
+        elif blind:
             why = "the camera: " + ", ".join(blind)
         elif faults:
             why = "faults: " + ", ".join(faults)

@@ -48,7 +48,8 @@ class CycleEmitter:
         self.next_t: float | None = None
         self.sent_cycles = 0
         self.stall_cycles = 0           # of them, sent by the stall watch while the loop was stuck on a frame
-        self.state_cycles: dict[str, int] = {}     # cycles sent in each state, by its name
+        self.state_cycles: dict[str, int] = {}     # cycles sent in each state, by its name (the last word apart)
+        self.why_cycles: dict[str, dict[str, int]] = {}     # of them, by state and the reason for it
         self.last_sent_at: float | None = None     # on ``clock``, when there is one
         self.stalling = False           # the last cycle was the stall watch's
         self._failing_since: dict[str, float] = {}     # a sender's first failed send of its current run
@@ -110,10 +111,12 @@ class CycleEmitter:
         """Send one more cycle at ``t`` now, whatever the schedule (the run is ending: the health
         has been marked unavailable, so this says UNAVAILABLE on every bus)."""
         with self._lock:
-            self._send(t)
+            self._send(t, last_word=True)
 
-    def _send(self, t: float, messages: tuple[str, ...] | None = None) -> None:
-        """Send ``messages`` (every one by default: a stall's or the last word) of the frame at ``t``."""
+    def _send(self, t: float, messages: tuple[str, ...] | None = None, last_word: bool = False) -> None:
+        """Send ``messages`` (every one by default: a stall's or the last word) of the frame at ``t``; the
+        last word is not counted in :attr:`state_cycles` (every run ends UNAVAILABLE: that is no time the
+        bus spent in the state while the run lived)."""
         h = self.health
         status = h.snapshot(t) if self.clock is None else h.snapshot(t, self.clock())
         frame = AlertFrame.of(t, self.latest if self.latest is not None else Hazard.none(t), status)
@@ -129,7 +132,11 @@ class CycleEmitter:
         self._last = frame
         self.sent_cycles += 1
         self.hazards_sent += messages is None or HAZARD in messages
-        self.state_cycles[frame.state.name] = self.state_cycles.get(frame.state.name, 0) + 1
+        if not last_word:
+            self.state_cycles[frame.state.name] = self.state_cycles.get(frame.state.name, 0) + 1
+            if status.why:
+                why = self.why_cycles.setdefault(frame.state.name, {})
+                why[status.why] = why.get(status.why, 0) + 1
         if self.clock is not None:
             self.last_sent_at = self.clock()
 

@@ -6,8 +6,9 @@ with this frame, by the names of :class:`~bsn_edge.alerts.health.Fault`: ``decod
 ``size_changes``, ``nan_outputs``), ``levels`` (LEFT, CENTRE, RIGHT: ``NONE``, ``CAUTION`` or
 ``WARNING``), ``scores`` (smoothed, 0-1), ``distances`` (metres to the nearest blind spot, null for
 none), ``state`` (the system state the bus carried when the frame's hazard was made: the last status
-sent), ``camera`` and ``unseen`` (when the camera-health check raised a reason: its name, and the sectors
-it cannot see), ``latency_ms`` and ``stage_ms`` (this frame's milliseconds in each stage it went through:
+sent) and ``why`` (the reason for a state other than OK, in words), ``camera`` and ``unseen`` (when the
+camera-health check raised a reason: its name, and the sectors it cannot see), ``latency_ms`` and
+``stage_ms`` (this frame's milliseconds in each stage it went through:
 ``decode``, ``preprocess``, ``inference``, ``postprocess``, ``send``), ``bus_from`` (the number, from 0
 among the hazard frames sent, of the first that carried this frame's levels: every hazard frame from it
 until the next frame's carries them, which lets ``bsn-report`` compare the bus cycle by cycle).
@@ -51,6 +52,8 @@ class FrameRecord:
                        distances=[None if s.distance_m is None else round(s.distance_m, 2) for s in sectors])
             if self.status is not None:
                 out["state"] = self.status.state.name
+                if self.status.why:
+                    out["why"] = self.status.why
             if self.bus_from is not None:
                 out["bus_from"] = self.bus_from
         if self.visibility is not None and self.visibility.reason is not Blindness.CLEAR:
@@ -74,7 +77,7 @@ class FrameRecord:
                             for lv, s, m in zip(d["levels"], d["scores"], d["distances"], strict=True))
             rec.hazard = Hazard(rec.t, sectors)
             if "state" in d:
-                rec.status = Status(SystemState[d["state"]], 0.0)
+                rec.status = Status(SystemState[d["state"]], 0.0, why=str(d.get("why", "")))
             if "bus_from" in d:
                 rec.bus_from = int(d["bus_from"])
         if "camera" in d:

@@ -458,6 +458,8 @@ class FramePipeline:
             stage_ms=self.timer.per_frame_ms(frames), stage_share=self.timer.shares(), faults=self.health.faults,
             cycles_sent=self.emitter.sent_cycles, stall_cycles=self.emitter.stall_cycles,
             states_s={k: round(n * self.cfg.cycle_s, 2) for k, n in self.emitter.state_cycles.items()},
+            why_s={k: {why: round(n * self.cfg.cycle_s, 2) for why, n in v.items()}
+                   for k, v in self.emitter.why_cycles.items()},
             senders={s.name: vars(s.stats) for s in self.senders},
             senders_down=self.health.senders_down, source_failure=self.source.failure,
             stopped=bool(stop is not None and stop.is_set()),

@@ -8,7 +8,10 @@ processing), ``p50_ms``, ``p95_ms``, ``p99_ms`` (latency), ``wait_ms`` (frames w
 same percentiles), ``stage_ms`` and ``stage_share`` (per stage: decode, preprocess, visibility, inference,
 postprocess, send), ``faults`` (the counters, by :class:`~bsn_edge.alerts.health.Fault` name),
 ``cycles_sent``, ``stall_cycles`` (of them, sent by the stall watch while a file's loop was stuck on a
-frame), ``states_s`` (seconds of cycles on the bus in each state: OK, CALIBRATING, DEGRADED, UNAVAILABLE),
+frame), ``states_s`` (seconds of cycles on the bus in each state: OK, CALIBRATING, DEGRADED, UNAVAILABLE; the
+run's last word, UNAVAILABLE whatever ended it, not counted), ``why_s`` (the same seconds by state and reason:
+a stall, no valid inference yet, the frame rate under the floor, an output down, a fault, the camera, levels
+from an assumed camera while calibrating),
 ``senders`` (per sender: sent, errors, ...), ``senders_down`` (senders that could not
 send at the end), ``source_failure`` (why the source ended early, or null), ``stopped`` (by a signal
 or the caller), ``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report, hood: share of the rows,
@@ -92,6 +95,7 @@ class RunSummary:
     cycles_sent: int
     stall_cycles: int
     states_s: dict[str, float]            # seconds of cycles sent in each state, by its name
+    why_s: dict[str, dict[str, float]]    # of them, by state and the reason for it
     senders: dict[str, dict[str, Any]]
     senders_down: list[str]
     source_failure: str | None

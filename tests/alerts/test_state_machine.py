@@ -130,6 +130,32 @@ def test_a_fault_outranks_calibrating():
     assert h2.state(3.0) == SystemState.UNAVAILABLE
 
 
+def test_each_state_says_why_in_the_status():
+    """The same timeline as above, read as the status's ``why``: none for OK, the first reason otherwise (what
+    the end lines and the report sum per state)."""
+    from bsn_edge.alerts.blindness import Blindness
+
+    h = Health(HealthConfig(deadline_s=0.5, fps_floor=8.0, window_s=1.0))
+    assert h.snapshot(0.0).why == "no valid inference yet"
+    h.calibrating(True)
+    for k in range(30):
+        h.valid(k * 0.05)
+    assert h.snapshot(1.45).why == "calibrating: levels from an assumed camera"
+    h.calibrating(False)
+    assert h.snapshot(1.45).why == "" and h.snapshot(1.45).state == SystemState.OK
+    assert h.snapshot(2.0).why.startswith("stall")
+    for k in range(10):
+        h.valid(3.0 + k * 0.2)
+    assert h.snapshot(4.9).why == "frame rate under health.fps_floor"
+    h.camera(Blindness.COVERED)
+    assert (h.snapshot(4.9).state, h.snapshot(4.9).why) == (SystemState.UNAVAILABLE, "camera COVERED")
+    h.camera(Blindness.CLEAR)
+    h.sender_down("can", True)
+    assert h.snapshot(4.85).why in ("frame rate under health.fps_floor", "output down: can")
+    h.unavailable()
+    assert h.snapshot(4.9).why == "the run ending"
+
+
 # A step of the raw score and the times the levels must change, worked out from the exponential
 # s(t) = 1 - exp(-(t - t0) / tau) (rising) and s(t) = s0 exp(-(t - t0) / tau) (falling), not from the
 # machine. The machine holds each sample's score over the interval before it (zero-order hold), so a

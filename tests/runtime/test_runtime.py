@@ -44,6 +44,9 @@ def test_video_to_can_log_that_both_decoders_read(setup, tmp_path, capsys):
     assert "hazard 0 [alive 0]" in out.out and "status 0 [alive 0]" in out.out and "0 with a bad CRC, 0 lost" in out.err
     # 15 frames at 10 fps = 1.4 s on the video's clock: a cycle every 0.1 s, then the final UNAVAILABLE
     assert summary["cycles_sent"] == 16
+    # time in each state is the run's: the last word (UNAVAILABLE, whatever ends a run) is not counted
+    states = summary["states_s"]
+    assert sum(states.values()) == pytest.approx(1.5) and "UNAVAILABLE" not in states, states
     last = out.out.strip().splitlines()[-1].split(" s  ", 1)[1]       # after the frame's time
     assert last.startswith("status 15 [alive 0]: UNAVAILABLE"), "the counter wraps at 15, the number goes on"
     assert "status 14 [alive 14]: OK" in out.out
