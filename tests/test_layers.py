@@ -6,8 +6,8 @@ import x``, relative imports (``from ..x import y``, resolved against the module
 ``importlib.import_module("bsn_edge.x")`` alike, at the top or inside functions; ``from X import Y`` is
 read as both ``X`` and ``X.Y`` for every ``X`` (``from onnxruntime import quantization`` names the
 quantization tools), and an ``import_module`` or ``__import__`` whose name is not written out is refused
-(nothing could say what it loads). This file is the one place that says which packages are torch-free
-(:data:`TORCH_FREE`) and what they must not load (:data:`HEAVY`, which ``tests/runtime/test_core_imports.py``
+(nothing could say what it loads). The rules are the package's own (:mod:`bsn_edge.layers`): which packages
+are torch-free (``TORCH_FREE``) and what they must not load (``HEAVY``, which ``tests/runtime/test_core_imports.py``
 checks at run time too): the car's side, which ``bsn-run``, ``bsn-listen`` and ``bsn-calibrate`` load. Those
 commands (:data:`CAR_COMMANDS`), ``bsn_edge/__init__.py`` and every module of the package they import, followed
 import by import at the top or inside functions, are held to :data:`HEAVY` too.
@@ -18,36 +18,11 @@ from pathlib import Path
 
 import pytest
 
+from bsn_edge import layers
+from bsn_edge.layers import CAR_COMMANDS, HEAVY, LEVEL, TORCH_FREE
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "bsn_edge"
-LAYERS = [
-    ("user_file",),
-    ("fields", "config_toml", "progress", "default_model"),
-    ("camera",),
-    ("mounting",),
-    ("semantics", "sequence", "tracks", "metrics", "card", "model_frame"),
-    ("modelfile", "calibration"),
-    ("synth", "alerts"),
-    ("runtime",),
-    ("report",),
-    ("labels",),
-    ("models",),
-    ("data",),
-    ("train",),
-    ("evaluate",),
-    ("export",),
-    ("adapt",),
-    ("cli",),
-]
-LEVEL = {pkg: i for i, layer in enumerate(LAYERS) for pkg in layer}
-# the car's side: never torch, onnx or the quantization tools, even on a path taken only sometimes
-TORCH_FREE = ("user_file", "fields", "config_toml", "progress", "default_model", "camera", "mounting", "semantics",
-              "sequence", "tracks", "metrics", "card",
-              "model_frame", "modelfile", "calibration", "synth", "alerts", "runtime")
-HEAVY = ("torch", "onnx", "onnxruntime.quantization", "matplotlib")
-# the car's commands: they, the package's own __init__ and every module of the package they import (at the top
-# or inside a function, followed module to module) are held to HEAVY as the torch-free packages are
-CAR_COMMANDS = ("cli/run.py", "cli/listen.py", "cli/calibrate.py")
 
 
 def unit(module: str) -> str | None:
@@ -217,3 +192,8 @@ def test_the_checks_catch_each_way_of_importing_upwards(tmp_path, module, line):
     target = copy / module
     target.write_text(target.read_text() + f"\n\ndef _probe():\n    import importlib\n    {line}\n")
     assert upward_imports(copy) + heavy_imports(copy) + car_heavy_imports(copy), f"{line} in {module} was not caught"
+
+
+def test_the_development_page_shows_the_packages_layers_as_they_are():
+    """``docs/development.md``'s layer table is what ``python -m bsn_edge.layers`` prints from the rules above."""
+    assert layers.main(["--check", str(ROOT / "docs" / "development.md")]) == 0
