@@ -1,13 +1,14 @@
-"""The car-side core stays small: every module of every torch-free package (tests/test_layers.py's
-TORCH_FREE, the static check's own list), and the car's commands, load none of the training tools (HEAVY,
-the same list the static check uses) when imported, all in one interpreter as bsn-run would."""
+"""The car-side core stays small: every module of every torch-free package (bsn_edge.layers.TORCH_FREE, the
+static check's own list), and the car's commands, load none of the training tools (HEAVY, the same list the
+static check uses) when imported, all in one interpreter as bsn-run would."""
 
 import json
 import subprocess
 import sys
 
 from bsn_edge.cli.common import CHECKOUT
-from tests.test_layers import HEAVY, PACKAGE, TORCH_FREE, modules
+from bsn_edge.layers import HEAVY, TORCH_FREE
+from tests.test_layers import PACKAGE, modules
 
 CAR_COMMANDS = ("bsn_edge.cli.run", "bsn_edge.cli.listen", "bsn_edge.cli.calibrate")
 
