@@ -2,13 +2,11 @@
 table's statistics match values worked out by hand."""
 
 import json
-import os
 
 import pytest
 
 from benchmarks.bench_bsn_accuracy import markdown, table
 from benchmarks.ledger import Ledger, exceeds_spread, fmt, mean_std
-from bsn_edge.train import Run
 
 EXPERIMENT = {"steps": 3000, "size": [128, 256],
               "models": {"BSN": "small-light", "BSN-D": "small-light-d", "BSN-KD": "small-light-kd"}}
@@ -106,79 +104,6 @@ def test_read_opens_any_experiment_and_trained_keys_skip_the_shared_records(tmp_
     assert trained_keys(again) == [("BSN-KD/suburb/seed2", "BSN-KD", "suburb", 2), ("BSN/town/seed0", "BSN", "town", 0)]
     with pytest.raises(FileNotFoundError, match="no ledger"):
         Ledger.read(tmp_path / "none.json")
-
-
-def test_the_rescore_report_lists_runs_whose_weights_are_gone_and_averages_the_rest(tmp_path):
-    from benchmarks.archive.bench_bsn_rescore import markdown as rescore_md
-    from benchmarks.archive.bench_bsn_rescore import score_runs
-    led = Ledger(tmp_path / "l.json", EXPERIMENT)
-    led.put("BSN/town/seed0", {})
-    scores = score_runs(led, tmp_path / "work", {"table": tmp_path / "work" / "test"})  # no runs: none scored
-    assert scores["BSN/town/seed0"]["missing"].endswith("seed0/small-light_town")
-
-    def part(iou: float) -> dict:
-        m = {"iou": iou, "best_iou": 0.12, "best_threshold": 0.25, "ap": 0.15, "ap_by_chance": 0.02,
-             "clips": {"suburb_9": {"iou": iou, "ap": 0.1}, "suburb_10": {"iou": 0.3, "ap": 0.4}}}
-        return {"suburb": m, "town": {**m, "ap": None, "clips": {"town_9": {"iou": iou, "ap": None}}}}
-    for seed, iou in ((0, 0.05), (1, 0.07)):
-        scores[f"BSN/suburb/seed{seed}"] = {"model": "BSN", "source": "suburb", "seed": seed, "threshold": 0.1,
-                                            "table": part(iou), "finetuned": {}}
-    scores["BSN/suburb/seed0"]["finetuned"] = {"town": {"table": {"iou": 0.2}}}   # only its weights were kept
-    base = {"run": "BSN/suburb/seed0", "town": {b: 0.1 for b in ("Traversable", "Detection-2D", "Detection-3D")},
-            "suburb": {"Traversable": 0.2, "Detection-2D": 0.3, "Detection-3D": 0.4}}
-    text = rescore_md("small-light", list(EXPERIMENT["models"]), scores, {"table": 2},
-                      {"suburb_9": "night, 89 deg"}, base)
-    # a baseline scores the test style of each column: town, suburb, suburb, suburb, town, town
-    assert "| Detection-3D | 0.100 | 0.400 | 0.400 | 0.400 | 0.100 | 0.100 |" in text
-    assert "`BSN/suburb/seed0`'s D" in text
-    # town -> town, -> suburb, -> suburb fine-tuned, then suburb -> suburb, -> town, -> town fine-tuned
-    assert "| BSN | - | - | - | 0.060 +- 0.014 | 0.060 +- 0.014 | 0.200 (1 seed) |" in text
-    assert "| BSN-D | - | - | - | - | - | - |" in text
-    assert "| BSN/town/seed0 | - | - | weights gone |" in text
-    assert "| BSN | suburb -> suburb | table | 0.060 +- 0.014 | 0.120 +- 0.000 | 0.150 +- 0.000 |" in text
-    assert "| BSN | suburb -> town | table | 0.060 +- 0.014 | 0.120 +- 0.000 | - |" in text   # no AP: no positives
-    rows = [x for x in text.splitlines() if x.startswith("| suburb_")]
-    assert rows[0].startswith("| suburb_9 | night, 89 deg | - | 0.060 +- 0.014 |") and rows[1].startswith("| suburb_10")
-
-
-def test_the_rescore_reads_the_baselines_through_bsns_first_kept_run(tmp_path, monkeypatch):
-    from benchmarks.archive import bench_bsn_rescore as rescore
-    read = []
-    monkeypatch.setattr(rescore, "score_baselines", lambda run, data, out, style: read.append((run, out)) or {})
-    scores = {"BSN-D/suburb/seed0": {"model": "BSN-D", "name": "small-light-d", "source": "suburb", "seed": 0},
-              "BSN/suburb/seed0": {"model": "BSN", "source": "suburb", "seed": 0, "missing": "gone"},
-              "BSN/suburb/seed1": {"model": "BSN", "name": "small-light", "source": "suburb", "seed": 1},
-              "BSN/suburb/seed2": {"model": "BSN", "name": "small-light", "source": "suburb", "seed": 2}}
-    models = list(EXPERIMENT["models"])
-    assert rescore.baselines_on(scores, models, tmp_path, "more", tmp_path / "more")["run"] == "BSN/suburb/seed1"
-    assert {r for r, _ in read} == {tmp_path / "runs" / "seed1" / "small-light_suburb"}
-    assert {o.name for _, o in read} == {"baselines_on_town.json", "baselines_on_suburb.json"}
-    assert rescore.baselines_on({}, models, tmp_path, "more", tmp_path)["run"] is None
-
-
-def test_a_baseline_score_is_read_back_only_through_the_same_run_after_its_weights(tmp_path, monkeypatch):
-    from benchmarks.archive import bench_bsn_rescore as rescore
-    made = []
-
-    def fake_eval(run, data, out, *extra):
-        made.append(run)
-        rep = {"run": str(run), "overall": {"Traversable": {"iou": 0.5}}}
-        out.write_text(json.dumps(rep))
-        return rep
-    monkeypatch.setattr(rescore, "eval_run", fake_eval)
-    runs = [tmp_path / "runs" / f"seed{s}" / "small-light_town" for s in (1, 2)]
-    for r in runs:
-        r.mkdir(parents=True)
-        Run(r).model_path.write_bytes(b"weights")
-        os.utime(Run(r).model_path, (1_000_000, 1_000_000))
-    out = tmp_path / "baselines_on_town.json"
-    for run, evaluated in ((runs[0], 1), (runs[0], 1), (runs[1], 2)):
-        assert rescore.score_baselines(run, tmp_path, out, "town") == {"Traversable": 0.5}
-        assert len(made) == evaluated
-    Run(runs[1]).model_path.write_bytes(b"trained again")      # newer weights than the score
-    os.utime(out, (1_000_000, 1_000_000))
-    rescore.score_baselines(runs[1], tmp_path, out, "town")
-    assert made == [runs[0], runs[1], runs[1]]
 
 
 def test_the_architecture_table_draws_every_seeds_curve_of_the_architectures_asked(tmp_path):
