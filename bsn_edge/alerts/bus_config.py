@@ -23,6 +23,7 @@ class BusConfig:
 
     can: str = ""                # IFACE:CHANNEL (socketcan:can0, virtual:test); "" for none
     serial: str = ""             # a port or pyserial URL (/dev/ttyUSB0, loop://); "" for none
+    outputs: tuple[str, ...] = ()   # more outputs, each SCHEME:TARGET (udp:192.168.1.20:9000, can:..., serial:...)
     serial_baud: int = setting(115200, 1200, 4_000_000, "baud")
     can_timeout_s: float = setting(0.01, 0.001, 0.1, "s")
     serial_write_timeout_s: float = setting(0.05, 0.001, 0.5, "s")
@@ -35,6 +36,13 @@ class BusConfig:
             raise ValueError("bus.can and bus.serial are names (text), \"\" for none")
         if self.can and ":" not in self.can.strip(":"):
             raise ValueError(f"bus.can = {self.can!r} must be IFACE:CHANNEL, e.g. socketcan:can0")
+        from bsn_edge.alerts.senders import SENDERS
+
+        for o in self.outputs:
+            scheme, _, target = o.partition(":") if isinstance(o, str) else ("", "", "")
+            if scheme not in SENDERS or not target:
+                raise ValueError(f"bus.outputs: {o!r} must be SCHEME:TARGET with SCHEME one of "
+                                 f"{', '.join(sorted(SENDERS))}")
 
 
 @dataclass(frozen=True)

@@ -52,10 +52,11 @@ class BusOutput:
 
 
 def bus_outputs(can: str | None, serial: str | None, can_log: str | None = None,
-                bus: BusConfig | None = None) -> list[BusOutput]:
+                bus: BusConfig | None = None, more: tuple[str, ...] = ()) -> list[BusOutput]:
     """The buses named: ``can`` (``IFACE:CHANNEL``) and ``serial`` (a port or pyserial URL), each else the
-    vehicle file's (``bus``); a CAN log alone is written from a virtual bus. ``ValueError`` for a CAN bus not
-    given as ``IFACE:CHANNEL``."""
+    vehicle file's (``bus``); a CAN log alone is written from a virtual bus; then the vehicle file's
+    ``bus.outputs`` and ``more`` (``bsn-run --output``), each ``SCHEME:TARGET``, in that order. ``ValueError``
+    for a CAN bus not given as ``IFACE:CHANNEL``."""
     bus = bus or BusConfig()
     can, serial = can or bus.can or None, serial or bus.serial or None
     out: list[BusOutput] = []
@@ -68,6 +69,7 @@ def bus_outputs(can: str | None, serial: str | None, can_log: str | None = None,
         out.append(BusOutput(f"can:{named}", can_log, what))
     if serial:
         out.append(BusOutput(f"serial:{serial}", None, f"serial port {serial!r} at {bus.serial_baud} baud"))
+    out += [BusOutput(o, None, f"output {o!r}") for o in (*bus.outputs, *more)]
     return out
 
 

@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import socket
+import struct
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, ClassVar, Protocol
 
 from bsn_edge.alerts.bus_config import BusConfig
 from bsn_edge.alerts.can_codec import CanEncoder
@@ -54,10 +55,24 @@ class Encoder(Protocol):
 class Sender(ABC):
     """Base class: ``send`` never raises; ``close`` is idempotent; usable as a context manager. A sender
     is given its encoder (the protocol's, :class:`CanEncoder`, unless told otherwise) and owns only the
-    transport: a subclass fills :meth:`_send`."""
+    transport: a subclass fills :meth:`_send`. A subclass with a ``scheme`` is an output a user can name
+    (``SCHEME:TARGET``, :func:`open_sender`): it registers itself in :data:`SENDERS` and opens from its
+    target with :meth:`from_target`."""
 
     name = "sender"
+    scheme: ClassVar[str] = ""       # how a user names this output; "" for a sender no one names
     tx_fault = Fault.TX_ERRORS       # what a failed send counts as
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.scheme:
+            SENDERS[cls.scheme] = cls
+
+    @classmethod
+    def from_target(cls, target: str, encoder: Encoder | None, log_path: str | None, bus: BusConfig) -> Sender:
+        """The sender of ``SCHEME:TARGET``'s target, with the vehicle file's ``bus`` settings; ``ValueError``
+        for a target it cannot mean (a subclass with a ``scheme`` fills this)."""
+        raise NotImplementedError(f"{cls.__name__} is not opened by name")
 
     def __init__(self, encoder: Encoder | None = None) -> None:
         self.stats = SenderStats()
@@ -120,6 +135,10 @@ def transmit_buffer_full(e: Exception) -> bool:
 BLF_BLOCK_BYTES = 1024
 
 
+# the outputs a user can name, by scheme: every Sender subclass with a ``scheme`` (a new bus is one class)
+SENDERS: dict[str, type[Sender]] = {}
+
+
 class CanSender(Sender):
     """python-can on any interface (``socketcan``, ``virtual``, vendor ones), loaded lazily.
     Optionally logs every sent frame (``.log`` candump, ``.asc``, ``.blf``) through python-can's
@@ -128,6 +147,7 @@ class CanSender(Sender):
     ``stats.log_errors``; the frames still go out."""
 
     name = "can"
+    scheme = "can"
 
     def __init__(self, interface: str, channel: str, log_path: str | None = None, bus=None,
                  timeout_s: float = 0.01, encoder: Encoder | None = None) -> None:
@@ -194,12 +214,20 @@ class CanSender(Sender):
             self.logger = None
         self.bus.shutdown()
 
+    @classmethod
+    def from_target(cls, target: str, encoder: Encoder | None, log_path: str | None, bus: BusConfig) -> Sender:
+        iface, _, channel = target.partition(":")
+        if not (iface and channel):
+            raise ValueError(f"can:{target}: give can:IFACE:CHANNEL, e.g. can:socketcan:can0")
+        return cls(iface, channel, log_path=log_path, encoder=encoder, timeout_s=bus.can_timeout_s)
+
 
 class SerialSender(Sender):
     """pyserial on any URL pyserial understands (``/dev/ttyUSB0``, ``loop://``, ``socket://``...).
     A port that disappears is reopened with back-off (at most every ``retry_s``)."""
 
     name = "serial"
+    scheme = "serial"
     tx_fault = Fault.SERIAL_ERRORS
 
     def __init__(self, url: str, baudrate: int = 115200, port=None, retry_s: float = 1.0,
@@ -240,24 +268,59 @@ class SerialSender(Sender):
         if self.port is not None:
             self.port.close()
 
-
-def _can(target: str, encoder: Encoder | None, log_path: str | None, bus: BusConfig) -> Sender:
-    iface, _, channel = target.partition(":")
-    if not (iface and channel):
-        raise ValueError(f"can:{target}: give can:IFACE:CHANNEL, e.g. can:socketcan:can0")
-    return CanSender(iface, channel, log_path=log_path, encoder=encoder, timeout_s=bus.can_timeout_s)
-
-
-def _serial(target: str, encoder: Encoder | None, log_path: str | None, bus: BusConfig) -> Sender:
-    if log_path:
-        raise ValueError("a serial output keeps no CAN log")
-    return SerialSender(target, bus.serial_baud, retry_s=bus.serial_retry_s, encoder=encoder,
-                        write_timeout_s=bus.serial_write_timeout_s)
+    @classmethod
+    def from_target(cls, target: str, encoder: Encoder | None, log_path: str | None, bus: BusConfig) -> Sender:
+        if log_path:
+            raise ValueError("a serial output keeps no CAN log")
+        return cls(target, bus.serial_baud, retry_s=bus.serial_retry_s, encoder=encoder,
+                   write_timeout_s=bus.serial_write_timeout_s)
 
 
-# the transports, by the scheme an output is named with: a new bus is one Sender subclass and one entry
-SENDERS: dict[str, Callable[[str, Encoder | None, str | None, BusConfig], Sender]] = {"can": _can,
-                                                                                      "serial": _serial}
+class UdpSender(Sender):
+    """The bus's frames in UDP datagrams, for a driving stack on a PC (``udp:HOST:PORT``; an IPv6 host in
+    brackets, ``udp:[::1]:9000``). One datagram a cycle: :data:`UDP_MAGIC`, then each frame as its send time
+    (float64, seconds since the epoch, big-endian), its CAN id (uint32 big-endian), its length (uint8) and
+    its bytes: the same frames, counters and CRCs a CAN bus carries, which the DBC decodes. A send the
+    network refuses (no route, nobody listening: the ICMP answer of the datagram before, a full socket
+    buffer) is a failed send, counted as the other buses count theirs; the socket never blocks the loop."""
+
+    name = "udp"
+    scheme = "udp"
+
+    def __init__(self, host: str, port: int, encoder: Encoder | None = None) -> None:
+        super().__init__(encoder)
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)   # a name that does not resolve raises
+        family, kind, proto, _, address = infos[0]
+        self.address: tuple[Any, ...] = tuple(address)
+        self.sock = socket.socket(family, kind, proto)
+        self.sock.setblocking(False)
+        self.sock.connect(self.address)           # connected: the network's refusals come back as errors
+
+    def _send(self, frames: list[tuple[int, bytes]]) -> None:
+        now = time.time()
+        payload = UDP_MAGIC + b"".join(struct.pack(">dIB", now, fid, len(data)) + data for fid, data in frames)
+        try:
+            self.sock.send(payload)
+        except (BlockingIOError, InterruptedError):
+            self.stats.full += 1
+            self._met_fault(Fault.TX_FULL)
+            raise
+
+    def _close(self) -> None:
+        self.sock.close()
+
+    @classmethod
+    def from_target(cls, target: str, encoder: Encoder | None, log_path: str | None, bus: BusConfig) -> Sender:
+        if log_path:
+            raise ValueError("a UDP output keeps no CAN log")
+        host, sep, port = target.rpartition(":")
+        host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+        if not (sep and host and port.isdigit() and 0 < int(port) < 65536):
+            raise ValueError(f"udp:{target}: give udp:HOST:PORT, e.g. udp:192.168.1.20:9000")
+        return cls(host, int(port), encoder)
+
+
+UDP_MAGIC = b"BSN1"      # a UdpSender datagram's first bytes: the layout's name and version
 
 
 def open_sender(output: str, encoder: Encoder | None = None, log_path: str | None = None,
@@ -268,4 +331,4 @@ def open_sender(output: str, encoder: Encoder | None = None, log_path: str | Non
     scheme, _, target = output.partition(":")
     if scheme not in SENDERS or not target:
         raise ValueError(f"output {output!r}: give SCHEME:TARGET with SCHEME one of {', '.join(sorted(SENDERS))}")
-    return SENDERS[scheme](target, encoder, log_path, bus or BusConfig())
+    return SENDERS[scheme].from_target(target, encoder, log_path, bus or BusConfig())

@@ -104,6 +104,10 @@ def _outputs(p: argparse.ArgumentParser) -> None:
     g.add_argument("--serial", metavar="URL",
                    help="send on this serial port (pyserial URL, e.g. /dev/ttyUSB0; bus.serial in --config, its baud "
                         "rate bus.serial_baud, default 115200)")
+    g.add_argument("--output", action="append", default=[], metavar="SCHEME:TARGET",
+                   help="one more output, repeatable: udp:HOST:PORT (the bus's frames in UDP datagrams, for a "
+                        "driving stack on a PC; docs/protocol.md), can:IFACE:CHANNEL, serial:URL; added to "
+                        "bus.outputs in --config")
     g.add_argument("--cycle", type=float, default=None,
                    help="send cycle in seconds (default 0.1; runtime.cycle_s in --config)")
     g.add_argument("--overlay", metavar="OUT.mp4",
@@ -215,7 +219,7 @@ def make_senders(args: argparse.Namespace, bus: BusConfig | None = None) -> list
     UNAVAILABLE and is closed again)."""
     from bsn_edge.alerts.bus_outputs import bus_outputs, open_senders
 
-    return open_senders(bus_outputs(args.can, args.serial, args.can_log, bus), bus)
+    return open_senders(bus_outputs(args.can, args.serial, args.can_log, bus, tuple(getattr(args, "output", ()))), bus)
 
 
 def _inputs(args: argparse.Namespace) -> list[tuple[str, str | None]]:

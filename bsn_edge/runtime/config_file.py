@@ -81,29 +81,21 @@ def digest(cfg: RuntimeConfig) -> str:
 
 def settings_table() -> list[str]:
     """Every setting a vehicle file holds, with its default, kind and range, as Markdown table rows in
-    the file's order (the docs' settings table is this one, checked by a test)."""
+    the file's order (the docs' settings table is this one, checked by a test): read off the JSON Schema
+    (:func:`~bsn_edge.runtime.config_schema.schema`), the one place a setting's kind and range are written
+    out, so the table, the schema and the reference page cannot say two things."""
+    from bsn_edge.runtime.config_schema import cell_default, cell_kind, cell_range, schema
+
     rows = ["| setting | default | kind | range |", "|---|---|---|---|"]
 
-    def walk(instance: Any, prefix: str) -> None:
-        for f in dataclasses.fields(instance):
-            value = getattr(instance, f.name)
-            if prefix == LOOP and f.name in NESTED:
-                continue                      # a table of its own, after [runtime]
-            if dataclasses.is_dataclass(value):
-                walk(value, f"{prefix}.{f.name}")
-                continue
-            kind = "true or false" if isinstance(value, bool) else "whole number" if isinstance(value, int) \
-                else "text" if isinstance(value, str) else "number"
-            span = ""
-            if "range" in f.metadata:
-                lo, hi = f.metadata["range"]
-                span = f"{lo:g} to {hi:g}" + (f" {f.metadata['unit']}" if f.metadata["unit"] else "")
-            default = str(value).lower() if isinstance(value, bool) else f'"{value}"' if isinstance(value, str) \
-                else f"{value:g}"
-            rows.append(f"| `{prefix}.{f.name}` | {default} | {kind} | {span} |")
+    def walk(node: dict[str, Any], name: str) -> None:
+        for key, v in node["properties"].items():
+            if v["type"] != "object":
+                rows.append(f"| `{name}.{key}` | {cell_default(v)} | {cell_kind(v)} | {cell_range(v)} |")
+        for key, v in node["properties"].items():
+            if v["type"] == "object":
+                walk(v, f"{name}.{key}")
 
-    cfg = RuntimeConfig()
-    walk(cfg, LOOP)
-    for name in NESTED:
-        walk(getattr(cfg, name), name)
+    for name, node in schema()["properties"].items():
+        walk(node, name)
     return rows

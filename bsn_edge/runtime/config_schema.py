@@ -20,7 +20,8 @@ from bsn_edge.runtime.loop import RuntimeConfig
 __all__ = ["SCHEMA_FILE", "comments", "reference_page", "schema"]
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
 _TABLE = re.compile(r"^\[([\w.]+)\]\s*(?:#\s?(.*))?$")
-KINDS = {"boolean": "true or false", "integer": "whole number", "string": "text"}     # as the docs say them
+# as the docs say them
+KINDS = {"boolean": "true or false", "integer": "whole number", "string": "text", "array": "list of text"}
 _KEY = re.compile(r"^(\w+)\s*=\s*[^#]*?(?:#\s?(.*))?$")
 
 
@@ -44,7 +45,28 @@ def comments(path: Path = DEFAULTS_FILE) -> dict[str, str]:
     return out
 
 
+def cell_default(v: dict[str, Any]) -> str:
+    """A setting's default as the docs' tables write it, from its schema node."""
+    d = v["default"]
+    return str(d).lower() if v["type"] == "boolean" else f'"{d}"' if v["type"] == "string" \
+        else "[" + ", ".join(f'"{x}"' for x in d) + "]" if v["type"] == "array" else f"{d:g}"
+
+
+def cell_kind(v: dict[str, Any]) -> str:
+    """A setting's kind in words, from its schema node."""
+    return KINDS.get(v["type"], "number")
+
+
+def cell_range(v: dict[str, Any]) -> str:
+    """``0.01 to 1 s``: a setting's range and unit, from its schema node ("" for none)."""
+    return f"{v['minimum']:g} to {v['maximum']:g}" + (f" {v['unit']}" if v.get("unit") else "") \
+        if "minimum" in v else ""
+
+
 def _leaf(f: dataclasses.Field, value: Any, description: str) -> dict[str, Any]:
+    if isinstance(value, tuple):           # a list of names (bus.outputs)
+        listed: dict[str, Any] = {"type": "array", "items": {"type": "string"}, "default": list(value)}
+        return {**listed, "description": description} if description else listed
     kind = "boolean" if isinstance(value, bool) else "integer" if isinstance(value, int) \
         else "string" if isinstance(value, str) else "number"
     out: dict[str, Any] = {"type": kind, "default": value}
@@ -106,13 +128,8 @@ def reference_page() -> str:
         if leaves:
             lines.extend(["| key | default | kind | range | what it does |", "|---|---|---|---|---|"])
             for key, v in leaves.items():
-                default = str(v["default"]).lower() if v["type"] == "boolean" else f'"{v["default"]}"' \
-                    if v["type"] == "string" else f"{v['default']:g}"
-                span = f"{v['minimum']:g} to {v['maximum']:g}" + (f" {v['unit']}" if v.get("unit") else "") \
-                    if "minimum" in v else ""
-                kind = KINDS.get(v["type"], "number")
                 what = v.get("description", "") if v.get("description") != node.get("description") else ""
-                lines.append(f"| `{key}` | {default} | {kind} | {span} | {what} |")
+                lines.append(f"| `{key}` | {cell_default(v)} | {cell_kind(v)} | {cell_range(v)} | {what} |")
             lines.append("")
         for key, v in node["properties"].items():
             if v["type"] == "object":
