@@ -14,6 +14,7 @@ import by import at the top or inside functions, are held to :data:`HEAVY` too.
 """
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -23,6 +24,12 @@ from bsn_edge.layers import CAR_COMMANDS, HEAVY, LEVEL, TORCH_FREE
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "bsn_edge"
+
+
+@functools.lru_cache(maxsize=2048)
+def _parsed(text: str) -> ast.Module:
+    """A module's tree, parsed once per text (the mutation tests check many copies of one package)."""
+    return ast.parse(text)
 
 
 def unit(module: str) -> str | None:
@@ -77,7 +84,7 @@ def upward_imports(root: Path = PACKAGE) -> list[str]:
     for f, pkg in modules(root):
         if pkg is None:
             continue
-        for line, name in imported(ast.parse(f.read_text()), dotted(f, root)):
+        for line, name in imported(_parsed(f.read_text()), dotted(f, root)):
             if name == "<dynamic>":
                 bad.append(f"{f.relative_to(root.parent)}:{line} ({pkg}) imports a module named at run time")
                 continue
@@ -94,7 +101,7 @@ def heavy_imports(root: Path = PACKAGE) -> list[str]:
     for f, pkg in modules(root):
         if pkg not in TORCH_FREE:
             continue
-        for line, name in imported(ast.parse(f.read_text()), dotted(f, root)):
+        for line, name in imported(_parsed(f.read_text()), dotted(f, root)):
             if any(name == h or name.startswith(h + ".") for h in HEAVY):
                 bad.append(f"{f.relative_to(root.parent)}:{line} ({pkg}, torch-free) imports {name}")
     return bad
@@ -128,7 +135,7 @@ def car_side(root: Path = PACKAGE) -> dict[Path, str]:
         if f in seen:
             continue
         seen[f] = via
-        for _, name in imported(ast.parse(f.read_text()), dotted(f, root)):
+        for _, name in imported(_parsed(f.read_text()), dotted(f, root)):
             todo += [(g, str(f.relative_to(root.parent))) for g in module_files(name, root) if g not in seen]
     return seen
 
@@ -136,7 +143,7 @@ def car_side(root: Path = PACKAGE) -> dict[Path, str]:
 def car_heavy_imports(root: Path = PACKAGE) -> list[str]:
     bad = []
     for f, via in car_side(root).items():
-        for line, name in imported(ast.parse(f.read_text()), dotted(f, root)):
+        for line, name in imported(_parsed(f.read_text()), dotted(f, root)):
             if any(name == h or name.startswith(h + ".") for h in HEAVY):
                 bad.append(f"{f.relative_to(root.parent)}:{line} (loaded by {via}, the car's side) imports {name}")
     return bad
@@ -187,7 +194,8 @@ def test_the_checks_catch_each_way_of_importing_upwards(tmp_path, module, line):
     """Each form, written into a copy of the package, is found (and the copy is clean without it)."""
     import shutil
     copy = tmp_path / "bsn_edge"
-    shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(PACKAGE, copy, ignore=lambda d, names: [n for n in names if (not n.endswith(".py")
+                                                              and not (Path(d) / n).is_dir()) or n == "__pycache__"])
     assert upward_imports(copy) == [] and heavy_imports(copy) == [] and car_heavy_imports(copy) == []
     target = copy / module
     target.write_text(target.read_text() + f"\n\ndef _probe():\n    import importlib\n    {line}\n")

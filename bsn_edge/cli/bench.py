@@ -26,7 +26,8 @@ DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "install",
          "footprint", "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "adapt", "alive",
-         "prune", "calibration", "first_guess", "optimizer", "label_classes", "camera_health", "adapt_real", "ways_out")
+         "prune", "calibration", "first_guess", "optimizer", "label_classes", "camera_health", "adapt_real", "ways_out",
+         "paced_floor")
 # the campaign's own benchmarks: they judge a leg's run folder against held-out sets the campaign makes
 # (models/campaign/judge*.sh run them), so they have nothing to measure outside it
 CAMPAIGN_TOOLS = ("bench_cameras", "bench_tradeoff", "bench_campaign")
@@ -137,7 +138,7 @@ BY_OUT_ONLY = {"labels": "benchmarks.bench_labels", "realcam": "benchmarks.bench
                "alive": "benchmarks.bench_alive",
                "prune": "benchmarks.bench_prune", "first_guess": "benchmarks.bench_first_guess",
                "optimizer": "benchmarks.bench_optimizer", "camera_health": "benchmarks.bench_camera_health",
-               "ways_out": "benchmarks.bench_ways_out"}
+               "ways_out": "benchmarks.bench_ways_out", "paced_floor": "benchmarks.bench_paced_floor"}
 
 
 def main(argv: list[str] | None = None) -> int:

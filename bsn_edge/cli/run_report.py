@@ -57,18 +57,11 @@ def _whys(whys: dict[str, float]) -> str:
     return " (" + ", ".join(f"{why} {s:.1f} s" for why, s in sorted(whys.items(), key=lambda kv: -kv[1])) + ")"
 
 
-def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: CameraState) -> str:
-    """The end of a run in a few lines (the whole record goes to ``--summary``)."""
-    lines = [f"{PROG}: {summary['frames']} frames ({summary['valid_frames']} valid) in {summary['seconds']:.1f} s: "
-             f"{summary['fps']:.1f} frames/s, latency p50 {summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms"
-             + (f", {summary['dropped']} dropped" if summary["dropped"] else "")
-             + _cpu_said(summary)]
-    if getattr(args, "profile", None):
-        lines.append("  per stage, ms a frame (mean): " + ", ".join(
-            f"{k} {v:.2f}" for k, v in summary["stage_ms"].items()))
+def _faults_line(summary: dict[str, Any]) -> str:
+    """"  faults: ...; on the bus: OK 1.5 s, ... (why); then UNAVAILABLE, the last word"."""
     from bsn_edge.alerts.health import Fault
 
-    # an unsigned model is said on its own line below, not as a fault
+    # an unsigned model is said on its own line, not as a fault
     faults = {k: v for k, v in summary["faults"].items() if v and k != Fault.UNSIGNED_MODEL}
     seen = (summary.get("visibility") or {}).get("seconds") or {}
     said = [f"{k} {v}" for k, v in faults.items()]
@@ -79,8 +72,20 @@ def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: Cam
     states, whys = summary.get("states_s") or {}, summary.get("why_s") or {}
     on_bus = ", ".join(f"{k} {v:.1f} s" + _whys(whys.get(k) or {})
                        for k, v in sorted(states.items(), key=lambda kv: -kv[1]))
-    lines.append("  faults: " + (", ".join(said) if said else "none") + (f"; on the bus: {on_bus}" if on_bus else "")
-                 + ("; then UNAVAILABLE, the last word" if on_bus else ""))
+    return ("  faults: " + (", ".join(said) if said else "none") + (f"; on the bus: {on_bus}" if on_bus else "")
+            + ("; then UNAVAILABLE, the last word" if on_bus else ""))
+
+
+def human_summary(summary: dict[str, Any], args: argparse.Namespace, camera: CameraState) -> str:
+    """The end of a run in a few lines (the whole record goes to ``--summary``)."""
+    lines = [f"{PROG}: {summary['frames']} frames ({summary['valid_frames']} valid) in {summary['seconds']:.1f} s: "
+             f"{summary['fps']:.1f} frames/s, latency p50 {summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms"
+             + (f", {summary['dropped']} dropped" if summary["dropped"] else "")
+             + _cpu_said(summary)]
+    if getattr(args, "profile", None):
+        lines.append("  per stage, ms a frame (mean): " + ", ".join(
+            f"{k} {v:.2f}" for k, v in summary["stage_ms"].items()))
+    lines.append(_faults_line(summary))
     model = summary["model"]
     lines.append(f"  model: signed by key {model['signer']}" if model["authentic"]
                  else f"  model: UNSIGNED ({model['trust_note']}; run by --allow-unsigned)")
