@@ -40,7 +40,7 @@ def worker(clip: Path, rate: float, calib: str | None, loops: int, settings: dic
     from bsn_edge.runtime import Engine
     from bsn_edge.runtime import run as run_loop
     from bsn_edge.runtime.camera_state import CameraState
-    from bsn_edge.runtime.loop import RuntimeConfig
+    from bsn_edge.runtime.settings import RuntimeConfig
     from bsn_edge.runtime.sources import Captured, Source, VideoFileSource
 
     class Looped(Source):

@@ -46,7 +46,7 @@ def test_bsn_export_help_needs_none_of_the_training_stack():
 
 def test_the_runtime_settings_file_is_package_data_and_the_checkouts_copy_is_it(capsys):
     from bsn_edge.runtime.config_file import DEFAULTS_FILE, load_runtime_config
-    from bsn_edge.runtime.loop import RuntimeConfig
+    from bsn_edge.runtime.settings import RuntimeConfig
 
     pkg = Path(bsn_edge.__file__).resolve().parent / "runtime"
     assert DEFAULTS_FILE.parent == pkg and DEFAULTS_FILE.is_file() and not DEFAULTS_FILE.is_symlink()

@@ -30,7 +30,7 @@ from bsn_edge.default_model import DEFAULT_MODEL
 if TYPE_CHECKING:
     from bsn_edge.alerts.bus_config import BusConfig
     from bsn_edge.alerts.senders import Sender
-    from bsn_edge.runtime.loop import RuntimeConfig
+    from bsn_edge.runtime.settings import RuntimeConfig
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -4,7 +4,8 @@ Nothing here imports torch, onnx or onnxruntime's quantization tools: this is wh
 """
 
 from bsn_edge.runtime.engine import Engine, ModelError
-from bsn_edge.runtime.loop import RuntimeConfig, run
+from bsn_edge.runtime.loop import run
+from bsn_edge.runtime.settings import RuntimeConfig
 from bsn_edge.runtime.sources import Reconnect, open_source
 
 __all__ = ["Engine", "ModelError", "Reconnect", "RuntimeConfig", "open_source", "run"]

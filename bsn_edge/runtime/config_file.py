@@ -33,7 +33,7 @@ from bsn_edge.alerts.health import HealthConfig
 from bsn_edge.alerts.sectors import SectorConfig
 from bsn_edge.alerts.state_machine import AlertConfig
 from bsn_edge.config_toml import build, merge_overrides, read_toml, unknown
-from bsn_edge.runtime.loop import RuntimeConfig
+from bsn_edge.runtime.settings import RuntimeConfig
 from bsn_edge.runtime.source_config import CalibrationConfig, SourceConfig
 from bsn_edge.runtime.visibility import VisibilityConfig
 

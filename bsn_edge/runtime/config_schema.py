@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from bsn_edge.runtime.config_file import DEFAULTS_FILE, LOOP, NESTED, SCHEMA_FILE
-from bsn_edge.runtime.loop import RuntimeConfig
+from bsn_edge.runtime.settings import RuntimeConfig
 
 __all__ = ["SCHEMA_FILE", "comments", "reference_page", "schema"]
 DRAFT = "https://json-schema.org/draft/2020-12/schema"

@@ -443,7 +443,7 @@ def test_an_fp32_export_is_sealed_with_the_fp32_tolerance_and_its_card_says_none
     assert card.float_graph
 
 
-@pytest.mark.parametrize("count", [1, 3])
+@pytest.mark.parametrize("count", [1])   # 2 is the old names test's; the default is the CLI tests'
 def test_int8_count_is_the_number_of_frames_quantization_sees(run, spread, tmp_path, capsys, monkeypatch, count):
     """--int8-count N: quantization's calibration reads N frames, counted where onnxruntime takes them."""
     import sys

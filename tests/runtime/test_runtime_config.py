@@ -15,7 +15,7 @@ from bsn_edge.cli import run as run_cli
 from bsn_edge.cli.common import CHECKOUT
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime.config_file import load_runtime_config
-from bsn_edge.runtime.loop import RuntimeConfig
+from bsn_edge.runtime.settings import RuntimeConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 
