@@ -3,7 +3,7 @@
     python -m benchmarks.bench_alive [--runs NAME=RUN ...] --out benchmarks/results
 
 A channel is dead when its weights are all (about) zero, or the batch norm after it scales it by about
-nothing or has seen it vary by about nothing (``bsn_edge.models.alive``); the graph still computes it.
+nothing or has seen it vary by about nothing (``bsn_edge.networks.alive``); the graph still computes it.
 Without ``--runs``: the shipped default's run and every run of the campaign folder. For each, D and B
 (the student) and its segmentation teacher, in all and per convolution. No timing: it reads weights only.
 """
@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from bsn_edge.models.alive import SCALE_EPS, VAR_SHARE, WEIGHT_EPS, Alive, alive_channels
+from bsn_edge.networks.alive import SCALE_EPS, VAR_SHARE, WEIGHT_EPS, Alive, alive_channels
 from bsn_edge.train.run import Run
 
 from .common import machine
@@ -51,7 +51,7 @@ def measure(args: argparse.Namespace, _parser: argparse.ArgumentParser) -> Repor
     result: dict[str, Any] = {"machine": machine(), "runs": {}}
     md = ["# Alive channels", "", "The share of each network's convolution output channels that carry anything: "
           f"some weight of at least {WEIGHT_EPS:g}, and where a batch norm follows, its scale over {SCALE_EPS:g} "
-          f"and its running variance at least {VAR_SHARE:g} of its epsilon (`bsn_edge.models.alive`).", "",
+          f"and its running variance at least {VAR_SHARE:g} of its epsilon (`bsn_edge.networks.alive`).", "",
           "| run | student alive | teacher alive |", "|---|---|---|"]
     per_layer: list[str] = []
     for name, path in runs.items():

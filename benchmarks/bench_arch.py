@@ -46,7 +46,7 @@ from bsn_edge.card import UNRECORDED
 from bsn_edge.cli.common import parse_size
 from bsn_edge.export import to_onnx
 from bsn_edge.modelfile.read import session
-from bsn_edge.models import create_model, describe
+from bsn_edge.networks import create_model, describe
 from bsn_edge.train.config import load_config
 from bsn_edge.train.device import autocast_dtype, precision_name
 from bsn_edge.train.run import Run

@@ -42,7 +42,7 @@ from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.export.quantize import METHODS, TYPES, FrameReader, QuantConfig
 from bsn_edge.export.seal import read_card
 from bsn_edge.modelfile.read import session
-from bsn_edge.models import create_model
+from bsn_edge.networks import create_model
 
 from .bench_arch import count_gmacs
 from .bench_quant import kernel_times, latency

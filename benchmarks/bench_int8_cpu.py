@@ -29,7 +29,7 @@ from bsn_edge.export import quantize, to_onnx
 from bsn_edge.export.quantize import QuantConfig
 from bsn_edge.modelfile import selftest
 from bsn_edge.modelfile.read import ModelFile, session
-from bsn_edge.models import create_model
+from bsn_edge.networks import create_model
 
 from . import runner
 from .common import summary, time_calls

@@ -15,7 +15,7 @@ schedule as short as the run itself decays the rate before the collapse shows. T
 - ``adamw-all``: decoupled decay 1e-2 on every parameter, normalisation scales and biases included;
 - ``adamw`` (the default): decoupled decay 1e-2 on convolution and linear weights only.
 
-Alive channels (``bsn_edge.models.alive``) every ``--every`` steps. No timing: the figures are counts.
+Alive channels (``bsn_edge.networks.alive``) every ``--every`` steps. No timing: the figures are counts.
 Subnormal floats are flushed to zero (a collapsing run otherwise slows several times over).
 """
 
@@ -28,9 +28,9 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
-from bsn_edge.models import create_model
-from bsn_edge.models.alive import alive_channels
-from bsn_edge.models.registry import create_teacher
+from bsn_edge.networks import create_model
+from bsn_edge.networks.alive import alive_channels
+from bsn_edge.networks.registry import create_teacher
 from bsn_edge.semantics import NUM_CLASSES
 from bsn_edge.train.config import ADAM, ADAMW, TrainConfig
 from bsn_edge.train.optim import Optimizer
@@ -109,7 +109,7 @@ def measure(args: argparse.Namespace, _parser: argparse.ArgumentParser) -> Repor
     md = ["# Alive channels by optimizer", "",
           f"`{args.variant}`, fresh, on fixed random frames (batch {BATCH} at {SIZE[0]}x{SIZE[1]}, lr {LR:g}, "
           f"the first {args.steps:,} steps of a {schedule:,}-step schedule): the share of its {channels:,} "
-          "convolution channels alive (`bsn_edge.models.alive`, `benchmarks/bench_optimizer.py`).", "",
+          "convolution channels alive (`bsn_edge.networks.alive`, `benchmarks/bench_optimizer.py`).", "",
           "| step | " + " | ".join(args.settings) + " |", "|---|" + "---|" * len(args.settings)]
     for i, rec in enumerate(curves[args.settings[0]]):
         md.append(f"| {rec['step']} | " + " | ".join(f"{100 * curves[s][i]['alive_share']:.1f} %"

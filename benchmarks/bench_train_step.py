@@ -39,7 +39,7 @@ import torch
 from bsn_edge.cli.common import parse_size
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.data.cache import SampleCache
-from bsn_edge.models import create_model, create_teacher, get_spec
+from bsn_edge.networks import create_model, create_teacher, get_spec
 from bsn_edge.train.batches import training_batches
 from bsn_edge.train.config import load_config
 from bsn_edge.train.device import autocast_dtype, cpu_has_native_bf16, layout, scaled

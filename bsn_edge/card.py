@@ -153,7 +153,7 @@ class SelfTest:
 class ModelCard:
     """What a model is.
 
-    variant:        registry name (``bsn_edge.models.create_model``), e.g. ``small-light``
+    variant:        registry name (``bsn_edge.networks.create_model``), e.g. ``small-light``
     spec:           the architecture record the registry builds it from
     input_size:     (H, W) the model runs at
     threshold:      decision threshold on the blind-spot probability, chosen on validation

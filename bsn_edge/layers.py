@@ -24,7 +24,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("runtime",),
     ("report",),
     ("labels",),
-    ("models",),
+    ("networks",),
     ("data",),
     ("train",),
     ("evaluate",),

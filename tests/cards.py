@@ -2,7 +2,7 @@
 
 from bsn_edge.camera import Intrinsics
 from bsn_edge.card import ModelCard
-from bsn_edge.models import create_model, describe
+from bsn_edge.networks import create_model, describe
 
 
 def card_for(size: tuple[int, int], variant: str = "small-light", threshold: float | None = 0.5,

@@ -45,7 +45,7 @@ def small_light_onnx(tmp_path_factory, tests_key):
 
     from bsn_edge.export import to_onnx
     from bsn_edge.export.signing import sign
-    from bsn_edge.models import create_model
+    from bsn_edge.networks import create_model
     from tests.cards import card_for
     made = {}
 

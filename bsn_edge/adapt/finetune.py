@@ -8,7 +8,7 @@ from torch.utils.data import DataLoader
 
 from bsn_edge.adapt.config import AdaptConfig
 from bsn_edge.metrics import ThresholdSweep
-from bsn_edge.models import BlindSpotNet
+from bsn_edge.networks import BlindSpotNet
 from bsn_edge.progress import progress_bar
 from bsn_edge.train.batches import batch_stream
 from bsn_edge.train.config import TrainConfig

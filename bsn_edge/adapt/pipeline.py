@@ -27,7 +27,7 @@ from bsn_edge.labels.batch import label_many
 from bsn_edge.labels.generator import made_with
 from bsn_edge.labels.sources.base import ClipData
 from bsn_edge.labels.sources.registry import make_seg
-from bsn_edge.models import ORACLE_DEPTH_NOTE
+from bsn_edge.networks import ORACLE_DEPTH_NOTE
 from bsn_edge.progress import progress_bar
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.meta import SequenceMeta

@@ -25,7 +25,7 @@ from bsn_edge.export.quantize import QuantConfig, quantize
 from bsn_edge.export.seal import seal
 from bsn_edge.modelfile import selftest
 from bsn_edge.modelfile.read import ModelFile, session
-from bsn_edge.models import ORACLE_DEPTH_NOTE
+from bsn_edge.networks import ORACLE_DEPTH_NOTE
 from bsn_edge.sequence.images import atomic_write_bytes
 from bsn_edge.train.run import Run
 

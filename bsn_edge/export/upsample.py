@@ -19,7 +19,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from bsn_edge.models.upsample import Upsample
+from bsn_edge.networks.upsample import Upsample
 
 
 def bilinear_taps(factor: int) -> np.ndarray:

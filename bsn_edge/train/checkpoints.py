@@ -13,7 +13,7 @@ import torch.distributed as dist
 
 from bsn_edge.card import UNCHOSEN_THRESHOLD, ModelCard
 from bsn_edge.labels.generator import label_camera
-from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, get_spec
+from bsn_edge.networks import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, get_spec
 from bsn_edge.sequence import SequenceMeta
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.train.batches import Datasets

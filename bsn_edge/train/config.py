@@ -13,8 +13,8 @@ from bsn_edge.camera import Intrinsics
 from bsn_edge.config_toml import build, merge_overrides, read_toml
 from bsn_edge.data.guessed_camera import GuessedDepth
 from bsn_edge.model_frame import MODEL_HFOV_DEG, MODEL_PITCH_DEG, model_camera
-from bsn_edge.models import get_spec, teacher_encoder
 from bsn_edge.mounting import REFERENCE_HEIGHT_M, Mounting
+from bsn_edge.networks import get_spec, teacher_encoder
 from bsn_edge.train.encoder_norm import EncoderNorm
 
 
@@ -115,7 +115,7 @@ class TrainConfig:
     device: str = "cpu"                      # cpu, cuda or auto (cuda when torch sees a GPU)
     checkpoint_every: int = 100
     init: str = ""                           # start from this run's weights (fine-tuning)
-    # re-draw train.init's dead channels before training on (bsn_edge.models.revive)
+    # re-draw train.init's dead channels before training on (bsn_edge.networks.revive)
     revive: bool = False
     encoder_lr: float = 1.0                  # share of lr for an encoder that starts from ImageNet weights
     # what the frame encoder's batch norm normalises with in training (bsn_edge.train.encoder_norm.

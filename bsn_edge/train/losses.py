@@ -6,7 +6,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M
+from bsn_edge.networks.bsn import MAX_DEPTH_M, MIN_DEPTH_M
 from bsn_edge.semantics import IGNORE
 
 

@@ -21,7 +21,7 @@ class Optimizer:
     not decayed. ``adam``: the recipe before it, L2 decay added to every gradient, normalisation scales
     and biases included. Adam normalises that decay like any gradient, so a channel with little gradient
     of its own walks to exactly zero at the learning rate's pace: it killed 81 % of the default's
-    channels (``bsn_edge.models.alive``). Kept to reproduce the runs trained with it."""
+    channels (``bsn_edge.networks.alive``). Kept to reproduce the runs trained with it."""
 
     def __init__(self, params: Iterable[torch.nn.Parameter] | Iterable[dict], lr: float, steps: int,
                  t: TrainConfig, fused: bool = False) -> None:

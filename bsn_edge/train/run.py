@@ -31,7 +31,7 @@ import torch
 
 from bsn_edge.card import ModelCard
 from bsn_edge.fields import read_json_object
-from bsn_edge.models import BlindSpotNet, ModelSpec, build, create_teacher, weights_bytes
+from bsn_edge.networks import BlindSpotNet, ModelSpec, build, create_teacher, weights_bytes
 from bsn_edge.sequence.images import atomic_write, atomic_write_bytes, torn_writes
 from bsn_edge.train.config import TeacherConfig
 from bsn_edge.train.run_record import training_record

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bsn_edge.card import UNRECORDED, TrainingRecord
-from bsn_edge.models import Carried, carried_over
+from bsn_edge.networks import Carried, carried_over
 from bsn_edge.train.config import TeacherConfig
 
 if TYPE_CHECKING:

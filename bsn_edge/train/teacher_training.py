@@ -14,8 +14,8 @@ import torch.nn.functional as F
 
 from bsn_edge import semantics as sm
 from bsn_edge.data.cache import SampleCache
-from bsn_edge.models import create_teacher
-from bsn_edge.models.alive import alive_channels
+from bsn_edge.networks import create_teacher
+from bsn_edge.networks.alive import alive_channels
 from bsn_edge.progress import progress_bar
 from bsn_edge.train.batches import datasets, sample_cache, skipped_and_torn, training_batches
 from bsn_edge.train.checkpoints import open_run

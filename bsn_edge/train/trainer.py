@@ -22,9 +22,9 @@ from bsn_edge.card import UNRECORDED
 from bsn_edge.data.cache import SampleCache
 from bsn_edge.data.camera_mix import CameraMix
 from bsn_edge.data.guessed_camera import GuessedDepth
-from bsn_edge.models import BlindSpotNet, create_model, get_spec, start_from
-from bsn_edge.models.alive import alive_channels
-from bsn_edge.models.revive import revive
+from bsn_edge.networks import BlindSpotNet, create_model, get_spec, start_from
+from bsn_edge.networks.alive import alive_channels
+from bsn_edge.networks.revive import revive
 from bsn_edge.progress import progress_bar
 from bsn_edge.train.batches import datasets, sample_cache, skipped_and_torn, training_batches
 from bsn_edge.train.checkpoints import carried, checkpoint, finish, open_run

@@ -9,7 +9,7 @@ from torch.utils.data import DataLoader
 from bsn_edge import semantics as sm
 from bsn_edge.data.cache import SampleCache
 from bsn_edge.metrics import ThresholdSweep
-from bsn_edge.models import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet
+from bsn_edge.networks import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet
 from bsn_edge.train.config import Config
 from bsn_edge.train.device import autocast, layout
 

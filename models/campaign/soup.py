@@ -18,7 +18,7 @@ from pathlib import Path
 import torch
 
 from bsn_edge.config_toml import build
-from bsn_edge.models import ModelSpec
+from bsn_edge.networks import ModelSpec
 from bsn_edge.train.batches import datasets
 from bsn_edge.train.checkpoints import save_checkpoint
 from bsn_edge.train.config import SECTIONS, Config

@@ -16,7 +16,7 @@ from bsn_edge.export import FusedModel, calib_frames, check_parity, head_nodes, 
 from bsn_edge.export.calib_frames import load_frames
 from bsn_edge.export.quantize import QuantConfig
 from bsn_edge.modelfile.read import session
-from bsn_edge.models import create_model
+from bsn_edge.networks import create_model
 from bsn_edge.synth import SynthConfig, write_clip
 from bsn_edge.train.run import Run
 from tests.cards import card_for

@@ -18,7 +18,7 @@ from bsn_edge.export.integer_input import MAX_WEIGHT, _integer_weights, integer_
 from bsn_edge.export.quantize import QuantConfig
 from bsn_edge.export.space_to_depth import SpaceToDepthInput
 from bsn_edge.modelfile.read import ModelFile, session
-from bsn_edge.models import create_model
+from bsn_edge.networks import create_model
 from bsn_edge.synth import SynthConfig, write_clip
 from tests.cards import card_for
 

@@ -7,8 +7,8 @@ import torch
 import torch.nn.functional as F
 
 from bsn_edge.export.upsample import ShuffleUpsample, bilinear_taps, chained_taps, with_shuffle_upsampling
-from bsn_edge.models import create_model
-from bsn_edge.models.upsample import Upsample
+from bsn_edge.networks import create_model
+from bsn_edge.networks.upsample import Upsample
 
 
 @pytest.mark.parametrize("factor", [2, 4, 8])

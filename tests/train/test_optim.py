@@ -73,7 +73,7 @@ def test_the_old_adam_with_l2_kills_channels_without_gradient_and_the_default_ke
     """Adam normalises L2's gradient like any other: an idle channel's batch-norm scale walks from 1 to 0 at
     the learning rate's pace (100 steps at 1e-2) and stays there. Decoupled decay on weights only leaves
     the scale alone and shrinks the weights by lr x decay of themselves a step (0.9999**300 = 0.97)."""
-    from bsn_edge.models.alive import alive_channels
+    from bsn_edge.networks.alive import alive_channels
 
     old = _train_half_idle(TrainConfig(optimizer="adam", weight_decay=5e-4))
     assert old.bn.weight[4:].abs().max() < 1e-3 and old.conv.weight[4:].abs().max() < 1e-6

@@ -10,7 +10,7 @@ from bsn_edge.cli import synth as synth_cli
 from bsn_edge.data import BlindSpotDataset, find_clips
 from bsn_edge.data.cache import SampleCache, dataset_key
 from bsn_edge.data.repaint import SeeThrough
-from bsn_edge.models import create_teacher
+from bsn_edge.networks import create_teacher
 from bsn_edge.sequence.images import DEPTH_SCALE
 from bsn_edge.train.device import scaled
 from bsn_edge.train.losses import pairwise_similarity

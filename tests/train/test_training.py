@@ -20,8 +20,8 @@ from bsn_edge.cli import train as train_cli
 from bsn_edge.data import BlindSpotDataset, find_clips, split_clips
 from bsn_edge.export import read_card
 from bsn_edge.metrics import THRESHOLDS
-from bsn_edge.models import BlindSpotNet
-from bsn_edge.models.alive import alive_channels
+from bsn_edge.networks import BlindSpotNet
+from bsn_edge.networks.alive import alive_channels
 from bsn_edge.train import Run, RunError, load_config
 from bsn_edge.train.device import cpu_has_native_bf16
 from bsn_edge.train.losses import masked_bce
@@ -100,7 +100,7 @@ def test_flip_keeps_geometry_honest(data):
 
 def test_a_few_steps_reduce_the_loss(data):
     torch.manual_seed(0)
-    from bsn_edge.models import create_model
+    from bsn_edge.networks import create_model
     ds = BlindSpotDataset(find_clips(data, "T2s")[:1], (64, 128), label_name="T2s")
     batch = {k: torch.stack([ds[i][k] for i in range(4)]) for k in ("image", "blindspot", "visibility")}
     m = create_model("small-light")
@@ -215,7 +215,7 @@ def test_cli_errors_are_explained(data, tmp_path, capsys):
 
 
 def test_bce_beyond_v_takes_rendered_clips_and_refuses_a_users(data, tmp_path, capsys):
-    from bsn_edge.models import create_model
+    from bsn_edge.networks import create_model
     from bsn_edge.train.trainer import losses
 
     cfg = load_config(SMOKE, [])
@@ -279,7 +279,7 @@ def _two_ranks_in_one_process(cfg, data_dir, init: Path) -> dict:
     """What DistributedDataParallel on two ranks computes, step by step in one process: each rank's
     half of the global batch through the model (BatchNorm on the rank's own samples), the gradients
     averaged, one optimizer step; the buffers are rank 0's (DDP broadcasts them from rank 0)."""
-    from bsn_edge.models import create_model
+    from bsn_edge.networks import create_model
     from bsn_edge.train import batches, device, trainer
     from bsn_edge.train.optim import Optimizer
     data_ = batches.datasets(cfg, data_dir)
@@ -705,7 +705,7 @@ def test_a_student_of_another_runs_teacher_says_what_that_teacher_is(data, tmp_p
     """A teacher on efficientnet-lite0 trained alone (bsn-train --teacher-only); a second run distils
     from it with teacher.checkpoint and a config that says nothing of its build: the second run's
     config says efficientnet-lite0, and it, its shipped copy and its teacher's loader build that encoder."""
-    from bsn_edge.models.efficientnet_lite import EfficientNetLite0
+    from bsn_edge.networks.efficientnet_lite import EfficientNetLite0
     from bsn_edge.train.trainer import train
     sets = ["data.label=\"T2s\"", "train.steps=1", "teacher.steps=1"]
     first, second = tmp_path / "a", tmp_path / "b"

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from torch import Tensor, nn
 
-from bsn_edge.models.encoder_base import Encoder
+from bsn_edge.networks.encoder_base import Encoder
 
 
 def shortcut(cin: int, cout: int, stride: int) -> nn.Module | None:

@@ -6,8 +6,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from bsn_edge.models.encoder_base import Encoder
-from bsn_edge.models.upsample import Upsample
+from bsn_edge.networks.encoder_base import Encoder
+from bsn_edge.networks.upsample import Upsample
 
 
 def conv_bn_relu(cin: int, cout: int, k: int = 3, dilation: int = 1,

@@ -13,14 +13,14 @@ from torch import nn
 
 from bsn_edge.camera import Intrinsics
 from bsn_edge.card import ModelCard
-from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, DepthNet
-from bsn_edge.models.deeplab import EncoderDecoder
-from bsn_edge.models.encoder_base import Encoder
-from bsn_edge.models.encoders import ENCODERS, encoder_info, make_encoder
-from bsn_edge.models.resnet import DEPTHS as RESNET_DEPTHS
-from bsn_edge.models.resnet import ResNetEncoder
-from bsn_edge.models.shared import SharedEncoderBSN
-from bsn_edge.models.unet import UNet
+from bsn_edge.networks.bsn import MAX_DEPTH_M, MIN_DEPTH_M, BlindSpotNet, DepthNet
+from bsn_edge.networks.deeplab import EncoderDecoder
+from bsn_edge.networks.encoder_base import Encoder
+from bsn_edge.networks.encoders import ENCODERS, encoder_info, make_encoder
+from bsn_edge.networks.resnet import DEPTHS as RESNET_DEPTHS
+from bsn_edge.networks.resnet import ResNetEncoder
+from bsn_edge.networks.shared import SharedEncoderBSN
+from bsn_edge.networks.unet import UNet
 from bsn_edge.semantics import NUM_CLASSES
 
 
@@ -32,8 +32,8 @@ class ModelSpec:
     encoder_depth: ResNet depth of B. decoder_width / separable: B's decoder (256 dense is the
     paper's; 64 separable is the light one). use_depth: B sees D's depth. distill: trained with
     the teacher's pairwise-similarity loss (lambda = 1) or without (lambda = 0). shared_encoder:
-    D and B read one encoder (:class:`~bsn_edge.models.shared.SharedEncoderBSN`) instead of one
-    ResNet each. encoder: that shared encoder, a name of :data:`~bsn_edge.models.encoders.ENCODERS`
+    D and B read one encoder (:class:`~bsn_edge.networks.shared.SharedEncoderBSN`) instead of one
+    ResNet each. encoder: that shared encoder, a name of :data:`~bsn_edge.networks.encoders.ENCODERS`
     (``resnet``: ResNet-18; ``efficientnet-lite0``). pretrained: ``imagenet`` when training starts
     from the encoder's ImageNet weights (the card then names the encoder), else ``''``.
     oracle_depth: B reads the ground-truth depth given with the frame instead of D's,
@@ -169,7 +169,7 @@ def start_from(model: BlindSpotNet, name: str, source: BlindSpotNet, source_name
 
 
 #: the encoders a segmentation teacher can be built on: ResNets at output stride 16, and the
-#: encoders of :data:`~bsn_edge.models.encoders.ENCODERS` that publish pretrained weights
+#: encoders of :data:`~bsn_edge.networks.encoders.ENCODERS` that publish pretrained weights
 TEACHER_ENCODERS: tuple[str, ...] = (*(f"resnet{d}" for d in RESNET_DEPTHS),
                                      *(n for n, i in ENCODERS.items() if i.load_pretrained is not None))
 

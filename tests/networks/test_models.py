@@ -3,8 +3,8 @@
 import pytest
 import torch
 
-from bsn_edge.models import MODELS, create_model, create_teacher
-from bsn_edge.models.resnet import ResNetEncoder
+from bsn_edge.networks import MODELS, create_model, create_teacher
+from bsn_edge.networks.resnet import ResNetEncoder
 
 
 @pytest.mark.parametrize("name", list(MODELS))

@@ -3,7 +3,7 @@ zero (or under the epsilon), a batch norm of another width that is not the convo
 
 import torch
 
-from bsn_edge.models.alive import SCALE_EPS, alive_channels
+from bsn_edge.networks.alive import SCALE_EPS, alive_channels
 
 
 def test_dead_channels_are_counted_where_they_were_killed():
@@ -50,7 +50,7 @@ def test_weights_walking_to_zero_behind_a_norm_are_dead_before_fp16_rounds_them_
 def test_a_channel_the_norm_saw_vary_by_nothing_is_dead():
     """Where a channel's running variance is under a hundredth of the norm's epsilon, the norm passes on
     under a tenth of what it varies by: checked on the norm itself, against a channel of healthy variance."""
-    from bsn_edge.models.alive import VAR_SHARE
+    from bsn_edge.networks.alive import VAR_SHARE
 
     net = torch.nn.Sequential(torch.nn.Conv2d(3, 3, 1, bias=False), torch.nn.BatchNorm2d(3)).eval()
     eps = net[1].eps

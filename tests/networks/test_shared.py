@@ -9,7 +9,7 @@ import torch
 from benchmarks.bench_arch import count_gmacs
 from bsn_edge.export import FusedModel, to_onnx
 from bsn_edge.modelfile.read import session
-from bsn_edge.models import create_model, get_spec, start_from
+from bsn_edge.networks import create_model, get_spec, start_from
 from tests.cards import card_for
 
 

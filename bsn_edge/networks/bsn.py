@@ -8,9 +8,9 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from bsn_edge.models.deeplab import EncoderDecoder
-from bsn_edge.models.resnet import ResNetEncoder
-from bsn_edge.models.upsample import Upsample
+from bsn_edge.networks.deeplab import EncoderDecoder
+from bsn_edge.networks.resnet import ResNetEncoder
+from bsn_edge.networks.upsample import Upsample
 
 MIN_DEPTH_M, MAX_DEPTH_M = 0.5, 120.0   # D's output range; sky is taught as the far end
 LOG_MIN_DEPTH, LOG_MAX_DEPTH = math.log(MIN_DEPTH_M), math.log(MAX_DEPTH_M)

@@ -6,8 +6,8 @@ import torch
 
 from bsn_edge.adapt import AdaptError, adapt
 from bsn_edge.cli import export as export_cli
-from bsn_edge.models import MAX_DEPTH_M, create_model, depth_feature
-from bsn_edge.models.bsn import given_depth_feature
+from bsn_edge.networks import MAX_DEPTH_M, create_model, depth_feature
+from bsn_edge.networks.bsn import given_depth_feature
 from bsn_edge.train import Run
 from bsn_edge.train.validation import given_depth
 from tests.cards import card_for

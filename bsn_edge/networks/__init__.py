@@ -1,7 +1,7 @@
 """Networks in plain torch: ResNet encoders, DeepLabV3+, U-Net, D, B and the registry."""
 
-from bsn_edge.models.bsn import MAX_DEPTH_M, MIN_DEPTH_M, ORACLE_DEPTH_NOTE, BlindSpotNet, DepthNet, depth_feature
-from bsn_edge.models.registry import (
+from bsn_edge.networks.bsn import MAX_DEPTH_M, MIN_DEPTH_M, ORACLE_DEPTH_NOTE, BlindSpotNet, DepthNet, depth_feature
+from bsn_edge.networks.registry import (
     MODELS,
     TEACHER_ENCODERS,
     Carried,

@@ -6,7 +6,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from bsn_edge.models.deeplab import conv_bn_relu
+from bsn_edge.networks.deeplab import conv_bn_relu
 
 
 class UNet(nn.Module):

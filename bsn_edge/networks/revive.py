@@ -1,9 +1,9 @@
 """Dead channels given a new start: a run trained with Adam and L2 decay (``train.optimizer = "adam"``)
-carries most of its channels at exactly zero (:mod:`bsn_edge.models.alive`). Training on from it keeps them
+carries most of its channels at exactly zero (:mod:`bsn_edge.networks.alive`). Training on from it keeps them
 there: a zero-weight channel behind a zero batch-norm scale gets no gradient. Re-initialising them lets a
 new training use them, while the channels that are alive keep what they learnt.
 
-A dead channel is re-drawn the way :func:`bsn_edge.models.alive.alive_channels` pairs layers: its
+A dead channel is re-drawn the way :func:`bsn_edge.networks.alive.alive_channels` pairs layers: its
 convolution row at random (normal, with the spread of the layer's living rows; Kaiming's where none
 live), and the batch norm that follows it at its living scales' median (:data:`REVIVED_SCALE`), its
 shift kept (the constant the next layers have learnt to read from it) and its statistics reset (mean 0,
@@ -17,7 +17,7 @@ import math
 
 import torch
 
-from bsn_edge.models.alive import SCALE_EPS, dead_rows, following_norm
+from bsn_edge.networks.alive import SCALE_EPS, dead_rows, following_norm
 
 # a revived channel's norm starts at this share of its layer's living scale. At a tenth (0.001-0.01 in the
 # default's encoder) Adam's steps of a learning rate's size swamped it: after 1,000 steps at 5e-4 half of them
