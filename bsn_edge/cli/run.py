@@ -141,9 +141,9 @@ class _PrintDefaults(argparse.Action):
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
                  option_string: str | None = None) -> None:
-        from bsn_edge.runtime.config_file import DEFAULTS_FILE, SCHEMA_FILE
-        shown = SCHEMA_FILE if option_string == "--print-schema" else DEFAULTS_FILE
-        sys.stdout.write(shown.read_text(encoding="utf-8"))
+        from bsn_edge.runtime.config_file import SCHEMA_FILE, with_ranges
+        sys.stdout.write(SCHEMA_FILE.read_text(encoding="utf-8") if option_string == "--print-schema"
+                         else with_ranges())
         parser.exit()
 
 

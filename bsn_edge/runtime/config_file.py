@@ -45,6 +45,29 @@ NESTED: dict[str, type] = {"sectors": SectorConfig, "alerts": AlertConfig, "heal
 LOOP = "runtime"
 
 
+def with_ranges(path: Path = DEFAULTS_FILE) -> str:
+    """The settings file as ``bsn-run --print-config`` prints it: each key's line ends with its range and unit,
+    taken from the setting's declaration (the file itself carries none, so no range is written twice)."""
+    from bsn_edge.runtime.config_schema import KEY_LINE, TABLE_LINE, cell_range, schema
+
+    nodes: dict[str, dict[str, Any]] = {}
+
+    def walk(node: dict[str, Any], name: str) -> None:
+        for key, v in node["properties"].items():
+            (walk(v, f"{name}.{key}") if v["type"] == "object" else nodes.__setitem__(f"{name}.{key}", v))
+
+    for name, node in schema()["properties"].items():
+        walk(node, name)
+    out, table = [], ""
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if m := TABLE_LINE.match(line.strip()):
+            table = m.group(1)
+        elif (m := KEY_LINE.match(line.strip())) and (span := cell_range(nodes.get(f"{table}.{m.group(1)}", {}))):
+            line += f" ({span})" if "#" in line else f"  # ({span})"
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
 def load_runtime_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()
                         ) -> RuntimeConfig:
     """The runtime's settings: the defaults, then the file at ``path``, then ``overrides``

@@ -19,10 +19,10 @@ from bsn_edge.runtime.settings import RuntimeConfig
 
 __all__ = ["SCHEMA_FILE", "comments", "reference_page", "schema"]
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
-_TABLE = re.compile(r"^\[([\w.]+)\]\s*(?:#\s?(.*))?$")
+TABLE_LINE = _TABLE = re.compile(r"^\[([\w.]+)\]\s*(?:#\s?(.*))?$")
 # as the docs say them
 KINDS = {"boolean": "true or false", "integer": "whole number", "string": "text", "array": "list of text"}
-_KEY = re.compile(r"^(\w+)\s*=\s*[^#]*?(?:#\s?(.*))?$")
+KEY_LINE = _KEY = re.compile(r"^(\w+)\s*=\s*[^#]*?(?:#\s?(.*))?$")
 
 
 def comments(path: Path = DEFAULTS_FILE) -> dict[str, str]:
@@ -59,8 +59,10 @@ def cell_kind(v: dict[str, Any]) -> str:
 
 def cell_range(v: dict[str, Any]) -> str:
     """``0.01 to 1 s``: a setting's range and unit, from its schema node ("" for none)."""
-    return f"{v['minimum']:g} to {v['maximum']:g}" + (f" {v['unit']}" if v.get("unit") else "") \
-        if "minimum" in v else ""
+    if "minimum" not in v:
+        return ""
+    lo, hi = (f"{x:g}" if abs(x) < 1e5 else f"{x:,.0f}".replace(",", "_") for x in (v["minimum"], v["maximum"]))
+    return f"{lo} to {hi}" + (f" {v['unit']}" if v.get("unit") else "")
 
 
 def _leaf(f: dataclasses.Field, value: Any, description: str) -> dict[str, Any]:

@@ -410,3 +410,35 @@ def test_the_vehicle_files_threads_source_and_calibration_reach_what_they_set_an
     assert (flags.threads, flags.spin, flags.source.stall_s) == (2, False, 1.5)
     with pytest.raises(ValueError, match="reconnect_first_s"):
         load_runtime_config(None, ["source.reconnect_first_s=9", "source.reconnect_max_s=1"])
+
+
+def test_each_range_is_written_once_where_the_setting_is_declared_and_print_config_shows_it(capsys):
+    """The shipped file carries no range of its own (a hand copy drifts); ``--print-config`` writes each key's
+    range beside it from the setting's declaration, and what it prints is still the defaults."""
+    import re
+    import tomllib
+
+    from bsn_edge.runtime.config_file import DEFAULTS_FILE
+    from bsn_edge.runtime.config_schema import schema
+
+    plain = re.compile(r"\(-?[\d.]+ to -?[\d.]+( [\w/]+)?\)")
+    copied = [ln for ln in DEFAULTS_FILE.read_text().splitlines() if "#" in ln and plain.search(ln.split("#", 1)[1])]
+    assert not copied, copied
+    with pytest.raises(SystemExit):
+        run_cli.main(["--print-config"])
+    printed = capsys.readouterr().out
+    assert tomllib.loads(printed) == tomllib.loads(DEFAULTS_FILE.read_text())
+
+    def ranged(node, name):
+        for key, v in node["properties"].items():
+            if v["type"] == "object":
+                yield from ranged(v, f"{name}.{key}")
+            elif "minimum" in v:
+                yield name, key, v
+
+    lines = printed.splitlines()
+    for table, key, v in (x for name, node in schema()["properties"].items() for x in ranged(node, name)):
+        start = lines.index(f"[{table}]") if f"[{table}]" in lines else \
+            next(i for i, ln in enumerate(lines) if ln.startswith(f"[{table}]"))
+        line = next(ln for ln in lines[start + 1:] if re.match(rf"{key}\s*=", ln))
+        assert f"({v['minimum']:g} to " in line or "to 4_000_000" in line, line
