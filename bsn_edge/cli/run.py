@@ -414,56 +414,16 @@ def _configured(args: argparse.Namespace) -> tuple[RuntimeConfig, list[Sender]] 
 
 
 def _start(args: argparse.Namespace, cfg: RuntimeConfig):
-    """What the run needs before its first frame, each piece checked: ``(engine, camera, source, maps)``;
-    ``FileNotFoundError``, ``ValueError`` or ``OSError`` names what is wrong."""
-    from bsn_edge.calibration.camera_file import SIDE_RANGE_PX, Calibration
-    from bsn_edge.calibration.exif import from_exif
-    from bsn_edge.modelfile.trust import TrustPolicy
-    from bsn_edge.mounting import check_height
-    from bsn_edge.runtime import Engine, open_source
-    from bsn_edge.runtime.camera_state import CameraState
-    from bsn_edge.runtime.maps import MapWriter
+    """What the run needs before its first frame, built by :func:`~bsn_edge.runtime.build.build_run` from the
+    command line: ``(engine, camera, source, maps)``; ``FileNotFoundError``, ``ValueError`` or ``OSError``
+    names what is wrong."""
+    from bsn_edge.runtime.build import RunRequest, build_run
 
-    calibration = Calibration.read(args.calib) if args.calib else None
-    if args.height is not None:
-        check_height(args.height, "--height")
-    maps = MapWriter(args.save_maps, overwrite=args.force) if args.save_maps else None
-    trust = TrustPolicy.default(args.trust, args.allow_unsigned)
-    engine = Engine(args.model, cfg.engine_threads, cfg.spin, trust=trust)
-    if not engine.authentic:
-        print(f"{PROG}: warning: {engine.verdict.note}; it runs because of --allow-unsigned, and the status says "
-              "Model_Unsigned on every cycle", file=sys.stderr)
-    source = open_source(args.source, pace=args.pace, reconnect=cfg.source.reconnect())
-    if source.size is not None and source.one_camera and not all(
-            SIDE_RANGE_PX[0] <= side <= SIDE_RANGE_PX[1] for side in source.size):
-        source.close()                   # refused before its first frame, with or without a camera file
-        raise ValueError(f"{args.source}: frames of {source.size[0]}x{source.size[1]}: bsn-run takes frames "
-                         f"{SIDE_RANGE_PX[0]} to {SIDE_RANGE_PX[1]} pixels on a side")
-    if calibration is None and source.cameras is not None and not source.one_camera:
-        from bsn_edge.runtime.picture_cameras import PictureCameras
-        print(f"{PROG}: note: {source.cameras.cameras.value}: {source.cameras.why}; each is warped with its own lens "
-              "(EXIF, else assumed) and the model camera's mounting (pass --calib if they are one camera)",
-              file=sys.stderr)
-        return engine, PictureCameras(engine.card, source.cameras, args.height), source, maps
-    intrinsics_from = "camera file"
-    if calibration is None and source.picture is not None and source.size is not None:
-        calibration = from_exif(source.picture, *source.size)
-        if calibration is not None:
-            intrinsics_from = calibration.intrinsics_method
-            print(f"{PROG}: note: no camera file: the intrinsics from the {intrinsics_from}; pitch and yaw are "
-                  "calibrated online", file=sys.stderr)
-    camera = CameraState(engine.card, calibration, args.height, args.save_calib, intrinsics_from=intrinsics_from,
-                         calibrate_nice=cfg.calibration.nice, calibrate_hz=cfg.calibration.frames_per_s)
-    if calibration is not None and source.size is not None:
-        try:
-            camera.size_note = calibration.fit_to(*source.size, where=f"--calib {args.calib}")
-            camera.check_view(*source.size)
-        except ValueError as e:
-            source.close()
-            raise ValueError(str(e) if str(e).startswith("--calib") else f"--calib {args.calib}: {e}") from None
-        if camera.size_note:
-            print(f"{PROG}: note: {camera.size_note}", file=sys.stderr)
-    return engine, camera, source, maps
+    request = RunRequest(source=args.source, model=args.model, calib=args.calib, height=args.height,
+                         save_calib=args.save_calib, save_maps=args.save_maps, force=args.force,
+                         trust=tuple(args.trust), allow_unsigned=args.allow_unsigned, pace=args.pace)
+    built = build_run(request, cfg, say=lambda s: print(f"{PROG}: {s}", file=sys.stderr))
+    return built.engine, built.camera, built.source, built.maps
 
 
 if __name__ == "__main__":
