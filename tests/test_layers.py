@@ -191,12 +191,11 @@ def test_nothing_the_car_commands_load_names_a_training_tool():
     ("__init__.py", "import torch"),
 ])
 def test_the_checks_catch_each_way_of_importing_upwards(tmp_path, module, line):
-    """Each form, written into a copy of the package, is found (and the copy is clean without it)."""
+    """Each form, written into a copy of the package, is found (the package itself is clean: the tests above)."""
     import shutil
     copy = tmp_path / "bsn_edge"
     shutil.copytree(PACKAGE, copy, ignore=lambda d, names: [n for n in names if (not n.endswith(".py")
                                                               and not (Path(d) / n).is_dir()) or n == "__pycache__"])
-    assert upward_imports(copy) == [] and heavy_imports(copy) == [] and car_heavy_imports(copy) == []
     target = copy / module
     target.write_text(target.read_text() + f"\n\ndef _probe():\n    import importlib\n    {line}\n")
     assert upward_imports(copy) + heavy_imports(copy) + car_heavy_imports(copy), f"{line} in {module} was not caught"

@@ -27,7 +27,7 @@ from tests.fakes import long_video
 OCCLUDER_M = 1.0     # metres in the model camera: 3.3 m from the highest camera a file may hold (5 m)
 # derandomized, so CI runs the same examples every time; the slow-marked runs explore more (pytest -m slow)
 EXAMPLES, THOROUGH = 12, 60
-CAMERA_EXAMPLES, CAMERA_THOROUGH = 25, 120     # most random camera files are refused: more of them
+CAMERA_EXAMPLES, CAMERA_THOROUGH = 20, 120     # most random camera files are refused: more of them
 
 
 class OccluderEngine(Engine):

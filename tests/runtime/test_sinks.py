@@ -176,8 +176,10 @@ def test_a_folder_where_no_frame_decodes_is_an_error(setup, tmp_path, capsys):
     assert code == 1 and "none of the 4 frames" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 0), (signal.SIGINT, 130), (signal.SIGHUP, 129),
-                                           (signal.SIGQUIT, 131)])
+# HUP and QUIT take the path TERM and INT take (one handler for every stop signal): with the slow tests
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 0), (signal.SIGINT, 130),
+                                           pytest.param(signal.SIGHUP, 129, marks=pytest.mark.slow),
+                                           pytest.param(signal.SIGQUIT, 131, marks=pytest.mark.slow)])
 def test_a_signal_at_any_moment_of_start_up_ends_with_unavailable_and_no_traceback(setup, tmp_path, sig, code):
     model, clip = setup
     env = {**os.environ, "PYTHONPATH": str(CHECKOUT)}
