@@ -298,7 +298,7 @@ class UdpSender(Sender):
 
     def _send(self, frames: list[tuple[int, bytes]]) -> None:
         now = time.time()
-        payload = UDP_MAGIC + b"".join(struct.pack(">dIB", now, fid, len(data)) + data for fid, data in frames)
+        payload = UDP_MAGIC + b"".join(UDP_FRAME_HEAD.pack(now, fid, len(data)) + data for fid, data in frames)
         try:
             self.sock.send(payload)
         except (BlockingIOError, InterruptedError):
@@ -321,6 +321,25 @@ class UdpSender(Sender):
 
 
 UDP_MAGIC = b"BSN1"      # a UdpSender datagram's first bytes: the layout's name and version
+UDP_FRAME_HEAD = struct.Struct(">dIB")     # a frame's send time, CAN id and length, before its bytes
+
+
+def udp_frames(datagram: bytes) -> list[tuple[float, int, bytes]]:
+    """A :class:`UdpSender` datagram read back: ``(time, id, bytes)`` of each frame; ``ValueError`` for one
+    that is not of that layout (another magic, a frame cut short)."""
+    if datagram[:len(UDP_MAGIC)] != UDP_MAGIC:
+        raise ValueError(f"not a bsn-run datagram (it starts {datagram[:4]!r}, not {UDP_MAGIC!r})")
+    out, k = [], len(UDP_MAGIC)
+    while k < len(datagram):
+        if k + UDP_FRAME_HEAD.size > len(datagram):
+            raise ValueError(f"a frame cut short at byte {k}")
+        t, fid, n = UDP_FRAME_HEAD.unpack_from(datagram, k)
+        k += UDP_FRAME_HEAD.size
+        if k + n > len(datagram):
+            raise ValueError(f"a frame of {n} bytes cut short at byte {k}")
+        out.append((t, fid, datagram[k:k + n]))
+        k += n
+    return out
 
 
 def open_sender(output: str, encoder: Encoder | None = None, log_path: str | None = None,

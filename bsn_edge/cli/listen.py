@@ -7,6 +7,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from bsn_edge.alerts.bus_check import FrameChecker, Verdict
@@ -30,6 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--can-log", metavar="FILE",
                    help="read a log bsn-run --can-log wrote: .log (candump), .asc or .blf")
     g.add_argument("--serial", metavar="URL", help="listen on this serial port (pyserial URL)")
+    g.add_argument("--udp", metavar="[HOST:]PORT",
+                   help="listen for bsn-run's UDP datagrams (bsn-run --output udp:HOST:PORT) on this port, of every "
+                        "address unless HOST is given")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (live inputs)")
     p.add_argument("--max", type=int, default=None, help="stop after this many frames")
     p.add_argument("--onsets", action="store_true",
@@ -154,6 +158,35 @@ def main(argv: list[str] | None = None) -> int:
                 signal.signal(sig, handler)
 
 
+def _listen_udp(where: str, show: Printer, more: Callable[[], bool]) -> None:
+    """Every frame of the datagrams that reach ``[HOST:]PORT``, judged; a datagram of another layout is an
+    unreadable line, counted."""
+    import socket
+
+    from bsn_edge.alerts.senders import udp_frames
+
+    host, _, port = where.rpartition(":")
+    if not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"--udp {where!r}: give [HOST:]PORT, e.g. 9000 or 127.0.0.1:9000")
+    with socket.socket(socket.AF_INET6 if ":" in host.strip("[]") else socket.AF_INET, socket.SOCK_DGRAM) as rx:
+        rx.bind((host.strip("[]") or "", int(port)))
+        rx.settimeout(0.2)
+        n = 0
+        while more():
+            try:
+                datagram = rx.recv(65536)
+            except TimeoutError:
+                continue
+            n += 1
+            try:
+                frames = udp_frames(datagram)
+            except ValueError as e:
+                show.bad_line(f"datagram {n}", str(e))
+                continue
+            for _, fid, data in frames:
+                show(fid, data, t=time.monotonic())
+
+
 def _listen(argv: list[str] | None) -> int:
     p = build_parser()
     args = p.parse_args(argv)
@@ -190,6 +223,8 @@ def _listen(argv: list[str] | None) -> int:
                     msg = bus.recv(timeout=0.2)
                     if msg is not None:
                         show(msg.arbitration_id, bytes(msg.data), t=time.monotonic())
+        elif args.udp:
+            _listen_udp(args.udp, show, more)
         else:
             import serial
             dec = FrameDecoder()

@@ -124,3 +124,32 @@ def test_udp_to_nobody_is_a_counted_failed_send_never_an_exception():
     failed = [s for s in sent if not s.ok]
     assert failed and all(s.faults.get(Fault.TX_ERRORS) == 1 for s in failed), sent
     assert tx.stats.errors == len(failed) and "Connection refused" in tx.stats.last_error
+
+
+def test_bsn_listen_judges_the_udp_datagrams_and_counts_one_of_another_layout(capsys):
+    """``bsn-listen --udp PORT``: each frame of bsn-run's datagrams printed and checked as a CAN bus's are; a
+    datagram that is not of the layout is counted as unreadable (exit 1), the rest still read."""
+    import socket
+    import threading
+    import time
+
+    from bsn_edge.cli import listen
+
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    codes = []
+    t = threading.Thread(target=lambda: codes.append(listen.main(["--udp", f"127.0.0.1:{port}", "--max", "6",
+                                                                  "--duration", "20"])))
+    t.start()
+    time.sleep(0.5)                        # the listener binds first
+    with open_sender(f"udp:127.0.0.1:{port}") as tx, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as junk:
+        junk.sendto(b"XXXX not ours", ("127.0.0.1", port))
+        for k in range(3):
+            tx.send(AlertFrame.unavailable(0.1 * k))
+            time.sleep(0.05)
+    t.join(25)
+    out = capsys.readouterr()
+    assert codes == [1] and out.out.count("[alive") == 6, (codes, out)
+    assert "datagram 1: not a bsn-run datagram" in out.err and "1 unreadable lines" in out.err
