@@ -36,13 +36,13 @@ class BusConfig:
             raise ValueError("bus.can and bus.serial are names (text), \"\" for none")
         if self.can and ":" not in self.can.strip(":"):
             raise ValueError(f"bus.can = {self.can!r} must be IFACE:CHANNEL, e.g. socketcan:can0")
-        from bsn_edge.alerts.senders import SENDERS
+        from bsn_edge.alerts.senders import parse_output
 
         for o in self.outputs:
-            scheme, _, target = o.partition(":") if isinstance(o, str) else ("", "", "")
-            if scheme not in SENDERS or not target:
-                raise ValueError(f"bus.outputs: {o!r} must be SCHEME:TARGET with SCHEME one of "
-                                 f"{', '.join(sorted(SENDERS))}")
+            try:
+                parse_output(o)
+            except ValueError as e:
+                raise ValueError(f"bus.outputs: {e}") from None
 
 
 @dataclass(frozen=True)

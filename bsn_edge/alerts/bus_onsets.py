@@ -76,7 +76,7 @@ def read_bus(can_log: str | Path) -> BusRead:
         levels = tuple(Level(int(signals[signal_name(name, "Level")])).name for name in SECTORS)
         cycles.append(BusCycle(number, t, levels, state))
 
-    def apply(signals: dict[str, Any], k: int, t: float, _number: int) -> None:
+    def apply(signals: dict[str, Any], k: int, t: float) -> None:
         for name in SECTORS:
             level = int(signals[signal_name(name, "Level")])
             if level > last[name]:
@@ -97,19 +97,19 @@ def read_bus(can_log: str | Path) -> BusRead:
             if pending is not None:
                 close(pending[0], pending[3], pending[2], state)
                 if state is not None and state != SystemState.UNAVAILABLE.name:
-                    apply(*pending)
+                    apply(*pending[:3])
             pending = None
             continue
         n += 1
         if pending is not None:        # a hazard frame with no status of its own (status sent less often)
             close(pending[0], pending[3], pending[2], None)
-            apply(*pending)
+            apply(*pending[:3])
             pending = None
         if c.decoded is not None and c.trusted:
             pending = (c.decoded.signals, n - 1, f.timestamp, c.number or 0)
     if pending is not None:
         close(pending[0], pending[3], pending[2], None)
-        apply(*pending)
+        apply(*pending[:3])
     damaged = {v.value: k for v, k in check.counts.items() if k and v not in (Verdict.OK, Verdict.REPEATED)}
     said = f"{len(unreadable)} unreadable line(s), the first {unreadable[0]}" if unreadable else ""
     return BusRead(out, n, damaged, said, tuple(statuses), start or 0.0, tuple(cycles))

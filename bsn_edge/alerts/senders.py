@@ -347,7 +347,13 @@ def open_sender(output: str, encoder: Encoder | None = None, log_path: str | Non
     """The sender of ``SCHEME:TARGET`` (``can:socketcan:can0``, ``serial:/dev/ttyUSB0``) with ``encoder``
     (the protocol's by default) and the vehicle file's ``bus`` settings (baud rate, timeouts); ``ValueError``
     naming the valid schemes for another."""
-    scheme, _, target = output.partition(":")
+    scheme, target = parse_output(output)
+    return SENDERS[scheme].from_target(target, encoder, log_path, bus or BusConfig())
+
+
+def parse_output(output: object) -> tuple[str, str]:
+    """``SCHEME:TARGET`` split, the scheme one of :data:`SENDERS`; ``ValueError`` naming the valid schemes."""
+    scheme, _, target = output.partition(":") if isinstance(output, str) else ("", "", "")
     if scheme not in SENDERS or not target:
         raise ValueError(f"output {output!r}: give SCHEME:TARGET with SCHEME one of {', '.join(sorted(SENDERS))}")
-    return SENDERS[scheme].from_target(target, encoder, log_path, bus or BusConfig())
+    return scheme, target

@@ -50,13 +50,6 @@ def _cpu_said(summary: dict[str, Any]) -> str:
         f" ({100 * busy / cores:.0f} % of {cores} cores)" if busy is not None else "")
 
 
-def _whys(whys: dict[str, float]) -> str:
-    """" (stall 10.0 s, no valid inference yet 0.8 s)": a state's seconds by reason, the longest first."""
-    if not whys:
-        return ""
-    return " (" + ", ".join(f"{why} {s:.1f} s" for why, s in sorted(whys.items(), key=lambda kv: -kv[1])) + ")"
-
-
 def _faults_line(summary: dict[str, Any]) -> str:
     """"  faults: ...; on the bus: OK 1.5 s, ... (why); then UNAVAILABLE, the last word"."""
     from bsn_edge.alerts.health import Fault
@@ -69,9 +62,9 @@ def _faults_line(summary: dict[str, Any]) -> str:
     if summary.get("stall_cycles"):
         said.append(f"stall cycles {summary['stall_cycles']} (the loop held up past health.deadline_s: UNAVAILABLE)")
     said += [f"bus down: {name}" for name in summary.get("senders_down") or ()]
-    states, whys = summary.get("states_s") or {}, summary.get("why_s") or {}
-    on_bus = ", ".join(f"{k} {v:.1f} s" + _whys(whys.get(k) or {})
-                       for k, v in sorted(states.items(), key=lambda kv: -kv[1]))
+    from bsn_edge.runtime.run_summary import states_said
+
+    on_bus = states_said(summary.get("states_s") or {}, summary.get("why_s") or {})
     return ("  faults: " + (", ".join(said) if said else "none") + (f"; on the bus: {on_bus}" if on_bus else "")
             + ("; then UNAVAILABLE, the last word" if on_bus else ""))
 

@@ -93,6 +93,7 @@ def check_cycles(records: list[FrameRecord], cycles: tuple[BusCycle, ...], start
         return out
     made.sort(key=lambda r: r.bus_from or 0)
     keys = [r.bus_from or 0 for r in made]
+    logged = {r.frame for r in records}
     for i, c in enumerate(cycles):
         none = all(lv == "NONE" for lv in c.levels)
         if c.state == "UNAVAILABLE" or (c.state is None and none):
@@ -109,16 +110,16 @@ def check_cycles(records: list[FrameRecord], cycles: tuple[BusCycle, ...], start
         out["disagree"] += 1
         if len(out["disagreements"]) < MAX_SHOWN:
             out["disagreements"].append(_cycle_disagreement(c, rec, mine, cycles[max(0, i - AROUND): i + AROUND + 1],
-                                                            start, records))
+                                                            start, logged))
     return out
 
 
 def _cycle_disagreement(c: BusCycle, rec: FrameRecord | None, mine: tuple[str, ...], around: tuple[BusCycle, ...],
-                        start: float, records: list[FrameRecord]) -> dict[str, Any]:
-    """One cycle whose levels are not its frame's, with the cycles around it and what explains it."""
-    frames = {r.frame for r in records}
-    gap = rec is not None and any(f not in frames for f in range(rec.frame + 1, rec.frame + 3)) \
-        and rec.frame != max(frames)
+                        start: float, logged: set[int]) -> dict[str, Any]:
+    """One cycle whose levels are not its frame's, with the cycles around it and what explains it (``logged``:
+    the frame numbers the log holds)."""
+    gap = rec is not None and any(f not in logged for f in range(rec.frame + 1, rec.frame + 3)) \
+        and rec.frame != max(logged)
     if rec is None:
         why = "the bus carried levels before the frame log's first hazard"
     elif gap:

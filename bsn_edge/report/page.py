@@ -292,13 +292,10 @@ def _bus_section(check: dict[str, Any] | None) -> list[str]:
 def _on_bus(on_bus: dict[str, Any]) -> str:
     """"OK 1.5 s; UNAVAILABLE 0.3 s (stall ... 0.2 s, ...)": the summary's time in each state and why ("-"
     without a summary)."""
-    states, whys = on_bus.get("states_s") or {}, on_bus.get("why_s") or {}
-    said = []
-    for state, secs in sorted(states.items(), key=lambda kv: -float(kv[1])):
-        why = sorted((whys.get(state) or {}).items(), key=lambda kv: -float(kv[1]))
-        said.append(f"{state} {float(secs):.1f} s"
-                    + (" (" + ", ".join(f"{k} {float(v):.1f} s" for k, v in why) + ")" if why else ""))
-    return "; ".join(said) + ("; then UNAVAILABLE, the last word" if said else "") or "-"
+    from bsn_edge.runtime.run_summary import states_said
+
+    said = states_said(on_bus.get("states_s") or {}, on_bus.get("why_s") or {})
+    return said + "; then UNAVAILABLE, the last word" if said else "-"
 
 
 def _cycles_part(cycles: dict[str, Any] | None) -> list[str]:

@@ -48,16 +48,9 @@ LOOP = "runtime"
 def with_ranges(path: Path = DEFAULTS_FILE) -> str:
     """The settings file as ``bsn-run --print-config`` prints it: each key's line ends with its range and unit,
     taken from the setting's declaration (the file itself carries none, so no range is written twice)."""
-    from bsn_edge.runtime.config_schema import KEY_LINE, TABLE_LINE, cell_range, schema
+    from bsn_edge.runtime.config_schema import KEY_LINE, TABLE_LINE, cell_range, leaves
 
-    nodes: dict[str, dict[str, Any]] = {}
-
-    def walk(node: dict[str, Any], name: str) -> None:
-        for key, v in node["properties"].items():
-            (walk(v, f"{name}.{key}") if v["type"] == "object" else nodes.__setitem__(f"{name}.{key}", v))
-
-    for name, node in schema()["properties"].items():
-        walk(node, name)
+    nodes = dict(leaves())
     out, table = [], ""
     for line in path.read_text(encoding="utf-8").splitlines():
         if m := TABLE_LINE.match(line.strip()):
@@ -107,18 +100,7 @@ def settings_table() -> list[str]:
     the file's order (the docs' settings table is this one, checked by a test): read off the JSON Schema
     (:func:`~bsn_edge.runtime.config_schema.schema`), the one place a setting's kind and range are written
     out, so the table, the schema and the reference page cannot say two things."""
-    from bsn_edge.runtime.config_schema import cell_default, cell_kind, cell_range, schema
+    from bsn_edge.runtime.config_schema import cell_default, cell_kind, cell_range, leaves
 
-    rows = ["| setting | default | kind | range |", "|---|---|---|---|"]
-
-    def walk(node: dict[str, Any], name: str) -> None:
-        for key, v in node["properties"].items():
-            if v["type"] != "object":
-                rows.append(f"| `{name}.{key}` | {cell_default(v)} | {cell_kind(v)} | {cell_range(v)} |")
-        for key, v in node["properties"].items():
-            if v["type"] == "object":
-                walk(v, f"{name}.{key}")
-
-    for name, node in schema()["properties"].items():
-        walk(node, name)
-    return rows
+    return ["| setting | default | kind | range |", "|---|---|---|---|"] + [
+        f"| `{dotted}` | {cell_default(v)} | {cell_kind(v)} | {cell_range(v)} |" for dotted, v in leaves()]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +44,20 @@ def comments(path: Path = DEFAULTS_FILE) -> dict[str, str]:
         else:
             last = ""
     return out
+
+
+def leaves(node: dict[str, Any] | None = None, name: str = "") -> Iterator[tuple[str, dict[str, Any]]]:
+    """Every setting of the schema (``node``: a table of it, named ``name``) as ``(dotted key, its node)``, in
+    the file's order: a table's own keys, then its nested tables."""
+    if node is None:
+        for table, sub in schema()["properties"].items():
+            yield from leaves(sub, table)
+        return
+    props = node["properties"]
+    yield from ((f"{name}.{k}", v) for k, v in props.items() if v["type"] != "object")
+    for k, v in props.items():
+        if v["type"] == "object":
+            yield from leaves(v, f"{name}.{k}")
 
 
 def cell_default(v: dict[str, Any]) -> str:

@@ -121,3 +121,14 @@ class RunSummary:
         if self.model is not None:
             out["model"]["size"] = list(self.model.size)
         return out
+
+
+def states_said(states_s: dict[str, Any], why_s: dict[str, Any]) -> str:
+    """``OK 1.5 s, UNAVAILABLE 0.3 s (stall ... 0.2 s, ...)``: the summary's time in each state and, where the
+    state was not OK, its reasons, the longest first ("" without any)."""
+    def longest(d: dict[str, Any]) -> list[tuple[str, Any]]:
+        return sorted(d.items(), key=lambda kv: -float(kv[1]))
+
+    return ", ".join(f"{state} {float(secs):.1f} s" + (" (" + ", ".join(f"{k} {float(v):.1f} s" for k, v in why) + ")"
+                                                          if (why := longest(why_s.get(state) or {})) else "")
+                     for state, secs in longest(states_s))
