@@ -1,4 +1,4 @@
-"""The one way a received frame is judged: decoded with the shipped DBC, its CRC, its alive counter and its
+"""The one way a received frame is judged: decoded with the layout's DBC, its CRC, its alive counter and its
 value tables checked. ``bsn-listen`` prints what it says and ``bsn-report`` takes onsets only from frames it
 passes, so the two never read one bus two ways."""
 
@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 
 from bsn_edge.alerts.can_codec import Decoded, decode, invalid_fields
+from bsn_edge.alerts.dbc import BusLayout
 from bsn_edge.alerts.e2e import COUNTER_MOD, counter_gap
 
 
@@ -42,8 +43,10 @@ class Checked:
 
 @dataclass
 class FrameChecker:
-    """Judges a stream of frames in order; keeps each message's last good counter and the counts."""
+    """Judges a stream of frames in order, decoded with ``layout``'s DBC (the default layout's when None); keeps
+    each message's last good counter and the counts."""
 
+    layout: BusLayout | None = None
     last: dict[str, int] = field(default_factory=dict)
     numbers: dict[str, int] = field(default_factory=dict)     # each message's last good frame's number
     counts: dict[Verdict, int] = field(default_factory=lambda: dict.fromkeys(Verdict, 0))
@@ -52,7 +55,7 @@ class FrameChecker:
     def __call__(self, frame_id: int, data: bytes) -> Checked | None:
         """The frame judged; None for an id the DBC does not hold (another node's traffic)."""
         try:
-            d = decode(frame_id, data)
+            d = decode(frame_id, data, self.layout)
         except Exception as e:  # cantools' errors for a frame of our id that does not fit its layout
             return self._count(Checked(None, Verdict.UNDECODABLE, detail=f"{type(e).__name__}: {e}"))
         if d is None:

@@ -10,10 +10,10 @@ from pathlib import Path
 from typing import Any
 
 from bsn_edge.alerts.bus_check import FrameChecker, Verdict
-from bsn_edge.alerts.can_codec import HAZARD, signal_name
+from bsn_edge.alerts.can_codec import STATUS, signal_name
 from bsn_edge.alerts.can_log import read_log
+from bsn_edge.alerts.dbc import HAZARD, bus_layout
 from bsn_edge.alerts.health import SystemState
-from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
 
 
@@ -53,13 +53,17 @@ class BusRead:
     cycles: tuple[BusCycle, ...] = ()                 # every trusted hazard frame with its cycle's state
 
 
-def read_bus(can_log: str | Path) -> BusRead:
-    """Every level onset the hazard frames of ``can_log`` (``.log`` candump, ``.asc``, ``.blf``) carry, read as
-    ``bsn-listen`` reads them (:func:`~bsn_edge.alerts.can_log.read_log`) and judged as it judges them
-    (:class:`FrameChecker`): a damaged frame (bad CRC or counter, an undefined level, a layout that does not
-    decode) and a line that cannot be read are counted, never an onset."""
-    check = FrameChecker()
-    last = dict.fromkeys(SECTORS, 0)
+def read_bus(can_log: str | Path, sectors: tuple[str, ...] | None = None) -> BusRead:
+    """Every level onset the hazard frames of ``can_log`` (``.log`` candump, ``.asc``, ``.blf``) carry for the
+    layout of ``sectors`` (the default layout's when None), read as ``bsn-listen`` reads them
+    (:func:`~bsn_edge.alerts.can_log.read_log`) and judged as it judges them (:class:`FrameChecker`): a damaged
+    frame (bad CRC or counter, an undefined level, a layout that does not decode) and a line that cannot be read
+    are counted, never an onset. A layout of more than one hazard frame is read a cycle at a time: the first
+    hazard frame opens it, the others add their sectors; a cycle missing a sector's trusted frame has no levels."""
+    layout = bus_layout(sectors)
+    names = layout.sectors
+    check = FrameChecker(layout=layout)
+    last = dict.fromkeys(names, 0)
     out: list[BusOnset] = []
     unreadable: list[str] = []
     n = 0
@@ -72,12 +76,18 @@ def read_bus(can_log: str | Path) -> BusRead:
     cycles: list[BusCycle] = []
     start: float | None = None
 
+    def whole(signals: dict[str, Any]) -> bool:
+        return all(signal_name(name, "Level") in signals for name in names)
+
     def close(signals: dict[str, Any], number: int, t: float, state: str | None) -> None:
-        levels = tuple(Level(int(signals[signal_name(name, "Level")])).name for name in SECTORS)
-        cycles.append(BusCycle(number, t, levels, state))
+        if whole(signals):
+            levels = tuple(Level(int(signals[signal_name(name, "Level")])).name for name in names)
+            cycles.append(BusCycle(number, t, levels, state))
 
     def apply(signals: dict[str, Any], k: int, t: float) -> None:
-        for name in SECTORS:
+        if not whole(signals):
+            return
+        for name in names:
             level = int(signals[signal_name(name, "Level")])
             if level > last[name]:
                 out.append(BusOnset(name, Level(level).name, k, t))
@@ -88,7 +98,7 @@ def read_bus(can_log: str | Path) -> BusRead:
         c = check(f.frame_id, f.data)
         if c is None:
             continue
-        if c.decoded is not None and c.decoded.name != HAZARD:
+        if c.decoded is not None and c.decoded.name == STATUS:
             # the status after a hazard frame is its cycle's: an UNAVAILABLE cycle (a stall, the last word)
             # carries no hazard, so its levels of NONE are no fall and what follows no new onset
             state = SystemState(int(c.decoded.signals["System_State"])).name if c.trusted else None
@@ -100,13 +110,17 @@ def read_bus(can_log: str | Path) -> BusRead:
                     apply(*pending[:3])
             pending = None
             continue
+        if c.decoded is not None and c.decoded.name != HAZARD:     # a later hazard frame of the cycle
+            if pending is not None and c.trusted:
+                pending[0].update(c.decoded.signals)
+            continue
         n += 1
         if pending is not None:        # a hazard frame with no status of its own (status sent less often)
             close(pending[0], pending[3], pending[2], None)
             apply(*pending[:3])
             pending = None
         if c.decoded is not None and c.trusted:
-            pending = (c.decoded.signals, n - 1, f.timestamp, c.number or 0)
+            pending = (dict(c.decoded.signals), n - 1, f.timestamp, c.number or 0)
     if pending is not None:
         close(pending[0], pending[3], pending[2], None)
         apply(*pending[:3])
@@ -115,6 +129,6 @@ def read_bus(can_log: str | Path) -> BusRead:
     return BusRead(out, n, damaged, said, tuple(statuses), start or 0.0, tuple(cycles))
 
 
-def bus_onsets(can_log: str | Path) -> list[BusOnset]:
+def bus_onsets(can_log: str | Path, sectors: tuple[str, ...] | None = None) -> list[BusOnset]:
     """The level onsets of :func:`read_bus`."""
-    return read_bus(can_log).onsets
+    return read_bus(can_log, sectors).onsets

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from bsn_edge.alerts.bus_config import BusConfig
+from bsn_edge.alerts.dbc import BusLayout
 from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.senders import Sender, open_sender
 
@@ -74,15 +75,17 @@ def bus_outputs(can: str | None, serial: str | None, can_log: str | None = None,
 
 
 def open_senders(outputs: Iterable[BusOutput], bus: BusConfig | None = None,
-                 deadline_s: float = OPEN_DEADLINE_S) -> list[Sender]:
-    """A sender for each output, each opened within ``deadline_s``; ``ValueError`` naming the one that
-    cannot be opened, the ones already open having said UNAVAILABLE and closed (:func:`last_word`)."""
+                 deadline_s: float = OPEN_DEADLINE_S, layout: BusLayout | None = None) -> list[Sender]:
+    """A sender for each output, each opened within ``deadline_s`` and encoding for the sector ``layout`` (the
+    default layout's when None); ``ValueError`` naming the one that cannot be opened, the ones already open
+    having said UNAVAILABLE and closed (:func:`last_word`)."""
     bus = bus or BusConfig()
     senders: list[Sender] = []
     try:
         for o in outputs:
             try:
-                senders.append(open_within(functools.partial(open_sender, o.output, log_path=o.log, bus=bus),
+                senders.append(open_within(functools.partial(open_sender, o.output, log_path=o.log, bus=bus,
+                                                             layout=layout),
                                            deadline_s, o.what))
             except Exception as e:
                 raise ValueError(f"cannot open {o.what}: {type(e).__name__}: {e}") from None

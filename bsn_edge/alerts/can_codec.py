@@ -1,38 +1,23 @@
-"""AlertFrame <-> CAN frames, encoded with cantools from the shipped DBC, with E2E protection."""
+"""AlertFrame <-> CAN frames, encoded with cantools from the layout's DBC (:mod:`bsn_edge.alerts.dbc`), with E2E
+protection."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
-from pathlib import Path
 from typing import Any
 
-from bsn_edge.alerts.blindness import Blindness
+from bsn_edge.alerts.blindness import WHOLE, Blindness
+from bsn_edge.alerts.dbc import DBC_PATH, HAZARD, STATUS, BusLayout, bus_layout, signal_name
 from bsn_edge.alerts.e2e import AliveCounter, e2e_crc
-from bsn_edge.alerts.frame import AlertFrame
+from bsn_edge.alerts.frame import AlertFrame, SectorAlert
 from bsn_edge.alerts.health import Fault, SystemState
-from bsn_edge.alerts.sectors import SECTORS
+from bsn_edge.alerts.state_machine import Level
 
-DBC_PATH = Path(__file__).with_name("bsn_alerts.dbc")
-HAZARD, STATUS = "BSN_Hazard", "BSN_Status"
+__all__ = ["DBC_PATH", "HAZARD", "STATUS", "CanEncoder", "Decoded", "decode", "invalid_fields", "signal_name",
+           "to_alert_text"]
 NO_DISTANCE = 63.5
 SAT = 255
-SIDES = tuple(name.title() for name in SECTORS)   # the DBC's signal prefixes: Left, Centre, Right
-
-
-def signal_name(sector: str, field: str) -> str:
-    """The DBC's signal of ``field`` (Level, Score, Distance) for ``sector`` (LEFT -> Left_Level): the one
-    place a sector's signals are named."""
-    return f"{sector.title()}_{field}"
 SINK_SAT = 63
-
-
-@lru_cache(maxsize=1)
-def database():
-    """The shipped DBC, loaded once (cantools is imported here, not at package import)."""
-    import cantools
-
-    return cantools.database.load_file(str(DBC_PATH))
 
 
 def _crc_signal(msg) -> str:
@@ -44,11 +29,13 @@ def _counter_signal(msg) -> str:
 
 
 class CanEncoder:
-    """Encodes AlertFrames into (arbitration id, data) pairs, one counter per message."""
+    """Encodes AlertFrames into (arbitration id, data) pairs, one counter per message, with the DBC of ``layout``
+    (the default layout's when None)."""
 
-    def __init__(self) -> None:
-        self.db = database()
-        self.counters = {HAZARD: AliveCounter(), STATUS: AliveCounter()}
+    def __init__(self, layout: BusLayout | None = None) -> None:
+        self.layout = layout or bus_layout()
+        self.db = self.layout.database()
+        self.counters = {name: AliveCounter() for name in (*self.layout.hazard_names, STATUS)}
 
     def _encode(self, name: str, values: dict[str, Any]) -> tuple[int, bytes]:
         msg = self.db.get_message_by_name(name)
@@ -58,14 +45,21 @@ class CanEncoder:
         return msg.frame_id, bytes(data)
 
     def encode(self, frame: AlertFrame, messages: tuple[str, ...] | None = None) -> list[tuple[int, bytes]]:
-        """The frames of ``messages`` (by name, in the order given; None: every message) for ``frame``;
-        only a message sent moves its counter."""
+        """The frames of ``messages`` (by name, in the order given; None: every message; ``BSN_Hazard`` stands for
+        every hazard frame of the layout) for ``frame``; only a message sent moves its counter."""
+        sectors = frame.sectors
+        if not sectors and frame.state == SystemState.UNAVAILABLE:    # no hazard yet, or the last word
+            sectors = (SectorAlert(0.0, Level.NONE, None, frame.camera in WHOLE),) * len(self.layout.sectors)
+        if len(sectors) != len(self.layout.sectors):
+            raise ValueError(f"a frame of {len(frame.sectors)} sectors for a bus of {len(self.layout.sectors)} "
+                             f"({', '.join(self.layout.sectors)})")
         hz: dict[str, Any] = {}
-        for name, s in zip(SIDES, frame.sectors, strict=True):
-            hz[f"{name}_Level"] = int(s.level)
-            hz[f"{name}_Score"] = round(min(max(s.score, 0.0), 1.0) * 127) / 127
-            hz[f"{name}_Distance"] = NO_DISTANCE if s.distance_m is None else min(round(s.distance_m * 2) / 2, 63.0)
-            hz[f"{name}_Unseen"] = int(s.unseen)
+        for name, s in zip(self.layout.sectors, sectors, strict=True):
+            hz[signal_name(name, "Level")] = int(s.level)
+            hz[signal_name(name, "Score")] = round(min(max(s.score, 0.0), 1.0) * 127) / 127
+            hz[signal_name(name, "Distance")] = NO_DISTANCE if s.distance_m is None \
+                else min(round(s.distance_m * 2) / 2, 63.0)
+            hz[signal_name(name, "Unseen")] = int(s.unseen)
         f = frame.faults
         st = {"System_State": int(frame.state), "Frame_Rate": min(round(frame.fps * 2) / 2, 127.5),
               "Decode_Errors": min(f.get(Fault.DECODE_ERRORS, 0) + f.get(Fault.SIZE_CHANGES, 0), SAT),
@@ -75,8 +69,15 @@ class CanEncoder:
               "Sink_Errors": min(f.get(Fault.SINK_ERRORS, 0), SINK_SAT),
               "Model_Unsigned": 1 if f.get(Fault.UNSIGNED_MODEL, 0) else 0,
               "Camera_Reason": int(frame.camera)}
-        values = {HAZARD: hz, STATUS: st}
-        return [self._encode(name, values[name]) for name in (messages if messages is not None else (HAZARD, STATUS))]
+        out = []
+        for name in messages if messages is not None else (HAZARD, STATUS):
+            if name == STATUS:
+                out.append(self._encode(STATUS, st))
+                continue
+            for h in self.layout.hazards:      # each hazard frame takes its own sectors' signals
+                msg = self.db.get_message_by_name(h.name)
+                out.append(self._encode(h.name, {sig.name: hz[sig.name] for sig in msg.signals if sig.name in hz}))
+        return out
 
 
 @dataclass(frozen=True)
@@ -89,9 +90,10 @@ class Decoded:
     counter: int
 
 
-def decode(frame_id: int, data: bytes) -> Decoded | None:
-    """Decode one CAN frame of the DBC (None for other ids); the CRC is checked, not trusted."""
-    db = database()
+def decode(frame_id: int, data: bytes, layout: BusLayout | None = None) -> Decoded | None:
+    """Decode one CAN frame of ``layout``'s DBC (the default layout's when None; None for other ids); the CRC is
+    checked, not trusted."""
+    db = (layout or bus_layout()).database()
     try:
         msg = db.get_message_by_frame_id(frame_id)
     except KeyError:
@@ -104,13 +106,17 @@ def decode(frame_id: int, data: bytes) -> Decoded | None:
 LEVEL_NAMES = ("NONE", "CAUTION", "WARNING")
 
 
+def _levels(d: Decoded) -> list[str]:
+    """The level signals of a hazard frame, left to right."""
+    return [k for k in d.signals if k.endswith("_Level")]
+
+
 def invalid_fields(d: Decoded) -> list[str]:
     """Signals whose raw value the DBC's value table does not define (e.g. a level of 3)."""
-    if d.name != HAZARD:
+    if d.name == STATUS:
         reason = int(d.signals.get("Camera_Reason", 0))
         return [] if reason in set(Blindness) else [f"Camera_Reason={reason}"]
-    return [f"{side}_Level={int(d.signals[f'{side}_Level'])}" for side in SIDES
-            if not 0 <= int(d.signals[f"{side}_Level"]) < len(LEVEL_NAMES)]
+    return [f"{k}={int(d.signals[k])}" for k in _levels(d) if not 0 <= int(d.signals[k]) < len(LEVEL_NAMES)]
 
 
 def to_alert_text(d: Decoded, number: int | None = None) -> str:
@@ -119,11 +125,13 @@ def to_alert_text(d: Decoded, number: int | None = None) -> str:
     counter (0-14, wrapping) and its values."""
     s = d.signals
     flag = "" if d.crc_ok else "  CRC MISMATCH"
-    which = f"{'hazard' if d.name == HAZARD else 'status'} {'' if number is None else f'{number} '}[alive {d.counter}]"
-    if d.name == HAZARD:
+    kind = "status" if d.name == STATUS else d.name.removeprefix("BSN_").lower()     # hazard, hazard2
+    which = f"{kind} {'' if number is None else f'{number} '}[alive {d.counter}]"
+    if d.name != STATUS:
         parts = []
-        for side in SIDES:
-            v = int(s[f"{side}_Level"])
+        for level in _levels(d):
+            side = level.removesuffix("_Level")
+            v = int(s[level])
             lv = LEVEL_NAMES[v] if 0 <= v < len(LEVEL_NAMES) else f"LEVEL?{v}"
             dist = s[f"{side}_Distance"]
             where = "" if dist >= NO_DISTANCE else f" {dist:.1f} m"

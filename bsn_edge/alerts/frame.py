@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 
 from bsn_edge.alerts.blindness import WHOLE, Blindness
 from bsn_edge.alerts.health import Status, SystemState
-from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
 
 
@@ -23,26 +22,19 @@ class SectorAlert:
     unseen: bool = False    # the camera cannot see this sector: its level says nothing of it
 
 
-def _one_per_sector(sectors: tuple[SectorAlert, ...]) -> None:
-    if len(sectors) != len(SECTORS):
-        raise ValueError(f"an alert has one reading per sector {SECTORS}, got {len(sectors)}")
-
-
 @dataclass(frozen=True)
 class Hazard:
     """The loop's word on one frame (``BSN_Hazard``): its time and one smoothed reading per sector."""
 
     t: float
-    sectors: tuple[SectorAlert, ...]     # one per sector of ``SECTORS``, in its order
-
-    def __post_init__(self) -> None:
-        _one_per_sector(self.sectors)
+    sectors: tuple[SectorAlert, ...]     # one per sector of the layout, left to right; () before the first frame
 
     @classmethod
-    def none(cls, t: float, unseen: bool = False) -> Hazard:
-        """Nothing to warn of: what goes with an UNAVAILABLE status, whatever the last frame saw (``unseen``:
-        because the camera cannot see)."""
-        return cls(t, (SectorAlert(0.0, Level.NONE, None, unseen),) * len(SECTORS))
+    def none(cls, t: float, unseen: bool = False, count: int = 0) -> Hazard:
+        """Nothing to warn of in ``count`` sectors: what goes with an UNAVAILABLE status, whatever the last frame
+        saw (``unseen``: because the camera cannot see). With none (``count`` 0), the encoder says NONE in every
+        sector of its layout."""
+        return cls(t, (SectorAlert(0.0, Level.NONE, None, unseen),) * count)
 
 
 @dataclass(frozen=True)
@@ -51,22 +43,19 @@ class AlertFrame:
     decode it back."""
 
     t: float
-    sectors: tuple[SectorAlert, ...]     # one per sector of ``SECTORS``, in its order
+    sectors: tuple[SectorAlert, ...]     # one per sector of the layout, left to right; () for no hazard yet
     state: SystemState
     fps: float
     faults: dict[str, int] = field(default_factory=dict)
     camera: Blindness = Blindness.CLEAR
     why: str = ""                        # the status's reason in words: for the frame log, never encoded
 
-    def __post_init__(self) -> None:
-        _one_per_sector(self.sectors)
-
     @classmethod
     def of(cls, t: float, hazard: Hazard, status: Status) -> AlertFrame:
         """The cycle at ``t`` carrying ``hazard`` and ``status``: an UNAVAILABLE status carries no hazard (every
         sector unseen when the camera cannot see as a whole)."""
         if status.state == SystemState.UNAVAILABLE:
-            hazard = Hazard.none(t, status.camera in WHOLE)
+            hazard = Hazard.none(t, status.camera in WHOLE, len(hazard.sectors))
         return cls(t, hazard.sectors, status.state, status.fps, dict(status.faults), status.camera, status.why)
 
     @classmethod

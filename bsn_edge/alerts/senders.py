@@ -15,6 +15,7 @@ from typing import Any, ClassVar, Protocol
 
 from bsn_edge.alerts.bus_config import BusConfig
 from bsn_edge.alerts.can_codec import CanEncoder
+from bsn_edge.alerts.dbc import BusLayout
 from bsn_edge.alerts.frame import AlertFrame
 from bsn_edge.alerts.health import Fault
 from bsn_edge.alerts.serial_codec import encode_frame
@@ -343,11 +344,13 @@ def udp_frames(datagram: bytes) -> list[tuple[float, int, bytes]]:
 
 
 def open_sender(output: str, encoder: Encoder | None = None, log_path: str | None = None,
-                bus: BusConfig | None = None) -> Sender:
+                bus: BusConfig | None = None, layout: BusLayout | None = None) -> Sender:
     """The sender of ``SCHEME:TARGET`` (``can:socketcan:can0``, ``serial:/dev/ttyUSB0``) with ``encoder``
-    (the protocol's by default) and the vehicle file's ``bus`` settings (baud rate, timeouts); ``ValueError``
-    naming the valid schemes for another."""
+    (by default the protocol's for the sector ``layout``, the default layout when None) and the vehicle file's
+    ``bus`` settings (baud rate, timeouts); ``ValueError`` naming the valid schemes for another."""
     scheme, target = parse_output(output)
+    if encoder is None and layout is not None:
+        encoder = CanEncoder(layout)
     return SENDERS[scheme].from_target(target, encoder, log_path, bus or BusConfig())
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 from bsn_edge.alerts.bus_check import FrameChecker, Verdict
 from bsn_edge.alerts.can_codec import STATUS, to_alert_text
 from bsn_edge.alerts.can_log import PYTHON_CAN_LOGS, is_log, read_log
+from bsn_edge.alerts.dbc import BusLayout, bus_layout
 from bsn_edge.alerts.e2e import COUNTER_MOD
 from bsn_edge.alerts.serial_codec import FrameDecoder
 from bsn_edge.cli.common import fail
@@ -34,6 +35,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--udp", metavar="[HOST:]PORT",
                    help="listen for bsn-run's UDP datagrams (bsn-run --output udp:HOST:PORT) on this port, of every "
                         "address unless HOST is given")
+    p.add_argument("--config", metavar="FILE",
+                   help="the vehicle file bsn-run ran with: its [sectors] layout says which sectors the hazard frames "
+                        "carry (default: LEFT, CENTRE, RIGHT, the shipped DBC)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (live inputs)")
     p.add_argument("--max", type=int, default=None, help="stop after this many frames")
     p.add_argument("--onsets", action="store_true",
@@ -42,14 +46,15 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def print_onsets(path: Path) -> int:
-    """``--onsets``: each level rise the log's trusted hazard frames carry, one a line; damage counted below."""
+def print_onsets(path: Path, sectors: tuple[str, ...] | None = None) -> int:
+    """``--onsets``: each level rise the log's trusted hazard frames carry (``sectors``: the layout's), one a
+    line; damage counted below."""
     from bsn_edge.alerts.bus_onsets import read_bus
 
-    bus = read_bus(path)
-    print(f"{'at':>10}  {'sector':<7} {'level':<8} hazard frame in the log")
+    bus = read_bus(path, sectors)
+    print(f"{'at':>10}  {'sector':<8} {'level':<8} hazard frame in the log")
     for o in bus.onsets:
-        print(f"{o.timestamp - bus.start:>8.2f} s  {o.sector:<7} {o.level:<8} {o.frame}")
+        print(f"{o.timestamp - bus.start:>8.2f} s  {o.sector:<8} {o.level:<8} {o.frame}")
     damaged = ", ".join(f"{n} {k}" for k, n in bus.damaged.items())
     print(f"{len(bus.onsets)} onsets in {bus.hazard_frames} hazard frames"
           + (f"; damaged: {damaged}" if damaged else "") + (f"; {bus.unreadable}" if bus.unreadable else ""),
@@ -61,9 +66,9 @@ class Printer:
     """Prints each decoded frame as :class:`FrameChecker` judges it; counts bad CRCs, repeats, losses,
     undefined fields and unreadable lines (each frame under one verdict)."""
 
-    def __init__(self, out=None) -> None:
+    def __init__(self, out=None, layout: BusLayout | None = None) -> None:
         self.out = out
-        self.check = FrameChecker()
+        self.check = FrameChecker(layout=layout)
         self.frames = self.bad_lines = self.gaps = 0
         self.serial_crc = 0        # frames the serial decoder dropped for a bad CRC before decoding
         self.first_t: float | None = None
@@ -158,6 +163,15 @@ def main(argv: list[str] | None = None) -> int:
                 signal.signal(sig, handler)
 
 
+def _sectors(config: str | None) -> tuple[str, ...] | None:
+    """The sectors of the vehicle file at ``config`` (None without one: the default layout)."""
+    if config is None:
+        return None
+    from bsn_edge.runtime.config_file import load_runtime_config
+
+    return load_runtime_config(config).sectors.names
+
+
 def _listen_udp(where: str, show: Printer, more: Callable[[], bool]) -> None:
     """Every frame of the datagrams that reach ``[HOST:]PORT``, judged; a datagram of another layout is an
     unreadable line, counted."""
@@ -192,7 +206,11 @@ def _listen(argv: list[str] | None) -> int:
     args = p.parse_args(argv)
     if args.onsets and not args.can_log:
         p.error("--onsets reads a CAN log: give --can-log FILE")
-    show = Printer()
+    try:
+        sectors = _sectors(args.config)
+    except (ValueError, OSError) as e:
+        return fail(PROG, str(e))
+    show = Printer(layout=bus_layout(sectors))
     deadline = None if args.duration is None else time.monotonic() + args.duration
 
     def more() -> bool:
@@ -207,7 +225,7 @@ def _listen(argv: list[str] | None) -> int:
                 return fail(PROG, f"{path}: not a CAN log this tool reads (.log, as bsn-run --can-log writes, or "
                                   f"python-can's {' '.join(PYTHON_CAN_LOGS)})")
             if args.onsets:
-                return print_onsets(path)
+                return print_onsets(path, sectors)
             for f in read_log(path, show.bad_line):
                 if not more():
                     break

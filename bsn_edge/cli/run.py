@@ -158,9 +158,13 @@ def _settings(p: argparse.ArgumentParser) -> None:
     g.add_argument("--print-schema", action=_PrintDefaults,
                    help="print the JSON Schema of that file (types, ranges, defaults, what each does; "
                         "configs/runtime.schema.json in a checkout) and exit; docs/settings.md is its reference")
+    g.add_argument("--print-dbc", action="store_true",
+                   help="print the DBC of the bus for the settings' [sectors] layout (with --config and --set; "
+                        "without them, the shipped bsn_edge/alerts/bsn_alerts.dbc) and exit: the file a receiver "
+                        "decodes this vehicle's frames with")
     g.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                   help="change one setting, after --config: e.g. --set sectors.left_edge_deg=-15 --set "
-                        "alerts.tau_s=0.5 --set alerts.warning.on=0.7 (repeatable). --cycle, --in-flight, "
+                   help="change one setting, after --config: e.g. --set alerts.tau_s=0.5 --set "
+                        "alerts.warning.on=0.7 (repeatable). --cycle, --in-flight, "
                         "--in-turn, --threads, --spin / --no-spin and --stall are shorthands for runtime.cycle_s, "
                         "runtime.in_flight, runtime.overlap, runtime.threads, runtime.spin and source.stall_s")
 
@@ -213,13 +217,17 @@ def _output_files(args: argparse.Namespace) -> list[tuple[OutputKind, str | None
             (OutputKind("--save-calib", (".json",), "camera"), args.save_calib)]
 
 
-def make_senders(args: argparse.Namespace, bus: BusConfig | None = None) -> list[Sender]:
+def make_senders(args: argparse.Namespace, bus: BusConfig | None = None,
+                 sectors: tuple[str, ...] | None = None) -> list[Sender]:
     """The configured senders: the buses the flags name, else the vehicle file's (``bus``, which also
-    gives baud rate and timeouts); ``ValueError`` names the bad option (a sender already opened has said
+    gives baud rate and timeouts), encoding for the layout's ``sectors`` (the default layout's when None, as
+    before the vehicle file is read); ``ValueError`` names the bad option (a sender already opened has said
     UNAVAILABLE and is closed again)."""
     from bsn_edge.alerts.bus_outputs import bus_outputs, open_senders
+    from bsn_edge.alerts.dbc import bus_layout
 
-    return open_senders(bus_outputs(args.can, args.serial, args.can_log, bus, tuple(getattr(args, "output", ()))), bus)
+    outputs = bus_outputs(args.can, args.serial, args.can_log, bus, tuple(getattr(args, "output", ())))
+    return open_senders(outputs, bus, layout=bus_layout(sectors))
 
 
 def _inputs(args: argparse.Namespace) -> list[tuple[str, str | None]]:
@@ -272,12 +280,32 @@ def refuse(senders: list[Sender], message: str, summary: str | None = None) -> i
 def main(argv: list[str] | None = None) -> int:
     # signals first: from here on SIGINT and SIGTERM end the run cleanly, during start-up included; once
     # the outputs are open, every way out ends with UNAVAILABLE on the bus
+    if "--print-dbc" in (sys.argv[1:] if argv is None else argv):
+        return print_dbc(argv)
     with StopOnSignal(keep=argv is None) as stopper, console_streams(keep=argv is None) as console:
         args = build_parser().parse_args(argv)
         args.console = console
         if args.profile:
             _profiled(args)
         return _run(args, stopper)
+
+
+def print_dbc(argv: list[str] | None) -> int:
+    """``--print-dbc``: the DBC of the layout the settings (``--config``, ``--set``) declare, on standard output
+    (no source needed: only the settings are read)."""
+    p = argparse.ArgumentParser(prog=PROG, add_help=False)
+    p.add_argument("--config")
+    p.add_argument("--set", dest="overrides", action="append", default=[])
+    args, _ = p.parse_known_args(argv)
+    from bsn_edge.alerts.dbc import bus_layout
+    from bsn_edge.runtime.config_file import load_runtime_config
+
+    try:
+        cfg = load_runtime_config(args.config, args.overrides)
+    except (ValueError, OSError) as e:
+        return fail(PROG, str(e))
+    sys.stdout.write(bus_layout(cfg.sectors.names).text())
+    return 0
 
 
 PROFILE_FRAMES = 300
@@ -408,7 +436,7 @@ def _configured(args: argparse.Namespace) -> tuple[RuntimeConfig, list[Sender]] 
             return fail(PROG, f"{e}; {e2}")
         return refuse(senders, str(e), args.summary)
     try:
-        return cfg, make_senders(args, cfg.bus)
+        return cfg, make_senders(args, cfg.bus, cfg.sectors.names)
     except ValueError as e:
         return fail(PROG, str(e))
 

@@ -42,8 +42,8 @@ def make_report(log: str | Path, out: str | Path, summary: str | Path | None = N
         raise ValueError(f"{summary}: not a run's summary ({type(e).__name__}: {str(e)[:80]})") from None
     if can_log is not None:
         say(f"checking the bus: {can_log}")
-        bus = read_bus(can_log)
-        onsets, cycles = check(drive.onsets, bus.onsets, bus.statuses, bus.start), \
+        bus = read_bus(can_log, drive.names)
+        onsets, cycles = check(drive.onsets, bus.onsets, bus.statuses, bus.start, drive.names), \
             check_cycles(drive.records, bus.cycles, bus.start)
         record["bus_check"] = {**onsets, "agree": onsets["agree"] and not cycles["disagree"], "cycles": cycles,
                                "hazard_frames": bus.hazard_frames, "damaged_frames": bus.damaged,

@@ -55,17 +55,18 @@ class Drive:
     records: list[FrameRecord]
     damage: list[Damage] = field(default_factory=list)
     summary: dict[str, Any] = field(default_factory=dict)
+    names: tuple[str, ...] = SECTORS     # the run's sectors, left to right (its summary's layout)
 
     @cached_property
     def onsets(self) -> list[Onset]:
         """Every level onset, in the order of the frames (a frame without levels changes nothing); worked out
         once, the page, the bus check and the thumbnails all read it."""
         out: list[Onset] = []
-        last = [Level.NONE] * len(SECTORS)
+        last = [Level.NONE] * len(self.names)
         for rec in self.records:
             if rec.hazard is None:
                 continue
-            for k, (name, s) in enumerate(zip(SECTORS, rec.hazard.sectors, strict=True)):
+            for k, (name, s) in enumerate(zip(self.names, rec.hazard.sectors, strict=True)):
                 if s.level > last[k]:
                     out.append(Onset(name, s.level.name, rec.t, rec.frame, s.distance_m))
                 last[k] = s.level
@@ -102,7 +103,7 @@ class Drive:
             v = rec.visibility
             if v is None:
                 continue
-            unseen = [s for s, u in zip(SECTORS, v.unseen, strict=True) if u]
+            unseen = [s for s, u in zip(self.names, v.unseen, strict=True) if u]
             if spans and spans[-1][2] == v.reason.name and spans[-1][3] == unseen and rec.t - spans[-1][1] < 1.0:
                 spans[-1] = (spans[-1][0], rec.t, v.reason.name, unseen)
             else:
@@ -143,6 +144,8 @@ def read_drive(log: str | Path, summary: str | Path | None = None) -> Drive:
     log = Path(log)
     if not log.is_file():
         raise FileNotFoundError(f"frame log {log} not found")
+    about = _summary(summary) if summary is not None else {}
+    names = sector_names(about)
     records, damage = [], []
     with log.open("rb") as f:
         for n, raw in enumerate(f, 1):
@@ -150,24 +153,42 @@ def read_drive(log: str | Path, summary: str | Path | None = None) -> Drive:
                 line = raw.decode("utf-8")
                 if not line.strip():
                     continue
-                records.append(FrameRecord.from_json(json.loads(line)))
+                records.append(FrameRecord.from_json(json.loads(line), names))
             except (UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError, RecursionError,
                     OverflowError) as e:
                 damage.append(Damage(n, f"{type(e).__name__}: {e}"[:200]))
     if not records:
         raise ValueError(f"{log}: no line is a frame of bsn-run's log ({len(damage)} unreadable)")
-    drive = Drive(records, damage)
-    if summary is not None:
-        p = Path(summary)
-        if not p.is_file():
-            raise FileNotFoundError(f"summary {p} not found")
-        try:
-            drive.summary = json.loads(read_user_file(p, "JSON").decode("utf-8"))
-        except (UnicodeDecodeError, ValueError, RecursionError) as e:
-            raise ValueError(f"{p}: not a run's summary ({e})") from None
-        if not isinstance(drive.summary, dict) or "frames" not in drive.summary:
-            raise ValueError(f"{p}: not a run's summary (bsn-run --summary writes one)")
-    return drive
+    return Drive(records, damage, about, names)
+
+
+def _summary(summary: str | Path) -> dict[str, Any]:
+    """A run's summary read; ``FileNotFoundError`` or ``ValueError`` naming it when it is not one."""
+    p = Path(summary)
+    if not p.is_file():
+        raise FileNotFoundError(f"summary {p} not found")
+    try:
+        about = json.loads(read_user_file(p, "JSON").decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError) as e:
+        raise ValueError(f"{p}: not a run's summary ({e})") from None
+    if not isinstance(about, dict) or "frames" not in about:
+        raise ValueError(f"{p}: not a run's summary (bsn-run --summary writes one)")
+    return about
+
+
+def sector_names(summary: dict[str, Any]) -> tuple[str, ...]:
+    """The run's sectors, left to right, from its summary's resolved settings (``settings.sectors.layout``); the
+    default layout's for a run without a summary or one written before the layout was a setting. ``ValueError``
+    for a layout the settings would refuse."""
+    from bsn_edge.alerts.sectors import SectorConfig
+
+    sectors = _mapping(_mapping(summary.get("settings")).get("sectors"))
+    if "layout" not in sectors:
+        return SECTORS
+    try:
+        return SectorConfig(layout=sectors["layout"]).names
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"the summary's settings.sectors.layout is no layout: {e}") from None
 
 
 def calibration(summary: dict[str, Any]) -> dict[str, Any]:

@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import AlertConfig
 from bsn_edge.report.drive import Drive, Onset
 from bsn_edge.runtime.loop import STAGES
@@ -77,11 +76,12 @@ def timelines(drive: Drive) -> str:
     on = _thresholds(drive.summary)
     converged = (drive.summary.get("camera") or {}).get("calibration", {}).get("converged_at") or {}
     t_conv = next((r.t for r in drive.records if r.frame + 1 == converged.get("frame")), None)
-    fig, axes = plt.subplots(len(SECTORS) + 2, 1, figsize=(12, 2.0 * (len(SECTORS) + 2)), sharex=True,
-                             gridspec_kw={"height_ratios": [3] * len(SECTORS) + [1, 3]})
-    for k, (name, ax) in enumerate(zip(SECTORS, axes, strict=False)):
+    n = len(drive.names)
+    fig, axes = plt.subplots(n + 2, 1, figsize=(12, 2.0 * (n + 2)), sharex=True,
+                             gridspec_kw={"height_ratios": [3] * n + [1, 3]})
+    for k, (name, ax) in enumerate(zip(drive.names, axes, strict=False)):
         _sector_axis(ax, name, k, t, recs, on)
-    state_ax, lat_ax = axes[len(SECTORS)], axes[len(SECTORS) + 1]
+    state_ax, lat_ax = axes[n], axes[n + 1]
     spans = drive.states()
     step = float(np.median(np.diff(t))) if len(t) > 1 else 0.1
     for k, (a, b, state) in enumerate(spans):

@@ -5,7 +5,8 @@
 
 - ``[runtime]``: the loop (``cycle_s``, ``warmup``, ``overlap``, ``in_flight``, ``feeder_nice``, ``threads``,
   ``spin``);
-- ``[sectors]``: the sector edges as bearings and how far blind spots count (:class:`SectorConfig`);
+- ``[sectors]``: the sector layout (each sector's name and the bearing it ends at) and how far blind spots
+  count (:class:`SectorConfig`);
 - ``[alerts]``: smoothing (``tau_s``) and each level's rule (``[alerts.caution]``, ``[alerts.warning]``:
   ``on``, ``off``, ``delay_s``, ``hold_s``; :class:`AlertConfig`);
 - ``[health]``: when the status says DEGRADED or UNAVAILABLE (:class:`HealthConfig`);
@@ -15,7 +16,7 @@
 - ``[calibration]``: online calibration's share of the cores (:class:`CalibrationConfig`);
 - ``[visibility]``: the camera-health check's thresholds and times (:class:`VisibilityConfig`).
 
-``bsn-run --config FILE --set sectors.left_edge_deg=-15`` reads it with the mechanism the training config
+``bsn-run --config FILE --set alerts.tau_s=0.5`` reads it with the mechanism the training config
 has (:mod:`bsn_edge.config_toml`): a key the runtime does not have, or a value out of range, is refused
 naming the key. The resolved settings and their digest go into the run's summary.
 """
@@ -32,7 +33,7 @@ from bsn_edge.alerts.bus_config import BusConfig, MessageRates
 from bsn_edge.alerts.health import HealthConfig
 from bsn_edge.alerts.sectors import SectorConfig
 from bsn_edge.alerts.state_machine import AlertConfig
-from bsn_edge.config_toml import build, merge_overrides, read_toml, unknown
+from bsn_edge.config_toml import build, merge_overrides, read_toml, shown, unknown
 from bsn_edge.runtime.settings import RuntimeConfig
 from bsn_edge.runtime.source_config import CalibrationConfig, SourceConfig
 from bsn_edge.runtime.visibility import VisibilityConfig
@@ -66,7 +67,7 @@ def load_runtime_config(path: str | Path | None = None, overrides: list[str] | t
     """The runtime's settings: the defaults, then the file at ``path``, then ``overrides``
     (``section.key=value``); ``ValueError`` or ``FileNotFoundError`` naming what is wrong."""
     raw = read_toml(path)
-    given = merge_overrides(raw, overrides, example="sectors.left_edge_deg=-15")
+    given = merge_overrides(raw, overrides, example="alerts.tau_s=0.5")
     where = str(path) if path is not None else "--set"
     valid = [LOOP, *NESTED]
     sections = sorted(set(raw) - set(valid))
@@ -75,6 +76,7 @@ def load_runtime_config(path: str | Path | None = None, overrides: list[str] | t
     for name, table in raw.items():
         if not isinstance(table, dict):      # `runtime = 5`, `[[runtime]]`: a value or a list, not a table
             raise ValueError(f"[{name}] ({where}) must be a table of settings, got {type(table).__name__}")
+    _old_edges(raw.get("sectors", {}), where)
     loop_keys = {f.name for f in dataclasses.fields(RuntimeConfig)} - set(NESTED)
     loop = raw.get(LOOP, {})
     bad = sorted(set(loop) - loop_keys)
@@ -82,6 +84,21 @@ def load_runtime_config(path: str | Path | None = None, overrides: list[str] | t
         raise ValueError(unknown(bad, loop_keys, f"key(s) in [{LOOP}]"))
     parts = {name: build(cls, raw[name], name, where, given) for name, cls in NESTED.items() if name in raw}
     return dataclasses.replace(build(RuntimeConfig, loop, LOOP, where, given), **parts)
+
+
+OLD_EDGES = ("left_edge_deg", "right_edge_deg")
+
+
+def _old_edges(sectors: dict[str, Any], where: str) -> None:
+    """A file of the time before layouts (``left_edge_deg``, ``right_edge_deg``): refused with the layout line that
+    says the same, so the user's edges are not lost to a default."""
+    if not any(k in sectors for k in OLD_EDGES):
+        return
+    left, right = (sectors.get(k, d) for k, d in zip(OLD_EDGES, (-12.0, 12.0), strict=True))
+    edges = ", ".join(f"{k} = {shown(sectors[k])}" for k in OLD_EDGES if k in sectors)
+    raise ValueError(f"[sectors] ({where}): {edges}: the sectors are now a layout; write instead "
+                     f'layout = [{{ name = "LEFT", to_deg = {shown(left)} }}, {{ name = "CENTRE", to_deg = '
+                     f'{shown(right)} }}, {{ name = "RIGHT" }}]')
 
 
 def to_dict(cfg: RuntimeConfig) -> dict[str, Any]:

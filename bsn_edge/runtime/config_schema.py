@@ -63,12 +63,16 @@ def leaves(node: dict[str, Any] | None = None, name: str = "") -> Iterator[tuple
 def cell_default(v: dict[str, Any]) -> str:
     """A setting's default as the docs' tables write it, from its schema node."""
     d = v["default"]
+    if v["type"] == "array" and v["items"]["type"] == "object":          # the sector layout
+        return ", ".join(f"{s['name']} to {s['to_deg']:g}" if "to_deg" in s else s["name"] for s in d)
     return str(d).lower() if v["type"] == "boolean" else f'"{d}"' if v["type"] == "string" \
         else "[" + ", ".join(f'"{x}"' for x in d) + "]" if v["type"] == "array" else f"{d:g}"
 
 
 def cell_kind(v: dict[str, Any]) -> str:
     """A setting's kind in words, from its schema node."""
+    if v["type"] == "array" and v["items"]["type"] == "object":
+        return "list of tables (" + ", ".join(v["items"]["properties"]) + ")"
     return KINDS.get(v["type"], "number")
 
 
@@ -80,7 +84,21 @@ def cell_range(v: dict[str, Any]) -> str:
     return f"{lo} to {hi}" + (f" {v['unit']}" if v.get("unit") else "")
 
 
+def _layout(value: tuple[Any, ...]) -> dict[str, Any]:
+    """The sector layout's node: a list of tables, each a name and (but the last) the bearing it ends at."""
+    from bsn_edge.alerts.sectors import EDGE_DEG, MAX_SECTORS, NAME
+
+    item = {"type": "object", "additionalProperties": False, "required": ["name"],
+            "properties": {"name": {"type": "string", "pattern": NAME.pattern},
+                           "to_deg": {"type": "number", "exclusiveMinimum": -EDGE_DEG, "exclusiveMaximum": EDGE_DEG,
+                                      "unit": "deg"}}}
+    default = [{k: v for k, v in dataclasses.asdict(s).items() if v is not None} for s in value]
+    return {"type": "array", "minItems": 1, "maxItems": MAX_SECTORS, "items": item, "default": default}
+
+
 def _leaf(f: dataclasses.Field, value: Any, description: str) -> dict[str, Any]:
+    if isinstance(value, tuple) and value and dataclasses.is_dataclass(value[0]):     # sectors.layout
+        return {**_layout(value), "description": description} if description else _layout(value)
     if isinstance(value, tuple):           # a list of names (bus.outputs)
         listed: dict[str, Any] = {"type": "array", "items": {"type": "string"}, "default": list(value)}
         return {**listed, "description": description} if description else listed

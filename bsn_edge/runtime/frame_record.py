@@ -3,10 +3,10 @@
 Fields, in the order written (a field that does not apply to the frame is left out):
 ``frame`` (index in the source), ``t`` (seconds on the source's clock), ``fault`` (what went wrong
 with this frame, by the names of :class:`~bsn_edge.alerts.health.Fault`: ``decode_errors``,
-``size_changes``, ``nan_outputs``), ``levels`` (LEFT, CENTRE, RIGHT: ``NONE``, ``CAUTION`` or
-``WARNING``), ``scores`` (smoothed, 0-1), ``distances`` (metres to the nearest blind spot, null for
-none), ``state`` (the system state the bus carried when the frame's hazard was made: the last status
-sent) and ``why`` (the reason for a state other than OK, in words), ``camera`` and ``unseen`` (when the
+``size_changes``, ``nan_outputs``), ``levels`` (one per sector of the layout, left to right: ``NONE``,
+``CAUTION`` or ``WARNING``; the run's summary names the sectors, ``settings.sectors.layout``), ``scores``
+(smoothed, 0-1), ``distances`` (metres to the nearest blind spot, null for none), ``state`` (the system
+state the bus carried when the frame's hazard was made: the last status sent) and ``why`` (the reason for a state other than OK, in words), ``camera`` and ``unseen`` (when the
 camera-health check raised a reason: its name, and the sectors it cannot see), ``latency_ms`` and
 ``stage_ms`` (this frame's milliseconds in each stage it went through:
 ``decode``, ``preprocess``, ``inference``, ``postprocess``, ``send``), ``bus_from`` (the number, from 0
@@ -40,6 +40,7 @@ class FrameRecord:
     stage_ms: dict[str, float] = field(default_factory=dict)
     visibility: Visibility | None = None   # the camera-health check's word on this frame
     bus_from: int | None = None            # the first hazard frame on the bus that carries this frame's levels
+    names: tuple[str, ...] = SECTORS       # the sectors of the layout, left to right (not written: the summary's)
 
     def to_json(self) -> dict[str, Any]:
         """The frame log's line (rounded as written)."""
@@ -58,7 +59,7 @@ class FrameRecord:
                 out["bus_from"] = self.bus_from
         if self.visibility is not None and self.visibility.reason is not Blindness.CLEAR:
             out["camera"] = self.visibility.reason.name
-            out["unseen"] = [s for s, u in zip(SECTORS, self.visibility.unseen, strict=True) if u]
+            out["unseen"] = [s for s, u in zip(self.names, self.visibility.unseen, strict=True) if u]
         if self.latency_ms is not None:
             out["latency_ms"] = round(self.latency_ms, 2)
         if self.stage_ms:
@@ -66,15 +67,18 @@ class FrameRecord:
         return out
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> FrameRecord:
-        """A line of the frame log read back (``KeyError`` / ``ValueError`` for one that is not a line of it);
-        the status's frame rate and counters, which the log does not keep, are 0 and empty."""
-        rec = cls(int(d["frame"]), float(d["t"]))
+    def from_json(cls, d: dict[str, Any], names: tuple[str, ...] = SECTORS) -> FrameRecord:
+        """A line of the frame log of a run whose sectors are ``names`` read back (``KeyError`` / ``ValueError``
+        for one that is not a line of it, levels of another count included); the status's frame rate and
+        counters, which the log does not keep, are 0 and empty."""
+        rec = cls(int(d["frame"]), float(d["t"]), names=names)
         if "fault" in d:
             rec.fault = Fault(d["fault"])
         if "levels" in d:
             sectors = tuple(SectorAlert(float(s), Level[lv], None if m is None else float(m))
                             for lv, s, m in zip(d["levels"], d["scores"], d["distances"], strict=True))
+            if len(sectors) != len(names):
+                raise ValueError(f"{len(sectors)} levels for the {len(names)} sectors {', '.join(names)}")
             rec.hazard = Hazard(rec.t, sectors)
             if "state" in d:
                 rec.status = Status(SystemState[d["state"]], 0.0, why=str(d.get("why", "")))
@@ -82,7 +86,7 @@ class FrameRecord:
                 rec.bus_from = int(d["bus_from"])
         if "camera" in d:
             unseen = set(d.get("unseen") or ())
-            rec.visibility = Visibility(Blindness[d["camera"]], tuple(s in unseen for s in SECTORS), 0.0)
+            rec.visibility = Visibility(Blindness[d["camera"]], tuple(s in unseen for s in names), 0.0)
         if "latency_ms" in d:
             rec.latency_ms = float(d["latency_ms"])
         rec.stage_ms = {str(k): float(v) for k, v in d.get("stage_ms", {}).items()}

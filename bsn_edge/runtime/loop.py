@@ -19,7 +19,6 @@ from typing import Any
 import numpy as np
 
 from bsn_edge.alerts import (
-    SECTORS,
     AlertFrame,
     Hazard,
     SectorAlert,
@@ -100,9 +99,10 @@ class FramePipeline:
         self.engine, self.source, self.senders, self.cfg, self.camera = engine, source, senders, cfg, camera
         self.outputs = outputs
         self.geometry = SectorGeometry(engine.card.camera, cfg.sectors)
-        self.machines = [SectorState(cfg.alerts) for _ in SECTORS]
+        self.names = cfg.sectors.names
+        self.machines = [SectorState(cfg.alerts) for _ in self.names]
         self.health = Health(cfg.health)
-        self.visibility = CameraHealth(cfg.visibility, self.geometry.column_sector, len(SECTORS))
+        self.visibility = CameraHealth(cfg.visibility, self.geometry.column_sector, len(self.names))
         self.blind = BlindnessLog()
         self.wall = None if source.live else clock    # a live source's frame times are the processing clock
         if not engine.authentic:        # said on every cycle: nobody trusted vouches for this model
@@ -290,7 +290,7 @@ class FramePipeline:
         t0 = time.perf_counter()
         for sink in self.sinks.values():     # an output stuck for a second is a fault now, whatever the frame
             sink.check()
-        rec = FrameRecord(cap.index, cap.t)
+        rec = FrameRecord(cap.index, cap.t, names=self.names)
         self.timer.add("preprocess", item.warp_s)
         rec.stage_ms.update(decode=1e3 * cap.decode_s, preprocess=1e3 * item.warp_s)
         drawn = None

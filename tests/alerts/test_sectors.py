@@ -4,14 +4,19 @@ import numpy as np
 import pytest
 
 from bsn_edge.alerts import SectorConfig, SectorGeometry
-from bsn_edge.alerts.sectors import bearing_deg
+from bsn_edge.alerts.sectors import Sector, bearing_deg
 from bsn_edge.camera import Intrinsics
 
 K = Intrinsics(100.0, 100.0, 100.0, 50.0, 200, 100)   # 90 degree field of view
 
 
+def edges(left: float, right: float) -> SectorConfig:
+    """The three sectors, split at ``left`` and ``right`` degrees."""
+    return SectorConfig(layout=(Sector("LEFT", left), Sector("CENTRE", right), Sector("RIGHT")))
+
+
 def test_columns_split_by_bearing():
-    g = SectorGeometry(K, SectorConfig(left_edge_deg=-10, right_edge_deg=10))
+    g = SectorGeometry(K, edges(-10, 10))
     assert bearing_deg(100.0, K) == 0.0
     for u in range(200):
         b = bearing_deg(u, K)
@@ -45,15 +50,15 @@ def test_nearer_is_more_hazardous():
 
 
 def test_config_is_validated():
-    with pytest.raises(ValueError):
-        SectorConfig(left_edge_deg=10, right_edge_deg=-10)
+    with pytest.raises(ValueError, match="must be right of the sector before it"):
+        edges(10, -10)
 
 
 def test_an_off_centre_principal_point_moves_the_sector_edges_with_it():
     """A camera whose principal point sits at 30 % of the width: straight ahead is column 60, not
     100, and the edges lie where tan(edge) * fx from it says (fx = 100: +-10 degrees at 17.6 px)."""
     k = Intrinsics(100.0, 100.0, 60.0, 50.0, 200, 100)
-    g = SectorGeometry(k, SectorConfig(left_edge_deg=-10, right_edge_deg=10))
+    g = SectorGeometry(k, edges(-10, 10))
     edge_px = 100.0 * np.tan(np.radians(10.0))
     for u in range(200):
         expected = 0 if u < 60 - edge_px else 2 if u > 60 + edge_px else 1
@@ -91,18 +96,20 @@ def test_a_score_never_passes_one_however_much_of_a_sector_is_blind():
     assert part.score == pytest.approx(1.5 / (0.02 * g.sector_pixels[0])) and part.score < 1
 
 
-def test_the_number_of_sectors_comes_from_one_list():
-    """SECTORS sizes the geometry, the alert frame and the bus's signals; a frame of another count is refused."""
-    import cantools
+def test_the_layout_sizes_the_geometry_and_the_bus_refuses_a_frame_of_another_count():
+    """Four sectors at -30, 0 and 30 degrees: each column falls where its bearing (atan((u - cx) / fx)) says, the
+    readings are four, and an encoder of the three-sector bus refuses a four-sector frame."""
+    from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
+    from bsn_edge.alerts.can_codec import CanEncoder
 
-    from bsn_edge.alerts import SECTORS, AlertFrame, Level, SectorAlert, SystemState
-    from bsn_edge.alerts.can_codec import DBC_PATH, SIDES
-
-    g = SectorGeometry(Intrinsics(300.0, 300.0, 256.0, 128.0, 512, 256))
-    assert len(g.sector_columns) == len(SECTORS) == len(g.read(np.zeros((256, 512), bool), np.ones((256, 512))))
-    assert sorted(set(g.column_sector.tolist())) == list(range(len(SECTORS)))
-    signals = {s.name for m in cantools.database.load_file(str(DBC_PATH)).messages for s in m.signals}
-    assert all(f"{side}_Level" in signals for side in SIDES) and len(SIDES) == len(SECTORS)
+    cfg = SectorConfig(layout=[{"name": "FAR_LEFT", "to_deg": -30}, {"name": "LEFT", "to_deg": 0},
+                               {"name": "RIGHT", "to_deg": 30}, {"name": "FAR_RIGHT"}])
+    assert cfg.names == ("FAR_LEFT", "LEFT", "RIGHT", "FAR_RIGHT") and cfg.edges_deg == (-30.0, 0.0, 30.0)
+    g = SectorGeometry(K, cfg)
+    for u in range(200):
+        b = np.degrees(np.arctan((u - 100.0) / 100.0))
+        assert g.column_sector[u] == sum(b >= e for e in (-30, 0, 30)), u
+    assert len(g.read(np.zeros((100, 200), bool), np.ones((100, 200)))) == 4
     none = SectorAlert(0.0, Level.NONE, None)
-    with pytest.raises(ValueError, match="one reading per sector"):
-        AlertFrame(0.0, (none,) * (len(SECTORS) - 1), SystemState.OK, 10.0)
+    with pytest.raises(ValueError, match="a frame of 4 sectors for a bus of 3"):
+        CanEncoder().encode(AlertFrame(0.0, (none,) * 4, SystemState.OK, 10.0))

@@ -22,7 +22,7 @@ VALUES = st.recursive(LEAF, lambda inner: st.lists(inner, max_size=4) | st.dicti
                                                                                         max_size=4), max_leaves=20)
 DEPTH = st.integers(min_value=1, max_value=6000)
 SECTIONS = ("runtime", "sectors", "alerts", "health", "bus", "messages", "source", "calibration", "visibility")
-KEYS = ("cycle_s", "warmup", "range_m", "left_edge_deg", "on", "deadline_s", "can", "stall_s", "frozen_s", "caution",
+KEYS = ("cycle_s", "warmup", "range_m", "layout", "on", "deadline_s", "can", "stall_s", "frozen_s", "caution",
         "outputs")
 FAST = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 

@@ -50,7 +50,8 @@ def test_a_sector_edge_and_a_smoothing_time_from_the_file_reach_the_bus(setup, t
     cfg = tmp_path / "vehicle.toml"
     # LEFT and CENTRE end left of the picture's 40 degrees: every pixel is RIGHT's; and the longest smoothing
     # time a vehicle may set, 2 s: a cycle moves a score by at most 1 - exp(-0.1 / 2) = 4.9 % of the way
-    cfg.write_text("[sectors]\nleft_edge_deg = -88.0\nright_edge_deg = -87.5\n\n[alerts]\ntau_s = 2.0\n")
+    cfg.write_text('[sectors]\nlayout = [{ name = "LEFT", to_deg = -88.0 }, { name = "CENTRE", to_deg = -87.5 }, '
+                   '{ name = "RIGHT" }]\n\n[alerts]\ntau_s = 2.0\n')
     tuned = _run(clip, tmp_path, "tuned", "--config", str(cfg))
     assert all(h["Left_Score"] == 0 and h["Centre_Score"] == 0 for h in tuned)
     assert all(h["Left_Distance"] == 63.5 and h["Centre_Distance"] == 63.5 for h in tuned), "nothing in range"
@@ -58,12 +59,13 @@ def test_a_sector_edge_and_a_smoothing_time_from_the_file_reach_the_bus(setup, t
     steps = [abs(b["Right_Score"] - a["Right_Score"]) for a, b in itertools.pairwise(tuned)]
     assert len({h["Right_Score"] for h in tuned}) > 1 and max(steps) <= 0.049 + 1 / 127, "smoothed over 2 s"
     summary = json.loads((tmp_path / "tuned.json").read_text())
-    assert summary["settings"]["sectors"]["left_edge_deg"] == -88.0 and summary["settings"]["alerts"]["tau_s"] == 2.0
+    assert summary["settings"]["sectors"]["layout"][0] == {"name": "LEFT", "to_deg": -88.0}
+    assert summary["settings"]["alerts"]["tau_s"] == 2.0
     assert summary["settings_digest"] != json.loads((tmp_path / "plain.json").read_text())["settings_digest"]
 
 
 @pytest.mark.parametrize("setting,says", [
-    ("sectors.left_edge=-15", "unknown key(s) in [sectors]: 'left_edge' (did you mean 'left_edge_deg'?)"),
+    ("sectors.layot=[]", "unknown key(s) in [sectors]: 'layot' (did you mean 'layout'?)"),
     ("alerts.caution.on=2", "[alerts.caution] (--set): on = 2.0 is outside [0.05, 0.9]"),
     ("runtime.cycle_s=abc", "runtime.cycle_s = 'abc' (--set) must be a finite number in [0.01, 1] s"),
     ("wheels.count=4",
@@ -154,7 +156,20 @@ NO_VEHICLE_CAN_USE = [
     ('alerts.tau_s="0.5"', "alerts.tau_s = '0.5' (--set) must be a finite number in [0, 2] s"),
     ("runtime.warmup=2.5", "runtime.warmup = 2.5 (--set) must be a whole number in [0, 100] inferences"),
     ("runtime.in_flight=1.5", "runtime.in_flight = 1.5 (--set) must be a whole number in [1, 4] frames"),
-    ("sectors.left_edge_deg=[1,2]", "sectors.left_edge_deg = [1, 2] (--set) must be a finite number in [-89, 89]"),
+    ("sectors.range_m=[1,2]", "sectors.range_m = [1, 2] (--set) must be a finite number in [10, 200] m"),
+    ("sectors.layout=5", "sectors.layout = 5 (--set) must be a list"),
+    ('sectors.layout=[{name="LEFT",to_deg=5},{name="LEFT"}]', "[sectors] (--set): layout names 'LEFT' twice"),
+    ('sectors.layout=[{name="A",to_deg=5},{name="B",to_deg=1},{name="C"}]',
+     "[sectors] (--set): layout[1].to_deg = 1 (B) must be right of the sector before it (5)"),
+    ('sectors.layout=[{name="A",to_deg=5},{name="B",to_deg=9}]',
+     "[sectors] (--set): layout[1] (B) is the last sector: it runs to the field's edge, so it has no to_deg"),
+    ('sectors.layout=[{name="A",to_deg=89},{name="B"}]',
+     "[sectors] (--set): layout[0].to_deg = 89 (A) must be a bearing between -89 and 89 degrees"),
+    ('sectors.layout=[{name="left",to_deg=0},{name="B"}]', "[sectors] (--set): layout[0].name = 'left' must be"),
+    ('sectors.layout=[{name="A",edge=0},{name="B"}]',
+     "[sectors] (--set): layout[0] has unknown key(s) 'edge'; a sector has name and to_deg"),
+    ("sectors.left_edge_deg=-15", "[sectors] (--set): left_edge_deg = -15: the sectors are now a layout; write "
+     'instead layout = [{ name = "LEFT", to_deg = -15 }, { name = "CENTRE", to_deg = 12.0 }, { name = "RIGHT" }]'),
     ("alerts.caution.hold_s=true", "alerts.caution.hold_s = True (--set) must be a finite number in [0, 10] s"),
     ("alerts.warning.on=1.0", "[alerts.warning] (--set): on = 1.0 is outside [0.05, 0.9]"),
     ("sectors.full_area=1", "[sectors] (--set): full_area = 1.0 is outside [0.001, 0.05]"),
@@ -266,8 +281,8 @@ def test_a_config_that_is_a_folder_or_not_utf8_is_named_as_such(tmp_path):
 
 def test_a_malformed_set_is_answered_with_an_example_of_the_runtimes_own():
     with pytest.raises(ValueError) as refused:
-        load_runtime_config(None, ["left_edge_deg=-15"])
-    assert "e.g. sectors.left_edge_deg=-15" in str(refused.value) and "train." not in str(refused.value)
+        load_runtime_config(None, ["tau_s=0.5"])
+    assert "e.g. alerts.tau_s=0.5" in str(refused.value) and "train." not in str(refused.value)
 
 
 def test_the_schema_and_the_reference_page_are_the_ones_the_settings_make():
@@ -292,8 +307,8 @@ def test_the_shipped_file_lists_and_describes_every_key_the_schema_has():
                 yield f"{name}.{key}", name
 
     every = [x for name, node in schema()["properties"].items() for x in leaves(node, name)]
-    # runtime 7, sectors 4, alerts 1 + 4 + 4, health 3, bus 8, messages 2, source 4, calibration 2, visibility 16
-    assert len(every) == 55
+    # runtime 7, sectors 3, alerts 1 + 4 + 4, health 3, bus 8, messages 2, source 4, calibration 2, visibility 16
+    assert len(every) == 54
     for dotted, table in every:
         assert dotted in said, f"{dotted} is not in the shipped file"
         assert said[dotted] or said.get(table), f"{dotted} has no comment, nor has its table"
