@@ -29,9 +29,10 @@ AROUND = 2      # status cycles shown on each side of a disagreement
 def check(log_onsets: list[Onset], on_bus: list[BusOnset], statuses: tuple[tuple[float, str], ...] = (),
           start: float | None = None, names: tuple[str, ...] = SECTORS) -> dict[str, Any]:
     """Sector by sector (``names``, the run's), the onsets of the log and of the bus matched in order: the k-th
-    rise to a level in one is the k-th rise to it in the other. Returns per sector the counts and what is in one only, and every
-    disagreement with its time (the log's clock, or seconds into the CAN log), the bus's states around it
-    (``statuses`` and ``start``: :attr:`BusRead.statuses` and :attr:`BusRead.start`) and what explains it."""
+    rise to a level in one is the k-th rise to it in the other. Returns per sector the counts and what is in one
+    only, and every disagreement with its time (the log's clock, or seconds into the CAN log), the bus's states
+    around it (``statuses`` and ``start``: :attr:`BusRead.statuses` and :attr:`BusRead.start`) and what explains
+    it."""
     out: dict[str, Any] = {"agree": True, "sectors": {}, "disagreements": []}
     t0 = start if start is not None else statuses[0][0] if statuses else on_bus[0].timestamp if on_bus else 0.0
     for name in names:

@@ -1,17 +1,17 @@
 """One line of the frame log (``bsn-run --log``): :class:`FrameRecord`.
 
-Fields, in the order written (a field that does not apply to the frame is left out):
-``frame`` (index in the source), ``t`` (seconds on the source's clock), ``fault`` (what went wrong
-with this frame, by the names of :class:`~bsn_edge.alerts.health.Fault`: ``decode_errors``,
-``size_changes``, ``nan_outputs``), ``levels`` (one per sector of the layout, left to right: ``NONE``,
-``CAUTION`` or ``WARNING``; the run's summary names the sectors, ``settings.sectors.layout``), ``scores``
-(smoothed, 0-1), ``distances`` (metres to the nearest blind spot, null for none), ``state`` (the system
-state the bus carried when the frame's hazard was made: the last status sent) and ``why`` (the reason for a state other than OK, in words), ``camera`` and ``unseen`` (when the
-camera-health check raised a reason: its name, and the sectors it cannot see), ``latency_ms`` and
-``stage_ms`` (this frame's milliseconds in each stage it went through:
-``decode``, ``preprocess``, ``inference``, ``postprocess``, ``send``), ``bus_from`` (the number, from 0
-among the hazard frames sent, of the first that carried this frame's levels: every hazard frame from it
-until the next frame's carries them, which lets ``bsn-report`` compare the bus cycle by cycle).
+Fields, in the order written (a field that does not apply to the frame is left out): ``frame`` (index in the
+source), ``t`` (seconds on the source's clock), ``fault`` (what went wrong with this frame, by the names of
+:class:`~bsn_edge.alerts.health.Fault`: ``decode_errors``, ``size_changes``, ``nan_outputs``), ``levels`` (one
+per sector of the layout, left to right: ``NONE``, ``CAUTION`` or ``WARNING``; the run's summary names the
+sectors, ``settings.sectors.layout``), ``scores`` (smoothed, 0-1), ``distances`` (metres to the nearest blind
+spot, null for none), ``state`` (the system state the bus carried when the frame's hazard was made: the last
+status sent) and ``why`` (the reason for a state other than OK, in words), ``camera`` and ``unseen`` (when the
+camera-health check raised a reason: its name, and the sectors it cannot see), ``latency_ms`` and ``stage_ms``
+(this frame's milliseconds in each stage it went through: ``decode``, ``preprocess``, ``inference``,
+``postprocess``, ``send``), ``bus_from`` (the number, from 0 among the hazard frames sent, of the first that
+carried this frame's levels: every hazard frame from it until the next frame's carries them, which lets
+``bsn-report`` compare the bus cycle by cycle).
 """
 
 from __future__ import annotations
