@@ -53,6 +53,71 @@ class BusRead:
     cycles: tuple[BusCycle, ...] = ()                 # every trusted hazard frame with its cycle's state
 
 
+@dataclass
+class _Pending:
+    """A cycle's hazard as read so far (the signals of its trusted hazard frames), until its status says."""
+
+    signals: dict[str, Any]
+    k: int              # its first hazard frame's place among the log's hazard frames
+    t: float
+    number: int         # that frame's number among those the sender sent
+
+
+class _BusReader:
+    """The log's frames in order, judged (:class:`FrameChecker`), gathered into cycles and onsets."""
+
+    def __init__(self, sectors: tuple[str, ...] | None) -> None:
+        layout = bus_layout(sectors)
+        self.names = layout.sectors
+        self.check = FrameChecker(layout=layout)
+        self.last = dict.fromkeys(self.names, 0)
+        self.onsets: list[BusOnset] = []
+        self.cycles: list[BusCycle] = []
+        self.statuses: list[tuple[float, str]] = []
+        self.unreadable: list[str] = []
+        self.pending: _Pending | None = None
+        self.hazards = 0
+
+    def bad(self, where: str, why: str) -> None:
+        self.unreadable.append(f"{where}: {why}")
+
+    def frame(self, frame_id: int, data: bytes, t: float) -> None:
+        c = self.check(frame_id, data)
+        if c is None:
+            return
+        if c.decoded is not None and c.decoded.name == STATUS:
+            # the status after a hazard frame is its cycle's: an UNAVAILABLE cycle (a stall, the last word)
+            # carries no hazard, so its levels of NONE are no fall and what follows no new onset
+            state = SystemState(int(c.decoded.signals["System_State"])).name if c.trusted else None
+            if state is not None:
+                self.statuses.append((t, state))
+            self.close(state, apply=state is not None and state != SystemState.UNAVAILABLE.name)
+            return
+        if c.decoded is not None and c.decoded.name != HAZARD:     # a later hazard frame of the cycle
+            if self.pending is not None and c.trusted:
+                self.pending.signals.update(c.decoded.signals)
+            return
+        self.hazards += 1
+        self.close(None, apply=True)      # a hazard frame with no status of its own (status sent less often)
+        if c.decoded is not None and c.trusted:
+            self.pending = _Pending(dict(c.decoded.signals), self.hazards - 1, t, c.number or 0)
+
+    def close(self, state: str | None, apply: bool) -> None:
+        """The pending cycle ended by a status of ``state`` (None: none, or untrusted); its onsets taken when
+        ``apply``. A cycle missing a sector's level (a later hazard frame lost) has none."""
+        p, self.pending = self.pending, None
+        if p is None or not all(signal_name(name, "Level") in p.signals for name in self.names):
+            return
+        levels = [int(p.signals[signal_name(name, "Level")]) for name in self.names]
+        self.cycles.append(BusCycle(p.number, p.t, tuple(Level(v).name for v in levels), state))
+        if not apply:
+            return
+        for name, level in zip(self.names, levels, strict=True):
+            if level > self.last[name]:
+                self.onsets.append(BusOnset(name, Level(level).name, p.k, p.t))
+            self.last[name] = level
+
+
 def read_bus(can_log: str | Path, sectors: tuple[str, ...] | None = None) -> BusRead:
     """Every level onset the hazard frames of ``can_log`` (``.log`` candump, ``.asc``, ``.blf``) carry for the
     layout of ``sectors`` (the default layout's when None), read as ``bsn-listen`` reads them
@@ -60,73 +125,15 @@ def read_bus(can_log: str | Path, sectors: tuple[str, ...] | None = None) -> Bus
     frame (bad CRC or counter, an undefined level, a layout that does not decode) and a line that cannot be read
     are counted, never an onset. A layout of more than one hazard frame is read a cycle at a time: the first
     hazard frame opens it, the others add their sectors; a cycle missing a sector's trusted frame has no levels."""
-    layout = bus_layout(sectors)
-    names = layout.sectors
-    check = FrameChecker(layout=layout)
-    last = dict.fromkeys(names, 0)
-    out: list[BusOnset] = []
-    unreadable: list[str] = []
-    n = 0
-
-    def bad(where: str, why: str) -> None:
-        unreadable.append(f"{where}: {why}")
-
-    pending: tuple[dict[str, Any], int, float, int] | None = None     # a cycle's hazard, until its status says
-    statuses: list[tuple[float, str]] = []
-    cycles: list[BusCycle] = []
+    r = _BusReader(sectors)
     start: float | None = None
-
-    def whole(signals: dict[str, Any]) -> bool:
-        return all(signal_name(name, "Level") in signals for name in names)
-
-    def close(signals: dict[str, Any], number: int, t: float, state: str | None) -> None:
-        if whole(signals):
-            levels = tuple(Level(int(signals[signal_name(name, "Level")])).name for name in names)
-            cycles.append(BusCycle(number, t, levels, state))
-
-    def apply(signals: dict[str, Any], k: int, t: float) -> None:
-        if not whole(signals):
-            return
-        for name in names:
-            level = int(signals[signal_name(name, "Level")])
-            if level > last[name]:
-                out.append(BusOnset(name, Level(level).name, k, t))
-            last[name] = level
-
-    for f in read_log(can_log, bad):
+    for f in read_log(can_log, r.bad):
         start = f.timestamp if start is None else start
-        c = check(f.frame_id, f.data)
-        if c is None:
-            continue
-        if c.decoded is not None and c.decoded.name == STATUS:
-            # the status after a hazard frame is its cycle's: an UNAVAILABLE cycle (a stall, the last word)
-            # carries no hazard, so its levels of NONE are no fall and what follows no new onset
-            state = SystemState(int(c.decoded.signals["System_State"])).name if c.trusted else None
-            if state is not None:
-                statuses.append((f.timestamp, state))
-            if pending is not None:
-                close(pending[0], pending[3], pending[2], state)
-                if state is not None and state != SystemState.UNAVAILABLE.name:
-                    apply(*pending[:3])
-            pending = None
-            continue
-        if c.decoded is not None and c.decoded.name != HAZARD:     # a later hazard frame of the cycle
-            if pending is not None and c.trusted:
-                pending[0].update(c.decoded.signals)
-            continue
-        n += 1
-        if pending is not None:        # a hazard frame with no status of its own (status sent less often)
-            close(pending[0], pending[3], pending[2], None)
-            apply(*pending[:3])
-            pending = None
-        if c.decoded is not None and c.trusted:
-            pending = (dict(c.decoded.signals), n - 1, f.timestamp, c.number or 0)
-    if pending is not None:
-        close(pending[0], pending[3], pending[2], None)
-        apply(*pending[:3])
-    damaged = {v.value: k for v, k in check.counts.items() if k and v not in (Verdict.OK, Verdict.REPEATED)}
-    said = f"{len(unreadable)} unreadable line(s), the first {unreadable[0]}" if unreadable else ""
-    return BusRead(out, n, damaged, said, tuple(statuses), start or 0.0, tuple(cycles))
+        r.frame(f.frame_id, f.data, f.timestamp)
+    r.close(None, apply=True)
+    damaged = {v.value: k for v, k in r.check.counts.items() if k and v not in (Verdict.OK, Verdict.REPEATED)}
+    said = f"{len(r.unreadable)} unreadable line(s), the first {r.unreadable[0]}" if r.unreadable else ""
+    return BusRead(r.onsets, r.hazards, damaged, said, tuple(r.statuses), start or 0.0, tuple(r.cycles))
 
 
 def bus_onsets(can_log: str | Path, sectors: tuple[str, ...] | None = None) -> list[BusOnset]:

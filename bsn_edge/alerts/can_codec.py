@@ -48,7 +48,7 @@ class CanEncoder:
         """The frames of ``messages`` (by name, in the order given; None: every message; ``BSN_Hazard`` stands for
         every hazard frame of the layout) for ``frame``; only a message sent moves its counter."""
         sectors = frame.sectors
-        if not sectors and frame.state == SystemState.UNAVAILABLE:    # no hazard yet, or the last word
+        if not sectors:         # no hazard yet (the bus's first cycles), or the last word: nothing to warn of
             sectors = (SectorAlert(0.0, Level.NONE, None, frame.camera in WHOLE),) * len(self.layout.sectors)
         if len(sectors) != len(self.layout.sectors):
             raise ValueError(f"a frame of {len(frame.sectors)} sectors for a bus of {len(self.layout.sectors)} "

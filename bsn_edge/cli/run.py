@@ -37,7 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=PROG,
         description="Run the fused blind-spot model on a video file, an image folder, a camera or a stream: "
-                    "per frame blind-spot mask and depth -> LEFT / CENTRE / RIGHT sectors -> smoothing -> "
+                    "per frame blind-spot mask and depth -> the vehicle file's sectors (LEFT / CENTRE / RIGHT by "
+                    "default) -> smoothing -> "
                     "alert state -> CAN and/or serial at a fixed cycle, with a status heartbeat. Prints a "
                     "summary (frames, dropped, frames/s, p50/p95/p99 latency, per-stage shares). Before the "
                     "first frame the model's digest, signature and self-test are checked: a model that fails "
@@ -280,9 +281,9 @@ def refuse(senders: list[Sender], message: str, summary: str | None = None) -> i
 def main(argv: list[str] | None = None) -> int:
     # signals first: from here on SIGINT and SIGTERM end the run cleanly, during start-up included; once
     # the outputs are open, every way out ends with UNAVAILABLE on the bus
-    if "--print-dbc" in (sys.argv[1:] if argv is None else argv):
-        return print_dbc(argv)
     with StopOnSignal(keep=argv is None) as stopper, console_streams(keep=argv is None) as console:
+        if "--print-dbc" in (sys.argv[1:] if argv is None else argv):
+            return print_dbc(argv)
         args = build_parser().parse_args(argv)
         args.console = console
         if args.profile:

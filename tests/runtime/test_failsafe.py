@@ -424,7 +424,7 @@ def test_a_serial_port_gone_for_good_is_degraded_on_the_other_bus_and_a_non_zero
     assert "DEGRADED" in names and names[-1] == "UNAVAILABLE"
     assert "OK" not in names[names.index("DEGRADED"):], "it stays down: DEGRADED until the end"
     # the command line: the same port gone, exit 1 and the reason at the end
-    monkeypatch.setattr(run_cli, "make_senders", lambda args, bus=None: [
+    monkeypatch.setattr(run_cli, "make_senders", lambda args, bus=None, sectors=None: [
         SerialSender("/dev/bsn-no-such-port", port=GonePort(), retry_s=0.0)])
     rc = run_cli.main(["--model", str(model), "--source", str(clip / "video.mp4"), "--calib",
                        str(clip / "calibration.json")])
