@@ -44,7 +44,7 @@ def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
         color = UNSEEN_BGR if sector.unseen else LEVEL_BGR[sector.level]
         cv2.rectangle(img, (x0 + 2, 2), (x1 - 2, 20), color, -1)
         text = sector.level.name if sector.distance_m is None else f"{sector.level.name} {sector.distance_m:.0f}m"
-        text = "CANNOT SEE" if sector.unseen else text
+        text = f"{geometry.cfg.names[s]} " + ("CANNOT SEE" if sector.unseen else text)
         cv2.putText(img, text, (x0 + 6, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
         if s < len(alert.sectors) - 1:
             cv2.line(img, (x1, 22), (x1, h), (255, 255, 255), 1)
