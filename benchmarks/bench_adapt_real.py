@@ -17,7 +17,7 @@ folder with no camera file (``bench_camvid``'s rule):
 **Label quality**: the T-frame labels ``bsn-adapt`` made on the first half, scored as if they were a model's
 masks against CamVid's pixel labels of the same frames: the road users they mark as blind spot, the open road
 they mark (it should be none), teacher by teacher (``own``: the run's teacher; ``real``: the real-picture
-teacher ``models/campaign/teacher_real``, which saw the labels of ``0001TP`` and ``0016E5`` in training, so
+teacher ``lab/campaign/teacher_real``, which saw the labels of ``0001TP`` and ``0016E5`` in training, so
 its rows there are marked as seen). The time of each stage of each adaptation is in the report.
 """
 
@@ -45,7 +45,7 @@ from .common import load_engine
 from .runner import Report, run
 
 CHECKOUT = Path(__file__).resolve().parents[1]
-TEACHERS = {"own": None, "real": CHECKOUT / "models" / "campaign" / "teacher_real"}
+TEACHERS = {"own": None, "real": CHECKOUT / "lab" / "campaign" / "teacher_real"}
 TEACHER_REAL_SAW = ("0001TP", "0016E5")     # drives whose pixel labels taught teacher_real
 RATE, HORIZON_S = 1.0, 5.0                  # CamVid's labelled frames are a second apart: T = 5 label frames
 

@@ -29,7 +29,7 @@ NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", 
          "prune", "calibration", "first_guess", "optimizer", "label_classes", "camera_health", "adapt_real", "ways_out",
          "paced_floor")
 # the campaign's own benchmarks: they judge a leg's run folder against held-out sets the campaign makes
-# (models/campaign/judge*.sh run them), so they have nothing to measure outside it
+# (lab/campaign/judge*.sh run them), so they have nothing to measure outside it
 CAMPAIGN_TOOLS = ("bench_cameras", "bench_tradeoff", "bench_campaign")
 # what of the source tree a benchmark needs beyond the package (an installed wheel runs the rest)
 NEEDS_TREE = {"arch": "configs/quick.toml", "quant": "configs/quick.toml", "accuracy": "configs/quick.toml",

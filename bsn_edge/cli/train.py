@@ -20,8 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "Runs under torchrun for several processes (DistributedDataParallel).")
     p.add_argument("--config", default=None,
                    help="TOML config: configs/toy.toml (minutes, shows every step works), quick.toml (about 20 "
-                        "minutes), campaign.toml (the default's recipe, hours in pieces), full.toml, gpu.toml, "
-                        "smoke.toml (the tests')")
+                        "minutes), campaign.toml (the default's recipe, hours in pieces), smoke.toml (the tests')")
     p.add_argument("--data", required=True, help="folder of labelled sequence folders")
     p.add_argument("--out", required=True, help="run folder")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
