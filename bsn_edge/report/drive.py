@@ -19,7 +19,7 @@ import numpy as np
 from bsn_edge.alerts.sectors import SECTORS
 from bsn_edge.alerts.state_machine import Level
 from bsn_edge.runtime.frame_record import FrameRecord
-from bsn_edge.runtime.loop import STAGES
+from bsn_edge.runtime.stages import STAGES
 from bsn_edge.user_file import read_user_file
 
 PERCENTILES = (50, 95, 99)

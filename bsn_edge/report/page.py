@@ -17,7 +17,7 @@ import numpy as np
 
 from bsn_edge.alerts.state_machine import AlertConfig
 from bsn_edge.report.drive import Drive, Onset
-from bsn_edge.runtime.loop import STAGES
+from bsn_edge.runtime.stages import STAGES
 
 DISTANCE_AXIS_M = 50.0      # the distance axis of a sector with no distance measured
 LEVEL_COLOURS = {"CAUTION": "#f2c14e", "WARNING": "#e4572e"}

@@ -8,10 +8,10 @@ sectors, ``settings.sectors.layout``), ``scores`` (smoothed, 0-1), ``distances``
 spot, null for none), ``state`` (the system state the bus carried when the frame's hazard was made: the last
 status sent) and ``why`` (the reason for a state other than OK, in words), ``camera`` and ``unseen`` (when the
 camera-health check raised a reason: its name, and the sectors it cannot see), ``latency_ms`` and ``stage_ms``
-(this frame's milliseconds in each stage it went through: ``decode``, ``preprocess``, ``inference``,
-``postprocess``, ``send``), ``bus_from`` (the number, from 0 among the hazard frames sent, of the first that
-carried this frame's levels: every hazard frame from it until the next frame's carries them, which lets
-``bsn-report`` compare the bus cycle by cycle).
+(this frame's milliseconds in each stage it went through, :data:`~bsn_edge.runtime.stages.STAGES`),
+``bus_from`` (the number, from 0 among the hazard frames sent, of the first that carried this frame's levels:
+every hazard frame from it until the next frame's carries them, which lets ``bsn-report`` compare the bus
+cycle by cycle).
 """
 
 from __future__ import annotations

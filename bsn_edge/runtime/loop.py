@@ -18,15 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from bsn_edge.alerts import (
-    AlertFrame,
-    Hazard,
-    SectorAlert,
-    SectorGeometry,
-    SectorState,
-)
-from bsn_edge.alerts.health import Fault, Health, Status, SystemState
-from bsn_edge.alerts.sectors import blind_spots
+from bsn_edge.alerts import AlertFrame, SectorGeometry, SectorState
+from bsn_edge.alerts.health import Fault, Health
 from bsn_edge.alerts.senders import Sender
 from bsn_edge.model_frame import ModelFrame
 from bsn_edge.runtime.camera_state import CAMERA_FILE, CameraState
@@ -41,14 +34,11 @@ from bsn_edge.runtime.run_summary import ModelSummary, RunSummary, SinkSummary
 from bsn_edge.runtime.settings import RuntimeConfig
 from bsn_edge.runtime.sinks import GuardedSink, LineLog, SinkFailure, open_all
 from bsn_edge.runtime.sources import Captured, Source
+from bsn_edge.runtime.stages import STAGES, WAY, Stage, Work
 from bsn_edge.runtime.stats import LatencyStats
 from bsn_edge.runtime.visibility import BlindnessLog, CameraHealth
-from bsn_edge.sequence.folder import frame_name
 
-STAGES = ("decode", "preprocess", "visibility", "inference", "postprocess", "send")
-# what the outputs show of a frame before the bus has carried anything (a camera's first frames, before the
-# heartbeat's first cycle): the bus has said nothing, so nothing is available
-NOT_SENT = Status(SystemState.UNAVAILABLE, 0.0)
+__all__ = ["STAGES", "FramePipeline", "Outputs", "StageTimer", "run"]
 
 
 @dataclass
@@ -78,17 +68,15 @@ class StageTimer:
 
 
 class FramePipeline:
-    """The runtime's work on one source, stage by stage; :meth:`run` drives it, :func:`run` wires it.
+    """The runtime's work on one source: its state, and the frame's way as a list of stage objects
+    (:data:`~bsn_edge.runtime.stages.WAY`: decode, the camera, visibility, inference, sectors, send, outputs),
+    each timed into ``stage_ms`` by :meth:`through`; :meth:`run` drives it, :func:`run` wires it.
 
-    Per frame: :meth:`warp` (into the model camera, an input buffer; on the feeder's thread when
-    reading overlaps the model, :class:`~bsn_edge.runtime.feeder.Feeder`), then on the caller's
-    thread :meth:`read` (the source's frame and its faults), :meth:`infer`, :meth:`sectors` (mask and
-    depth -> smoothed levels -> the :class:`Hazard` published to the send cycle, which alone decides the
-    status), :meth:`emit` (cycles due by the frame's time, for files) and :meth:`write` (the frame's hazard
-    with the status the bus carried, into the outputs beside the bus, each a
-    :class:`GuardedSink`). Only :meth:`warp` runs on the feeder's thread: health, the alert state and
-    the outputs belong to the caller's; the overlay and the maps are drawn and encoded on threads of
-    their own, at most ``SINK_BEHIND`` frames behind.
+    Only the warp (:meth:`warp`, into the model camera and an input buffer) runs on the feeder's thread when
+    reading overlaps the model (:class:`~bsn_edge.runtime.feeder.Feeder`), and an inference in flight on an
+    inference thread; health, the alert state and the outputs belong to the caller's thread. The send cycle
+    alone decides the status (the hazard is published to it); the overlay and the maps are drawn and encoded
+    on threads of their own, at most ``SINK_BEHIND`` frames behind, each a :class:`GuardedSink`.
     """
 
     SINK_BEHIND = 4     # frames an overlay or maps output may fall behind the loop
@@ -121,35 +109,11 @@ class FramePipeline:
         self.reconnects_seen = 0
         self._camera_file_failed = False
         self.last_t = 0.0
+        self.stages: tuple[Stage, ...] = tuple(kind(self) for kind in WAY)
 
-    # -- the stages ------------------------------------------------------------------------------
-
-    def read(self, cap: Captured, rec: FrameRecord) -> bool:
-        """Count what the source says about this frame; False when there is no picture to use."""
-        h = self.health
-        self.frames += 1
-        self.last_t = cap.t
-        h.set_fault(Fault.DROPPED_FRAMES, self.dropped)   # live sources drop while we work
-        h.set_fault(Fault.SOURCE_RECONNECTS, self.source.reconnects)
-        self.timer.add("decode", cap.decode_s)
-        if cap.frame is None:
-            h.fault(Fault.DECODE_ERRORS)
-            rec.fault = Fault.DECODE_ERRORS
-            return False
-        if self.source.reconnects != self.reconnects_seen:    # a camera reopened may come back at another size
-            self.reconnects_seen, self.shape = self.source.reconnects, None
-        elif self.shape is None and self.frames == 1 and self.source.one_camera and self.source.size is not None:
-            # the source's own size (a folder's: most of its first pictures'), not its first frame's
-            self.shape = (self.source.size[1], self.source.size[0], 3)
-        if self.shape is None or not self.source.one_camera:     # each picture its own camera, its own size
-            self.shape = cap.frame.shape
-        elif cap.frame.shape != self.shape:
-            # a frame of another size (or aspect) than the source's is a damaged frame: warped as the
-            # source's camera it would be stretched, so it is counted and not run
-            h.fault(Fault.SIZE_CHANGES)
-            rec.fault = Fault.SIZE_CHANGES
-            return False
-        return True
+    def stage(self, name: str) -> Stage:
+        """The stage of the way called ``name`` (one of :data:`STAGES`)."""
+        return next(st for st in self.stages if st.name == name)
 
     @property
     def dropped(self) -> int:
@@ -192,59 +156,6 @@ class FramePipeline:
             return None
         return self.pool.submit(self.infer, item.buf)
 
-    def checked(self, prob: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """The model's answer; None (and counted) when it is NaN or infinity."""
-        if not (np.isfinite(prob).all() and np.isfinite(depth).all()):
-            self.health.fault(Fault.NAN_OUTPUTS)
-            return None
-        return prob, depth
-
-    def look(self, cap: Captured, buf: np.ndarray, rec: FrameRecord) -> None:
-        """The camera-health check on the frame and what the model sees (``buf``): its reason to the health
-        (the send cycle's status) and to the frame's record."""
-        if cap.frame is None:
-            return
-        t0 = time.perf_counter()
-        vis = self.visibility.look(cap.t, cap.frame, buf[0])
-        self.health.camera(vis.reason)
-        self.blind.add(cap.t, vis.reason)
-        rec.visibility = vis
-        seconds = time.perf_counter() - t0
-        self.timer.add("visibility", seconds)
-        rec.stage_ms["visibility"] = 1e3 * seconds
-
-    def sectors(self, cap: Captured, mf: ModelFrame, prob: np.ndarray,
-                depth: np.ndarray, unseen: tuple[bool, ...] = ()) -> tuple[Hazard, np.ndarray]:
-        """Mask and depth -> sector readings -> smoothed levels -> the hazard, published to the send cycle
-        (which decides the status it goes out with), and the mask; ``unseen``: the sectors the camera cannot
-        see, said with their readings."""
-        mask = blind_spots(prob, self.engine.threshold, mf)
-        readings = self.geometry.read(mask, mf.depth_to_metres(depth))
-        sectors = []
-        blind = unseen or (False,) * len(readings)
-        for m, r, u in zip(self.machines, readings, blind, strict=True):
-            score, level = m.update(cap.t, r.score)
-            sectors.append(SectorAlert(score, level, r.distance_m, u))
-        self.health.valid(cap.t, None if self.wall is None else self.wall())
-        self.valid += 1
-        hazard = Hazard(cap.t, tuple(sectors))
-        self.emitter.publish(hazard)
-        return hazard, mask
-
-    def emit(self, cap: Captured) -> None:
-        """Send the cycles due by the frame's time (a live source's heartbeat sends its own)."""
-        if not self.source.live:
-            self.emitter.emit(cap.t)
-
-    def write(self, cap: Captured, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame, prob: np.ndarray,
-              depth: np.ndarray) -> None:
-        """The overlay and the maps of one frame, in the raw frame's pixels."""
-        overlay, maps = self.sinks.get("overlay"), self.sinks.get("maps")
-        if overlay is not None and overlay.ok:
-            overlay.write(cap.index, cap.frame, mf, mask, alert)
-        if maps is not None and maps.ok:
-            maps.write(cap.index, cap.name or frame_name(cap.index, ""), mf, prob, depth)
-
     # -- the run ---------------------------------------------------------------------------------
 
     def open(self) -> None:
@@ -284,63 +195,39 @@ class FramePipeline:
         open_all(self.sinks.values())
 
     def step(self, item: Prepared, inflight: Future | None = None) -> None:
-        """One prepared frame through the remaining stages, timed; ``inflight``: its inference, already
-        started on another thread (:meth:`start`), whose answer is waited for here."""
+        """One prepared frame along the way; ``inflight``: its inference, already started on another thread
+        (:meth:`start`), whose answer the inference stage waits for."""
         cap = item.cap
         t0 = time.perf_counter()
         for sink in self.sinks.values():     # an output stuck for a second is a fault now, whatever the frame
             sink.check()
-        rec = FrameRecord(cap.index, cap.t, names=self.names)
-        self.timer.add("preprocess", item.warp_s)
-        rec.stage_ms.update(decode=1e3 * cap.decode_s, preprocess=1e3 * item.warp_s)
-        drawn = None
-        if self.read(cap, rec) and item.mf is not None and item.buf is not None:
-            self.look(cap, item.buf, rec)
-            began, drawn = self.answer(item, item.mf, item.buf, inflight, rec)
-            t0 = min(t0, began)          # the frame's path began with its inference at the latest
-        t4 = time.perf_counter()
-        self.emit(cap)
-        t5 = time.perf_counter()
-        self.timer.add("send", t5 - t4)
-        rec.stage_ms["send"] = 1e3 * (t5 - t4)
-        if rec.hazard is not None and item.mf is not None and drawn is not None:
-            # what the outputs show is what the bus carried: the frame's hazard with the last status sent
-            on_bus = self.emitter.last_sent()
-            rec.status = on_bus.status if on_bus is not None else None
-            self.write(cap, item.mf, drawn[0], AlertFrame.of(cap.t, rec.hazard, rec.status or NOT_SENT), *drawn[1:])
+        w = Work(item, FrameRecord(cap.index, cap.t, names=self.names), inflight)
+        self.through(w)
+        t0 = min(t0, w.began)          # the frame's path began with its inference at the latest
         # a camera's frame: from its capture (the read returned) to its alert, waiting included; a
         # file's: its own path, decode to alert (the time it waited for the model is counted apart)
-        latency = time.monotonic() - cap.t if self.source.live else t5 - t0 + item.warp_s + cap.decode_s
+        latency = time.monotonic() - cap.t if self.source.live else w.sent_at - t0 + item.warp_s + cap.decode_s
         self.latency.add(latency)
         self.waiting.add(max(0.0, t0 - item.ready_at))
         log = self.sinks.get("log")
         if log is not None:
-            rec.latency_ms = 1e3 * latency
-            log.write(cap.index, rec.to_json())
+            w.rec.latency_ms = 1e3 * latency
+            log.write(cap.index, w.rec.to_json())
 
-    def answer(self, item: Prepared, mf: ModelFrame, buf: np.ndarray, inflight: Future | None,
-               rec: FrameRecord) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
-        """The model's answer on a frame read whole (``mf`` and ``buf``: its model frame and input) and its
-        hazard (into ``rec``): when its inference began,
-        and the mask, probability and depth the outputs draw (None for an answer that is not finite)."""
-        self.health.calibrating(item.calibrating)
-        prob, depth, began, seconds = self.infer(buf) if inflight is None else inflight.result()
-        out = self.checked(prob, depth)
-        if self.feeder is not None:
-            self.feeder.release(buf)
-        t2 = time.perf_counter()
-        self.timer.add("inference", seconds)
-        rec.stage_ms["inference"] = 1e3 * seconds
-        if out is None:
-            rec.fault = Fault.NAN_OUTPUTS
-            return began, None
-        prob, depth = out
-        rec.hazard, mask = self.sectors(item.cap, mf, prob, depth,
-                                        rec.visibility.unseen if rec.visibility is not None else ())
-        rec.bus_from = self.emitter.latest_from
-        self.timer.add("postprocess", time.perf_counter() - t2)
-        rec.stage_ms["postprocess"] = 1e3 * (time.perf_counter() - t2)
-        return began, (mask, prob, depth)
+    def through(self, w: Work) -> None:
+        """``w`` along the way, each stage timed into the run's totals and the frame's ``stage_ms`` (at the
+        seconds its work took on another thread, when it ran there); after a stage that ends the frame's way
+        only those that run for every frame (the send cycle)."""
+        go = True
+        for stage in self.stages:
+            if not (go or stage.always):
+                continue
+            t0 = time.perf_counter()
+            go = stage.run(w) and go
+            away = stage.elsewhere(w)
+            seconds = time.perf_counter() - t0 if away is None else away
+            self.timer.add(stage.name, seconds)
+            w.rec.stage_ms[stage.name] = 1e3 * seconds
 
     def close(self) -> None:
         """Whatever ended the run (the source, a signal, an exception): the outputs are finished, then

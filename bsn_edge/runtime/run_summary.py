@@ -1,28 +1,25 @@
 """What a run of the runtime did: :class:`RunSummary`, written as ``bsn-run --summary`` and printed.
 
-Fields of the JSON (:meth:`RunSummary.to_json`), in the order written:
-``frames`` (read from the source), ``valid_frames`` (with a valid inference), ``dropped`` (a live
-source's frames the loop had no time for), ``before_start`` (replaced before the loop first asked),
-``overlap``, ``in_flight`` (how reading and inference ran), ``seconds``, ``fps`` (frames a second of
-processing), ``p50_ms``, ``p95_ms``, ``p99_ms`` (latency), ``wait_ms`` (frames waiting for the model,
-same percentiles), ``stage_ms`` and ``stage_share`` (per stage: decode, preprocess, visibility, inference,
-postprocess, send), ``faults`` (the counters, by :class:`~bsn_edge.alerts.health.Fault` name),
-``cycles_sent``, ``stall_cycles`` (of them, sent by the stall watch while a file's loop was stuck on a
-frame), ``states_s`` (seconds of cycles on the bus in each state: OK, CALIBRATING, DEGRADED, UNAVAILABLE; the
-run's last word, UNAVAILABLE whatever ended it, not counted), ``why_s`` (the same seconds by state and reason:
-a stall, no valid inference yet, the frame rate under the floor, an output down, a fault, the camera, levels
-from an assumed camera while calibrating),
-``senders`` (per sender: sent, errors, ...), ``senders_down`` (senders that could not
-send at the end), ``source_failure`` (why the source ended early, or null), ``stopped`` (by a signal
-or the caller), ``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report, hood: share of the rows,
-spread, columns agreeing, arch; null while still looked for), ``visibility`` (what the camera-health check
-raised: frames and seconds per reason, and its stretches),
-``maps_written``, ``cpu`` (``cpu_ms_per_frame``: the process's CPU, every thread, per frame from the 20th to the
-last; ``cores_busy``: CPU seconds a second over those frames), ``sinks`` (per output: written, dropped,
-failure), ``model`` (variant, size,
-threshold, quantization, kernels, self-test, signer, authentic, trust note, graph and config digests); ``bsn-run`` adds
-``signal``, ``source`` (what it read) and ``machine`` (CPU, its int8 instruction sets, cores, Python).
-"""
+Fields of the JSON (:meth:`RunSummary.to_json`), in the order written: ``frames`` (read from the source),
+``valid_frames`` (with a valid inference), ``dropped`` (a live source's frames the loop had no time for),
+``before_start`` (replaced before the loop first asked), ``overlap``, ``in_flight`` (how reading and inference
+ran), ``seconds``, ``fps`` (frames a second of processing), ``p50_ms``, ``p95_ms``, ``p99_ms`` (latency),
+``wait_ms`` (frames waiting for the model, same percentiles), ``stage_ms`` and ``stage_share`` (per stage of the
+way, :data:`~bsn_edge.runtime.stages.STAGES`: decode, preprocess, visibility, inference, postprocess, send,
+outputs), ``faults`` (the counters, by :class:`~bsn_edge.alerts.health.Fault` name), ``cycles_sent``,
+``stall_cycles`` (of them, sent by the stall watch while a file's loop was stuck on a frame), ``states_s``
+(seconds of cycles on the bus in each state: OK, CALIBRATING, DEGRADED, UNAVAILABLE; the run's last word,
+UNAVAILABLE whatever ended it, not counted), ``why_s`` (the same seconds by state and reason: a stall, no valid
+inference yet, the frame rate under the floor, an output down, a fault, the camera, levels from an assumed camera
+while calibrating), ``senders`` (per sender: sent, errors, ...), ``senders_down`` (senders that could not send at
+the end), ``source_failure`` (why the source ended early, or null), ``stopped`` (by a signal or the caller),
+``heartbeat_error``, ``camera`` (intrinsics, mounting, calibration report, hood: share of the rows, spread,
+columns agreeing, arch; null while still looked for), ``visibility`` (what the camera-health check raised: frames
+and seconds per reason, and its stretches), ``maps_written``, ``cpu`` (``cpu_ms_per_frame``: the process's CPU,
+every thread, per frame from the 20th to the last; ``cores_busy``: CPU seconds a second over those frames),
+``sinks`` (per output: written, dropped, failure), ``model`` (variant, size, threshold, quantization, kernels,
+self-test, signer, authentic, trust note, graph and config digests); ``bsn-run`` adds ``signal``, ``source``
+(what it read) and ``machine`` (CPU, its int8 instruction sets, cores, Python)."""
 
 from __future__ import annotations
 

@@ -32,7 +32,8 @@ def test_video_to_can_log_that_both_decoders_read(setup, tmp_path, capsys):
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["frames"] == summary["valid_frames"] == 15
     assert summary["fps"] == pytest.approx(15 / summary["seconds"], rel=0.02)
-    assert set(summary["stage_share"]) == {"decode", "preprocess", "visibility", "inference", "postprocess", "send"}
+    assert set(summary["stage_share"]) == {"decode", "preprocess", "visibility", "inference", "postprocess", "send",
+                                           "outputs"}
     assert summary["p99_ms"] >= summary["p50_ms"] > 0
     lines = [json.loads(x) for x in log.read_text().splitlines()]
     assert len(lines) == 15 and all(len(x["levels"]) == 3 for x in lines)
