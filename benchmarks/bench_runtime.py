@@ -58,7 +58,7 @@ from bsn_edge.calibration import Calibration
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.camera_state import CameraState
-from bsn_edge.runtime.sources import LiveSource, Reconnect
+from bsn_edge.runtime.live_source import LiveSource, Reconnect
 from bsn_edge.sequence.folder import SequenceFolder
 from bsn_edge.sequence.media import read_video
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("user_file", "layers"),
-    ("fields", "config_toml", "progress", "default_model"),
+    ("fields", "config_toml", "progress", "default_model", "card_records"),
     ("camera",),
     ("mounting",),
     ("semantics", "sequence", "tracks", "metrics", "card", "model_frame"),
@@ -34,7 +34,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 )
 LEVEL = {pkg: i for i, layer in enumerate(LAYERS) for pkg in layer}
 # the car's side: never torch, onnx or the quantization tools, even on a path taken only sometimes
-TORCH_FREE = ("user_file", "layers", "fields", "config_toml", "progress", "default_model", "camera", "mounting",
+TORCH_FREE = ("user_file", "layers", "fields", "config_toml", "progress", "default_model", "card_records", "camera",
+              "mounting",
               "semantics", "sequence", "tracks", "metrics", "card", "model_frame", "modelfile", "calibration",
               "synth", "alerts", "runtime")
 HEAVY = ("torch", "onnx", "onnxruntime.quantization", "matplotlib")

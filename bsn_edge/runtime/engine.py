@@ -44,21 +44,8 @@ class Engine:
             raise ValueError(f"a decision threshold is a probability in (0, 1), got {threshold}")
         self.path = Path(model)
         mf = ModelFile.read(self.path)   # FileNotFoundError / ValueError name the file
-        try:
-            self.card = ModelCard.from_metadata(mf.metadata, str(self.path))
-        except ValueError as e:
-            raise ModelError(str(e)) from None
-        if not self.card.sealed:
-            raise ModelError(f"{self.path}: the model carries no integrity digest or self-test answer (exported "
-                             f"before models were sealed); seal a copy you trust with: bsn-export --reseal "
-                             f"{self.path} --out SEALED.onnx")
-        if self.card.threshold is None:
-            raise ModelError(f"{self.path}: the model's card has no decision threshold (its training chose none)")
-        self.threshold: float = self.card.threshold if threshold is None else threshold
-        if mf.graph_sha256 != self.card.graph_sha256:
-            raise ModelError(f"{self.path}: the model file is damaged: the sha256 of its graph and weights "
-                             f"({mf.graph_sha256[:12]}...) is not the one its export recorded "
-                             f"({self.card.graph_sha256[:12]}...)")
+        self.card = self._sealed_card(mf)
+        self.threshold: float = self.card.threshold if threshold is None else threshold  # type: ignore[assignment]
         self.verdict = Verdict("", "the signature was not checked")
         if trust is not None:
             policy = trust if isinstance(trust, TrustPolicy) else TrustPolicy(trust)
@@ -82,6 +69,25 @@ class Engine:
             self.self_test = selftest.check(lambda f: self.infer(f[None]), self.card.input_size, expected)
         except selftest.SelfTestError as e:
             raise ModelError(f"{self.path}: {e}") from None
+
+    def _sealed_card(self, mf: ModelFile) -> ModelCard:
+        """The card of the model file ``mf``: sealed, with a threshold, and the graph the one it was sealed with;
+        :class:`ModelError` naming the file otherwise."""
+        try:
+            card = ModelCard.from_metadata(mf.metadata, str(self.path))
+        except ValueError as e:
+            raise ModelError(str(e)) from None
+        if not card.sealed:
+            raise ModelError(f"{self.path}: the model carries no integrity digest or self-test answer (exported "
+                             f"before models were sealed); seal a copy you trust with: bsn-export --reseal "
+                             f"{self.path} --out SEALED.onnx")
+        if card.threshold is None:
+            raise ModelError(f"{self.path}: the model's card has no decision threshold (its training chose none)")
+        if mf.graph_sha256 != card.graph_sha256:
+            raise ModelError(f"{self.path}: the model file is damaged: the sha256 of its graph and weights "
+                             f"({mf.graph_sha256[:12]}...) is not the one its export recorded "
+                             f"({card.graph_sha256[:12]}...)")
+        return card
 
     def _check_io(self) -> None:
         h, w = self.card.input_size

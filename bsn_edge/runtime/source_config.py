@@ -6,8 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from bsn_edge.config_toml import check_fields, setting
+from bsn_edge.runtime.live_source import Reconnect
 from bsn_edge.runtime.priority import NICE_RANGE
-from bsn_edge.runtime.sources import Reconnect
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from bsn_edge.cli.common import CHECKOUT
 from bsn_edge.export.seal import set_metadata
 from bsn_edge.runtime import Engine, ModelError, Reconnect, RuntimeConfig, open_source, run
 from bsn_edge.runtime.cycle import CycleEmitter, Heartbeat
-from bsn_edge.runtime.sources import LiveSource
+from bsn_edge.runtime.live_source import LiveSource
 from tests.fakes import SHIPPED, long_video, mounted
 
 

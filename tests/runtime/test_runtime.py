@@ -284,7 +284,7 @@ def wait_for(cond, timeout: float = 10.0) -> None:
 
 def test_live_source_keeps_the_newest_frame_and_counts_drops():
     """A reader thread that outruns a slow consumer: stale frames are dropped and counted."""
-    from bsn_edge.runtime.sources import LiveSource, Reconnect
+    from bsn_edge.runtime.live_source import LiveSource, Reconnect
     cam = GatedCamera(6)
     src = LiveSource("camera", Reconnect(max_tries=0), opener=lambda _: cam)
     it = iter(src)
@@ -305,7 +305,7 @@ def test_live_source_keeps_the_newest_frame_and_counts_drops():
 def test_frames_replaced_before_the_loop_first_asks_are_not_drops():
     """A camera delivers while the model warms up: those frames were never due, so they are counted
     apart (``before_start``) and the bus's dropped-frames counter starts at 0."""
-    from bsn_edge.runtime.sources import LiveSource, Reconnect
+    from bsn_edge.runtime.live_source import LiveSource, Reconnect
     cam = GatedCamera(5)
     src = LiveSource("camera", Reconnect(max_tries=0), opener=lambda _: cam)
     for g in cam.gates[:3]:                  # 0, 1, 2 arrive before anyone asks

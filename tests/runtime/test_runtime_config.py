@@ -396,7 +396,7 @@ def test_the_vehicle_files_threads_source_and_calibration_reach_what_they_set_an
         setup, tmp_path, monkeypatch):
     """runtime.threads and spin reach onnxruntime's session, [calibration] the camera's online estimator,
     [source] the reconnect policy a camera is opened with; --threads, --no-spin and --stall override the file."""
-    from bsn_edge.runtime import sources
+    from bsn_edge.runtime import live_source, sources
 
     model, clip = setup
     vehicle = tmp_path / "vehicle.toml"
@@ -417,9 +417,9 @@ def test_the_vehicle_files_threads_source_and_calibration_reach_what_they_set_an
     finally:
         source.close()
         camera.close()
-    assert cfg.source.reconnect() == sources.Reconnect(3.5, 0.5, 8.0, 20.0)
-    monkeypatch.setattr(sources, "LiveSource", lambda target, policy: (target, policy))
-    assert sources.open_source("0", reconnect=cfg.source.reconnect()) == (0, sources.Reconnect(3.5, 0.5, 8.0, 20.0))
+    assert cfg.source.reconnect() == live_source.Reconnect(3.5, 0.5, 8.0, 20.0)
+    monkeypatch.setattr(live_source, "LiveSource", lambda target, policy: (target, policy))
+    assert sources.open_source("0", reconnect=cfg.source.reconnect()) == (0, live_source.Reconnect(3.5, 0.5, 8.0, 20.0))
     flags = run_cli.runtime_settings(run_cli.build_parser().parse_args(
         [*argv, "--threads", "2", "--no-spin", "--stall", "1.5"]))
     assert (flags.threads, flags.spin, flags.source.stall_s) == (2, False, 1.5)

@@ -11,7 +11,8 @@ import threading
 import cv2
 import numpy as np
 
-from bsn_edge.runtime.sources import ImageFolderSource, LiveSource, Reconnect, VideoFileSource, open_capture
+from bsn_edge.runtime.live_source import LiveSource, Reconnect, open_capture
+from bsn_edge.runtime.sources import ImageFolderSource, VideoFileSource
 from tests.runtime.test_untrusted_inputs import bsn_run
 
 PORTRAIT = range(6, 9)      # the frames of the 15-frame clip turned on their side

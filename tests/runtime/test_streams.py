@@ -10,7 +10,7 @@ import time
 import cv2
 import numpy as np
 
-from bsn_edge.runtime.sources import LiveSource, Reconnect, open_capture
+from bsn_edge.runtime.live_source import LiveSource, Reconnect, open_capture
 
 FRAMES = 15
 

@@ -5,7 +5,8 @@ import pytest
 
 from bsn_edge import semantics as sm
 from bsn_edge.synth import SynthConfig, make_clip, render_frames
-from bsn_edge.synth.populate import EGO_NOSE, LEAD_HEADWAY, LEAD_STANDSTILL, QUEUE_SPEED, build_scenario
+from bsn_edge.synth.platoon import EGO_NOSE, LEAD_HEADWAY, LEAD_STANDSTILL
+from bsn_edge.synth.populate import QUEUE_SPEED, build_scenario
 
 
 def _ahead(scenario):
