@@ -31,6 +31,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("export",),
     ("adapt",),
     ("cli",),
+    ("benchmarks",),
 )
 LEVEL = {pkg: i for i, layer in enumerate(LAYERS) for pkg in layer}
 # the car's side: never torch, onnx or the quantization tools, even on a path taken only sometimes

@@ -8,18 +8,9 @@ import pytest
 
 import bsn_edge
 from bsn_edge.cli import demo, run
-from bsn_edge.default_model import DEFAULT_CARD, DEFAULT_MODEL
+from bsn_edge.default_model import DEFAULT_MODEL
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def test_the_default_model_lives_in_the_package_and_is_package_data():
-    pkg = Path(bsn_edge.__file__).resolve().parent / "default_model"
-    assert DEFAULT_MODEL.parent == pkg and DEFAULT_MODEL.is_file() and not DEFAULT_MODEL.is_symlink()
-    assert DEFAULT_CARD.is_file() and DEFAULT_CARD.parent == pkg
-    tool = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
-    assert "bsn_edge.default_model" in tool["packages"]
-    assert {"*.onnx", "*.json"} <= set(tool["package-data"]["bsn_edge.default_model"])
 
 
 def test_the_commands_run_the_default_without_being_told():

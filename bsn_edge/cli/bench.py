@@ -1,9 +1,9 @@
 """``bsn-bench``: run the project's benchmarks and write the report.
 
-The benchmarks are written in the source tree (``benchmarks/``) and travel in the wheel as
-``bsn_edge.benchmarks``. With a source tree (beside the package, ``--checkout``, ``$BSN_EDGE_CHECKOUT`` or the
-current folder) every benchmark runs from it; an installed wheel without one runs those that need nothing of
-it (:data:`NEEDS_TREE` names the others and why) and says which it left out.
+The benchmarks are the package's (:mod:`bsn_edge.benchmarks`). With a source tree (beside the package,
+``--checkout``, ``$BSN_EDGE_CHECKOUT`` or the current folder) every one runs, in it and told where it is; an
+installed wheel without one runs those that need nothing of it (:data:`NEEDS_TREE` names the others and what of
+the tree each needs) and says which it left out.
 """
 
 from __future__ import annotations
@@ -15,13 +15,12 @@ import sys
 import time
 from pathlib import Path
 
-from bsn_edge.cli.common import CHECKOUT, REAL_DATA, fail
+from bsn_edge.cli.common import CHECKOUT, CHECKOUT_ENV, REAL_DATA, fail
 from bsn_edge.default_model import DEFAULT_MODEL
 
 PROG = "bsn-bench"
-CHECKOUT_ENV = "BSN_EDGE_CHECKOUT"
 # what makes a folder a checkout with everything the benchmarks use (a source distribution has the first only)
-MARKS = (Path("benchmarks") / "report.py", Path("configs") / "quick.toml", Path("models") / "README.md")
+MARKS = (Path("configs") / "quick.toml", Path("models") / "README.md")
 DEFAULT_STYLES = ("town", "suburb", "highway", "urban")
 DEFAULT_SEEDS = 5
 NAMES = ("synth", "labels", "train_step", "arch", "quant", "floor", "int8_cpu", "runtime", "accuracy", "install",
@@ -37,6 +36,7 @@ NEEDS_TREE = {"arch": "configs/quick.toml", "quant": "configs/quick.toml", "accu
               "realteacher": "the default's training run (models/default)",
               "alive": "the training runs' weights (models/)", "prune": "the default's training run (models/default)",
               "adapt_real": "the default's training run (models/default)"}
+BENCHMARKS = "bsn_edge.benchmarks"
 ADAPT_SOURCE, ADAPT_TARGET = "suburb", "urban"
 ADAPT_EVAL_SEEDS = (1300, 1301)   # held-out target clips: seeds no training clip has
 SEEDS = (0, 1, 2)                 # training seeds of the paper's tables
@@ -93,13 +93,12 @@ def find_checkout(given: str | None, cwd: Path | None = None) -> Path | None:
 
 
 def _py(root: Path | None, *args: str) -> None:
-    """``python ARGS`` in the source tree ``root`` (``-m benchmarks.X`` there), or here from the installed
-    package (``-m bsn_edge.benchmarks.X``) without one."""
-    if root is None:
-        args = tuple(f"bsn_edge.{a}" if a.startswith("benchmarks.") else a for a in args)
+    """``python ARGS`` (the package's modules: ``-m bsn_edge.benchmarks.X``) in the source tree ``root``, told it
+    is there (``$BSN_EDGE_CHECKOUT``), or here without one (an installed wheel)."""
     cmd = [sys.executable, *args]
     print("+", " ".join(cmd), flush=True)
-    subprocess.run(cmd, cwd=root, check=True)
+    env = None if root is None else {**os.environ, CHECKOUT_ENV: str(root)}
+    subprocess.run(cmd, cwd=root, check=True, env=env)
 
 
 def _prepare_data(root: Path | None, work: Path) -> Path:
@@ -129,16 +128,9 @@ def _prepare(root: Path | None, work: Path) -> tuple[Path, Path, Path]:
 
 
 # benchmarks that need nothing but where to write
-BY_OUT_ONLY = {"labels": "benchmarks.bench_labels", "realcam": "benchmarks.bench_realcam",
-               "realview": "benchmarks.bench_realview", "realboxes": "benchmarks.bench_realboxes",
-               "camvid": "benchmarks.bench_camvid", "realteacher": "benchmarks.bench_realteacher",
-               "vanishing": "benchmarks.bench_vanishing",
-               "floor": "benchmarks.bench_floor", "int8_cpu": "benchmarks.bench_int8_cpu",
-               "install": "benchmarks.bench_install", "footprint": "benchmarks.bench_footprint",
-               "alive": "benchmarks.bench_alive",
-               "prune": "benchmarks.bench_prune", "first_guess": "benchmarks.bench_first_guess",
-               "optimizer": "benchmarks.bench_optimizer", "camera_health": "benchmarks.bench_camera_health",
-               "ways_out": "benchmarks.bench_ways_out", "paced_floor": "benchmarks.bench_paced_floor"}
+BY_OUT_ONLY = ("labels", "realcam", "realview", "realboxes", "camvid", "realteacher", "vanishing", "floor",
+               "int8_cpu", "install", "footprint", "alive", "prune", "first_guess", "optimizer", "camera_health",
+               "ways_out", "paced_floor")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -163,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         for name in names:       # in the order asked (all: the order of NAMES)
             _one(root, name, args, out, work)
-        _py(root, "-m", "benchmarks.report", "--results", out)
+        _py(root, "-m", f"{BENCHMARKS}.report", "--results", out)
     except subprocess.CalledProcessError as e:
         return fail(PROG, f"a benchmark failed: {' '.join(map(str, e.cmd))}", 1)
     print(f"{PROG}: done in {time.perf_counter() - t0:.0f} s; report {Path(out) / 'REPORT.md'}")
@@ -172,18 +164,18 @@ def main(argv: list[str] | None = None) -> int:
 
 def _one(root: Path | None, name: str, args: argparse.Namespace, out: str, work: Path) -> None:
     if name in BY_OUT_ONLY:
-        _py(root, "-m", BY_OUT_ONLY[name], "--out", out)
+        _py(root, "-m", f"{BENCHMARKS}.bench_{name}", "--out", out)
     elif name == "synth":
-        _py(root, "-m", "benchmarks.bench_synth", "--out", out, "--frames", str(args.synth_frames))
+        _py(root, "-m", f"{BENCHMARKS}.bench_synth", "--out", out, "--frames", str(args.synth_frames))
     elif name == "train_step":
-        _py(root, "-m", "benchmarks.bench_train_step", "--data", str(_prepare_data(root, work)), "--out", out)
+        _py(root, "-m", f"{BENCHMARKS}.bench_train_step", "--data", str(_prepare_data(root, work)), "--out", out)
     elif name == "quant":
         data, run, _ = _prepare(root, work)
-        _py(root, "-m", "benchmarks.bench_quant", "--run", str(run), "--data", str(data), "--calib",
+        _py(root, "-m", f"{BENCHMARKS}.bench_quant", "--run", str(run), "--data", str(data), "--calib",
             str(data / "town_0"), "--out", out)
     elif name == "arch":
         data, run, _ = _prepare(root, work)
-        _py(root, "-m", "benchmarks.bench_arch", "--out", out, "--runs", f"small-light={run}", "--data", str(data),
+        _py(root, "-m", f"{BENCHMARKS}.bench_arch", "--out", out, "--runs", f"small-light={run}", "--data", str(data),
             "--train-steps", str(ARCH_STEPS), "--teacher-steps", str(ARCH_STEPS), "--seeds", *map(str, SEEDS),
             "--work", str(work / "arch"))
     elif name == "runtime":
@@ -193,14 +185,14 @@ def _one(root: Path | None, name: str, args: argparse.Namespace, out: str, work:
     elif name == "calibration":
         _calibration(root, out, work)
     elif name == "adapt_real":
-        _py(root, "-m", "benchmarks.bench_adapt_real", "--work", str(work / "adapt_real"), "--drive", "0006R0",
+        _py(root, "-m", f"{BENCHMARKS}.bench_adapt_real", "--work", str(work / "adapt_real"), "--drive", "0006R0",
             "0001TP", "0016E5", "--out", out)
     elif name == "label_classes":
         campaign = Path("~/.cache/bsn-edge/campaign/data").expanduser()
         data = campaign if campaign.is_dir() else _prepare_data(root, work)
-        _py(root, "-m", "benchmarks.bench_label_classes", "--data", str(data), "--out", out)
+        _py(root, "-m", f"{BENCHMARKS}.bench_label_classes", "--data", str(data), "--out", out)
     elif name == "accuracy":
-        _py(root, "-m", "benchmarks.bench_bsn_accuracy", "--out", out, "--work", str(work / "accuracy"), "--seeds",
+        _py(root, "-m", f"{BENCHMARKS}.bench_bsn_accuracy", "--out", out, "--work", str(work / "accuracy"), "--seeds",
             *map(str, SEEDS))
 
 
@@ -208,7 +200,7 @@ def _calibration(root: Path | None, out: str, work: Path) -> None:
     """The real clips that are at hand (no truth) and five synthetic drives (with their truth)."""
     real = [str(REAL_DATA / name) for name in ("udacity_test_video.mp4", "dashcam_highway.mp4",
                                                   "mountain_highway.mp4") if (REAL_DATA / name).is_file()]
-    _py(root, "-m", "benchmarks.bench_calibration", *[a for c in real for a in ("--clip", c)], "--cache",
+    _py(root, "-m", f"{BENCHMARKS}.bench_calibration", *[a for c in real for a in ("--clip", c)], "--cache",
         str(work / "calibration"), "--out", out)
 
 
@@ -220,7 +212,8 @@ def _runtime(root: Path | None, out: str, work: Path) -> None:
         if not clip.is_file():
             _py(root, "-m", "bsn_edge.cli.synth", str(work / "clip"), "--frames", "300", "--seed", "42", "--force")
         source = ["--source", str(clip)]
-    _py(root, "-m", "benchmarks.bench_runtime", "--model", str(DEFAULT_MODEL), *source, "--repeats", "3", "--out", out)
+    _py(root, "-m", f"{BENCHMARKS}.bench_runtime", "--model", str(DEFAULT_MODEL), *source, "--repeats", "3",
+        "--out", out)
 
 
 def _adapt(root: Path | None, out: str, work: Path) -> None:
@@ -232,7 +225,7 @@ def _adapt(root: Path | None, out: str, work: Path) -> None:
             _py(root, "-m", "bsn_edge.cli.synth", str(clip), "--frames", "120", "--style", ADAPT_TARGET, "--seed",
                 str(seed), "--no-video", "--force")
             _py(root, "-m", "bsn_edge.cli.label", str(clip))
-    _py(root, "-m", "benchmarks.bench_adapt", "--data", str(data), "--eval", str(held), "--source", ADAPT_SOURCE,
+    _py(root, "-m", f"{BENCHMARKS}.bench_adapt", "--data", str(data), "--eval", str(held), "--source", ADAPT_SOURCE,
         "--target", ADAPT_TARGET, "--work", str(work / "adapt"), "--out", out)
 
 

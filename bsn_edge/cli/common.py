@@ -9,7 +9,10 @@ import sys
 from pathlib import Path
 
 # the source checkout this package runs from (editable install): benchmarks/ and models/ live here
-CHECKOUT = Path(__file__).resolve().parents[2]
+CHECKOUT_ENV = "BSN_EDGE_CHECKOUT"
+# the source tree: $BSN_EDGE_CHECKOUT (bsn-bench sets it for the benchmarks it runs on a tree it was given), else
+# the one the package sits in (an installed wheel's site-packages: none)
+CHECKOUT = Path(os.environ.get(CHECKOUT_ENV) or Path(__file__).resolve().parents[2]).resolve()
 REAL_DATA_ENV = "BSN_EDGE_REAL_DATA"
 # the real development data: $BSN_EDGE_REAL_DATA, else beside the checkout (tests and benchmarks that need it
 # skip without it)

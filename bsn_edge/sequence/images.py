@@ -82,7 +82,8 @@ def write_image(path: str | os.PathLike, image: np.ndarray, durable: bool = Fals
     atomic_write_bytes(path, buf.tobytes(), durable)
 
 
-def _read(path: str | os.PathLike, flags: int) -> np.ndarray:
+def read_image(path: str | os.PathLike, flags: int = cv2.IMREAD_COLOR) -> np.ndarray:
+    """An image file as OpenCV reads it with ``flags``; ``FileNotFoundError`` naming it when it cannot be read."""
     img = cv2.imread(str(path), flags)
     if img is None:
         raise FileNotFoundError(f"cannot read image {path} (missing or not an image)")
@@ -103,7 +104,7 @@ def write_depth(path: str | os.PathLike, depth_m: np.ndarray) -> None:
 
 def read_depth(path: str | os.PathLike) -> np.ndarray:
     """Read a 16-bit depth PNG into float32 metres (0 = no depth)."""
-    raw = _read(path, cv2.IMREAD_UNCHANGED)
+    raw = read_image(path, cv2.IMREAD_UNCHANGED)
     if raw.dtype != np.uint16 or raw.ndim != 2:
         raise ValueError(f"{path}: depth must be a single-channel 16-bit PNG, got {raw.dtype} {raw.shape}")
     return raw.astype(np.float32) / DEPTH_SCALE
@@ -116,5 +117,5 @@ def write_mask(path: str | os.PathLike, mask: np.ndarray, durable: bool = False)
 
 def read_mask(path: str | os.PathLike) -> np.ndarray:
     """Read an 8-bit 0 / 255 mask PNG into a boolean array."""
-    raw = _read(path, cv2.IMREAD_GRAYSCALE)
+    raw = read_image(path, cv2.IMREAD_GRAYSCALE)
     return raw > 127

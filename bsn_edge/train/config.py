@@ -132,7 +132,7 @@ class TrainConfig:
     # are taught as well. Rendered clips only, whose depth is exact (0: V as labelled)
     bce_range_m: float = 0.0
     # BCE weight of the positive pixels on people and what they ride (semantics.PEOPLE_AND_CYCLES); every
-    # other pixel weighs 1. Their positives are a few % of the labels' (benchmarks/bench_label_classes.py)
+    # other pixel weighs 1. Their positives are a few % of the labels' (bsn_edge/benchmarks/bench_label_classes.py)
     people_weight: float = 1.0
 
     def __post_init__(self) -> None:

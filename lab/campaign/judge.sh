@@ -25,14 +25,14 @@ SHIPPED=$("$B/python" -c "from bsn_edge.default_model import DEFAULT_MODEL; prin
 "$B/bsn-export" --checkpoint "$RUN" --out "$MODEL" --int8 --reduce-range --int8-frames calib
 cp "$REPO/benchmarks/results/cameras.json" "$OUT/"
 cd "$REPO"
-"$B/python" -m benchmarks.bench_cameras --keep --out "$OUT" \
+"$B/python" -m bsn_edge.benchmarks.bench_cameras --keep --out "$OUT" \
   --set "no platoon=$HERE/heldout/plain" --set "platoon=$HERE/heldout/platoon" \
   --set "slow traffic=$HERE/heldout/queue" --set "earlier world=$HERE/heldout/earlier" \
   --model "$LABEL=$MODEL"
-"$B/python" -m benchmarks.bench_realcam --out "$OUT/realcam" --model "$MODEL"
-"$B/python" -m benchmarks.bench_realview --out "$OUT/realview" --model "default=$SHIPPED" \
+"$B/python" -m bsn_edge.benchmarks.bench_realcam --out "$OUT/realcam" --model "$MODEL"
+"$B/python" -m bsn_edge.benchmarks.bench_realview --out "$OUT/realview" --model "default=$SHIPPED" \
   --model "$LABEL=$MODEL"
 DEFAULT_LABEL=${DEFAULT_LABEL:-"shared-light S3 (shipped)"}   # the default's name in cameras.md
-"$B/python" -m benchmarks.bench_tradeoff --cameras "$OUT/cameras.json" --out "$OUT" \
+"$B/python" -m bsn_edge.benchmarks.bench_tradeoff --cameras "$OUT/cameras.json" --out "$OUT" \
   --model "$DEFAULT_LABEL=$SHIPPED" --model "$LABEL=$MODEL"
 echo "judged $RUN: $OUT (cameras.md, realcam/, realview/, tradeoff*.md)"

@@ -32,12 +32,12 @@ SHIPPED=$("$B/python" -c "from bsn_edge.default_model import DEFAULT_MODEL; prin
 models=(--model "default=$SHIPPED" --model "$LABEL=$MODEL")
 [ -n "$OTHER" ] && models+=(--model "$OTHER")
 cd "$REPO"
-"$B/python" -m benchmarks.bench_realboxes --out "$OUT/realboxes" "${models[@]}"
-"$B/python" -m benchmarks.bench_realboxes --out "$OUT/withheld" --name withheld --withhold-camera "${models[@]}"
-"$B/python" -m benchmarks.bench_camvid --out "$OUT/camvid" --like-area "${models[@]}"
+"$B/python" -m bsn_edge.benchmarks.bench_realboxes --out "$OUT/realboxes" "${models[@]}"
+"$B/python" -m bsn_edge.benchmarks.bench_realboxes --out "$OUT/withheld" --name withheld --withhold-camera "${models[@]}"
+"$B/python" -m bsn_edge.benchmarks.bench_camvid --out "$OUT/camvid" --like-area "${models[@]}"
 sets=()
 for s in highway suburb town urban; do sets+=(--set "$s=$HERE/bystyle/$s"); done
-"$B/python" -m benchmarks.bench_cameras --out "$OUT/cameras" "${sets[@]}" "${models[@]}"
-"$B/python" -m benchmarks.bench_realcam --out "$OUT/realcam" "${models[@]}"
-"$B/python" -m benchmarks.bench_realview --out "$OUT/realview" "${models[@]}"
+"$B/python" -m bsn_edge.benchmarks.bench_cameras --out "$OUT/cameras" "${sets[@]}" "${models[@]}"
+"$B/python" -m bsn_edge.benchmarks.bench_realcam --out "$OUT/realcam" "${models[@]}"
+"$B/python" -m bsn_edge.benchmarks.bench_realview --out "$OUT/realview" "${models[@]}"
 echo "judged $RUN: $OUT (realboxes/, withheld/, camvid/, cameras/, realcam/, realview/)"

@@ -83,7 +83,7 @@ def _real(name: str) -> Path:
 
 
 def test_real_cameras_of_known_mounting():
-    from benchmarks.bench_realcam import ddad_samples, udacity_camera
+    from bsn_edge.benchmarks.real_samples import ddad_samples, udacity_camera
     _real("ddad_dgp")
     # DDAD's front camera, mounting from its extrinsics and the LiDAR road plane under the car, per
     # scene (median of its frames): scene_02 (pitch 0.4-0.6, yaw -3.9) to a third of a degree; in

@@ -1,5 +1,6 @@
-"""``bsn-bench`` runs the benchmarks of a source tree against the installed package, wherever it is run from,
-and every benchmark of the tree is reachable from it or named as one of the campaign's own."""
+"""``bsn-bench`` runs the package's benchmarks (``bsn_edge.benchmarks``) in the source tree it finds or is given,
+told where it is, wherever it is run from; every benchmark of the package is reachable from it or named as one of
+the campaign's own."""
 
 import os
 import re
@@ -15,37 +16,37 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _tree(root: Path) -> Path:
-    """A source tree whose 'alive' benchmark writes where its package came from, and whose report writer
-    writes REPORT.md."""
-    b = root / "benchmarks"
-    b.mkdir(parents=True)
-    (b / "__init__.py").write_text("")
-    (b / "bench_alive.py").write_text(
-        "import argparse, pathlib, bsn_edge\n"
-        "a = argparse.ArgumentParser(); a.add_argument('--out'); o = a.parse_args().out\n"
-        "pathlib.Path(o).mkdir(parents=True, exist_ok=True)\n"
-        "(pathlib.Path(o) / 'alive.md').write_text(bsn_edge.__file__)\n")
-    for mark in ("configs/quick.toml", "models/README.md"):
+    """A source tree as bsn-bench knows one: the files of it the benchmarks read."""
+    for mark in bench.MARKS:
         (root / mark).parent.mkdir(parents=True, exist_ok=True)
         (root / mark).write_text("")
-    (b / "report.py").write_text(
-        "import argparse, pathlib\n"
-        "a = argparse.ArgumentParser(); a.add_argument('--results'); r = a.parse_args().results\n"
-        "(pathlib.Path(r) / 'REPORT.md').write_text('report')\n")
     return root
 
 
-def test_an_installed_bsn_bench_runs_the_benchmarks_of_the_tree_it_is_given(tmp_path):
-    tree, elsewhere = _tree(tmp_path / "tree"), tmp_path / "elsewhere"
-    elsewhere.mkdir()
-    out = tmp_path / "out"
-    env = {**os.environ, "PYTHONPATH": ""}
-    r = subprocess.run([sys.executable, "-m", "bsn_edge.cli.bench", "--checkout", str(tree), "--only", "alive",
-                        "--out", str(out)], cwd=elsewhere, capture_output=True, text=True, env=env, timeout=120)
+def _recorded(monkeypatch) -> list[tuple[list[str], Path | None, dict | None]]:
+    ran: list[tuple[list[str], Path | None, dict | None]] = []
+    monkeypatch.setattr(bench.subprocess, "run", lambda cmd, cwd, check, env: ran.append((cmd, cwd, env)))
+    return ran
+
+
+def test_bsn_bench_runs_the_packages_benchmarks_in_the_tree_it_is_given_and_tells_them_where_it_is(
+        tmp_path, monkeypatch):
+    tree = _tree(tmp_path / "tree")
+    ran = _recorded(monkeypatch)
+    monkeypatch.chdir(tmp_path)
+    assert bench.main(["--checkout", str(tree), "--only", "alive", "--out", str(tmp_path / "out")]) == 0
+    assert [cmd[cmd.index("-m") + 1] for cmd, _, _ in ran] == ["bsn_edge.benchmarks.bench_alive",
+                                                                "bsn_edge.benchmarks.report"]
+    assert all(cwd == tree.resolve() and env[bench.CHECKOUT_ENV] == str(tree.resolve()) for _, cwd, env in ran)
+
+
+def test_a_benchmark_reads_the_tree_it_is_told_of():
+    """What ``$BSN_EDGE_CHECKOUT`` names is the checkout the package's modules read (configs, models, lab)."""
+    code = "from bsn_edge.benchmarks import bench_alive; print(bench_alive.DEFAULT_RUNS)"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                       env={**os.environ, bench.CHECKOUT_ENV: "/somewhere/else"})
     assert r.returncode == 0, r.stderr
-    assert (out / "REPORT.md").read_text() == "report"
-    assert (out / "alive.md").read_text().startswith(str(Path(bench.__file__).parents[1])), \
-        "the benchmark ran against the package bsn-bench belongs to"
+    assert r.stdout.strip() == str(Path("/somewhere/else/models/default").resolve())
 
 
 def test_the_tree_comes_from_the_flag_then_the_environment_then_beside_the_package_then_here(tmp_path, monkeypatch):
@@ -68,18 +69,16 @@ def _as_installed(tmp_path, monkeypatch):
     monkeypatch.delenv(bench.CHECKOUT_ENV, raising=False)
     monkeypatch.setattr(bench, "CHECKOUT", tmp_path / "site-packages")
     monkeypatch.chdir(tmp_path)
-    ran = []
-    monkeypatch.setattr(bench.subprocess, "run", lambda cmd, cwd, check: ran.append((cmd, cwd)))
-    return ran
+    return _recorded(monkeypatch)
 
 
 def test_an_installed_wheel_runs_what_needs_no_tree_from_the_package_and_names_what_it_left_out(
         tmp_path, monkeypatch, capsys):
     ran = _as_installed(tmp_path, monkeypatch)
     assert bench.main(["--only", "vanishing", "alive", "--out", str(tmp_path / "out")]) == 0
-    modules = [cmd[cmd.index("-m") + 1] for cmd, _ in ran]
+    modules = [cmd[cmd.index("-m") + 1] for cmd, _, _ in ran]
     assert modules == ["bsn_edge.benchmarks.bench_vanishing", "bsn_edge.benchmarks.report"]
-    assert all(cwd is None for _, cwd in ran)
+    assert all(cwd is None and env is None for _, cwd, env in ran)
     err = capsys.readouterr().err
     assert "left out alive (needs the training runs' weights (models/))" in err and "--checkout" in err
 
@@ -97,7 +96,7 @@ def test_what_needs_a_tree_is_named_for_benchmarks_that_exist():
 
 def test_every_benchmark_is_reachable_from_bsn_bench_or_named_as_the_campaigns():
     source = (ROOT / "bsn_edge" / "cli" / "bench.py").read_text()
-    reached = set(re.findall(r"benchmarks\.(bench_\w+)", source))
-    scripts = {p.stem for p in (ROOT / "benchmarks").glob("bench_*.py")}
+    reached = set(re.findall(r"\.(bench_\w+)\"", source)) | {f"bench_{n}" for n in bench.BY_OUT_ONLY}
+    scripts = {p.stem for p in (ROOT / "bsn_edge" / "benchmarks").glob("bench_*.py")}
     assert scripts - reached - set(bench.CAMPAIGN_TOOLS) == set()
     assert reached <= scripts and set(bench.CAMPAIGN_TOOLS) <= scripts, "no name of a benchmark that is gone"

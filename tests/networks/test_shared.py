@@ -6,7 +6,7 @@ import onnx
 import pytest
 import torch
 
-from benchmarks.bench_arch import count_gmacs
+from bsn_edge.benchmarks.arch_speed import count_gmacs
 from bsn_edge.export import FusedModel, to_onnx
 from bsn_edge.modelfile.read import session
 from bsn_edge.networks import create_model, get_spec, start_from

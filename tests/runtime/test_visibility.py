@@ -10,9 +10,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from benchmarks.corruptions import CORRUPTIONS, sensor_noise
 from bsn_edge.alerts.blindness import Blindness
 from bsn_edge.alerts.sectors import SECTORS, SectorGeometry
+from bsn_edge.benchmarks.corruptions import CORRUPTIONS, sensor_noise
 from bsn_edge.cli.common import REAL_DATA
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime.visibility import CameraHealth, VisibilityConfig
