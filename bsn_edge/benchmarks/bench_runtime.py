@@ -51,7 +51,7 @@ from typing import Any
 
 import cv2
 
-from bsn_edge.alerts.senders import CanSender
+from bsn_edge.alerts.can_output import CanSender
 from bsn_edge.calibration import Calibration
 from bsn_edge.default_model import DEFAULT_MODEL
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run

@@ -92,7 +92,10 @@ def _model_alone(engine: Any, rate: float) -> float:
 def worker(clip: Path, rate: float, calib: str | None, loops: int, settings: dict[str, Any] | None = None
            ) -> dict[str, Any]:
     """One row, in this process: the runtime on ``clip`` paced at ``rate``; the figures as a dict."""
-    from bsn_edge.alerts.senders import CanSender
+    try:
+        from bsn_edge.alerts.can_output import CanSender
+    except ImportError:             # a tree from before each output had its module
+        from bsn_edge.alerts.senders import CanSender  # type: ignore[attr-defined,no-redef]
     from bsn_edge.calibration import Calibration
     from bsn_edge.default_model import DEFAULT_MODEL
     from bsn_edge.modelfile.trust import TrustPolicy

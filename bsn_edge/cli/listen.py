@@ -177,7 +177,7 @@ def _listen_udp(where: str, show: Printer, more: Callable[[], bool]) -> None:
     unreadable line, counted."""
     import socket
 
-    from bsn_edge.alerts.senders import udp_frames
+    from bsn_edge.alerts.udp_output import udp_frames
 
     host, _, port = where.rpartition(":")
     if not port.isdigit() or not 0 < int(port) < 65536:

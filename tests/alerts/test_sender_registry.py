@@ -1,12 +1,16 @@
 """Encoding apart from transport: a sender carries what its encoder gives it, and senders are opened by the
 output's scheme from one registry (a new bus is one class and one entry)."""
 
+import sys
+
 import can
 import pytest
 
 from bsn_edge.alerts.can_codec import CanEncoder
+from bsn_edge.alerts.can_output import CanSender
 from bsn_edge.alerts.frame import AlertFrame
-from bsn_edge.alerts.senders import SENDERS, CanSender, SerialSender, open_sender
+from bsn_edge.alerts.senders import SENDERS, open_sender
+from bsn_edge.alerts.serial_output import SerialSender
 
 
 class Fixed:
@@ -153,3 +157,40 @@ def test_bsn_listen_judges_the_udp_datagrams_and_counts_one_of_another_layout(ca
     out = capsys.readouterr()
     assert codes == [1] and out.out.count("[alive") == 6, (codes, out)
     assert "datagram 1: not a bsn-run datagram" in out.err and "1 unreadable lines" in out.err
+
+
+def test_a_new_output_is_one_new_file(tmp_path, monkeypatch):
+    """A module named ``*_output`` beside the package's outputs is found by name, its sender opened by its scheme
+    (written here to a folder of the package's path, as a file in ``bsn_edge/alerts`` would be), with the
+    layout's encoder and the vehicle file's settings: nothing else is edited."""
+    import bsn_edge.alerts as package
+    from bsn_edge.alerts import senders
+    from bsn_edge.alerts.bus_config import BusConfig
+
+    (tmp_path / "memory_output.py").write_text(
+        "from bsn_edge.alerts.senders import Sender\n\n"
+        "class MemorySender(Sender):\n"
+        "    name = scheme = 'memory'\n"
+        "    kept: list = []\n\n"
+        "    @classmethod\n"
+        "    def from_target(cls, target, encoder, log_path, bus):\n"
+        "        return cls(encoder)\n\n"
+        "    def _send(self, frames):\n"
+        "        self.kept.extend(frames)\n")
+    monkeypatch.setattr(package, "__path__", [*package.__path__, str(tmp_path)])
+    monkeypatch.delitem(SENDERS, "memory", raising=False)
+    senders.load_outputs.cache_clear()
+    try:
+        with senders.open_sender("memory:anything", bus=BusConfig()) as tx:
+            assert type(tx).__name__ == "MemorySender" and tx.send(AlertFrame.unavailable(0.0))
+            assert [fid for fid, _ in tx.kept] == [0x500, 0x501], "the protocol's frames, encoded for it"
+    finally:
+        SENDERS.pop("memory", None)
+        sys.modules.pop("bsn_edge.alerts.memory_output", None)
+        senders.load_outputs.cache_clear()
+
+
+def test_the_outputs_are_found_by_their_modules_names():
+    from bsn_edge.alerts.senders import load_outputs
+
+    assert {"can", "serial", "udp"} <= set(load_outputs())

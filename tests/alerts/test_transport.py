@@ -12,9 +12,10 @@ import serial
 
 from bsn_edge.alerts import AlertFrame, Fault, Level, SectorAlert, SystemState
 from bsn_edge.alerts.can_codec import HAZARD, STATUS, decode
+from bsn_edge.alerts.can_output import CanSender
 from bsn_edge.alerts.e2e import counter_gap
-from bsn_edge.alerts.senders import CanSender, SerialSender
 from bsn_edge.alerts.serial_codec import FrameDecoder, cobs_decode, cobs_encode
+from bsn_edge.alerts.serial_output import SerialSender
 from tests.fakes import FullBus, GonePort
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bsn_edge.alerts.can_codec import DBC_PATH
-from bsn_edge.alerts.senders import CanSender
+from bsn_edge.alerts.can_output import CanSender
 from bsn_edge.cli import report as report_cli
 from bsn_edge.report import make_report, read_drive
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run

@@ -19,8 +19,8 @@ import pytest
 
 from bsn_edge.alerts import AlertFrame, Level, SectorAlert, SystemState
 from bsn_edge.alerts.can_codec import DBC_PATH, decode
+from bsn_edge.alerts.can_output import CanSender
 from bsn_edge.alerts.health import Health, HealthConfig
-from bsn_edge.alerts.senders import CanSender
 from bsn_edge.card import CARD_SHA_KEY, ModelCard, card_digest
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli.common import CHECKOUT
@@ -405,7 +405,7 @@ def test_a_serial_port_gone_for_good_is_degraded_on_the_other_bus_and_a_non_zero
     names it, and bsn-run's ending says so with exit 1."""
     import cantools
 
-    from bsn_edge.alerts.senders import SerialSender
+    from bsn_edge.alerts.serial_output import SerialSender
     from bsn_edge.cli.common import CHECKOUT as ROOT
     from tests.fakes import GonePort
     model, clip = setup

@@ -13,7 +13,8 @@ import serial
 
 from bsn_edge.alerts import SystemState
 from bsn_edge.alerts.can_codec import decode
-from bsn_edge.alerts.senders import CanSender, SerialSender
+from bsn_edge.alerts.can_output import CanSender
+from bsn_edge.alerts.serial_output import SerialSender
 from bsn_edge.cli import listen as listen_cli
 from bsn_edge.cli import run as run_cli
 from bsn_edge.cli.common import REAL_DATA

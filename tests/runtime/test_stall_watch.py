@@ -15,8 +15,9 @@ import numpy as np
 
 from bsn_edge.alerts import SystemState
 from bsn_edge.alerts.can_codec import STATUS, decode
+from bsn_edge.alerts.can_output import CanSender
 from bsn_edge.alerts.health import Health, HealthConfig
-from bsn_edge.alerts.senders import CanSender, Sender
+from bsn_edge.alerts.senders import Sender
 from bsn_edge.runtime import Engine, RuntimeConfig, open_source, run
 from bsn_edge.runtime.cycle import CycleEmitter, StallWatch
 from tests.fakes import SimClock, long_video, mounted
