@@ -6,7 +6,7 @@ import json
 import pytest
 
 import bsn_edge.train.device as train_device
-from benchmarks import bench_arch
+from bsn_edge.benchmarks import bench_arch
 from bsn_edge.benchmarks.bench_arch import arithmetic_clash, trained_in
 from bsn_edge.benchmarks.ledger import Ledger
 from bsn_edge.card import UNRECORDED

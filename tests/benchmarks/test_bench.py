@@ -50,12 +50,12 @@ def test_every_benchmark_module_imports():
     import importlib
     import pkgutil
 
-    import benchmarks
+    from bsn_edge import benchmarks
 
     names = [m.name for m in pkgutil.iter_modules(benchmarks.__path__) if m.name.startswith("bench_")]
     assert "bench_train_step" in names
     for name in names:
-        importlib.import_module(f"benchmarks.{name}")
+        importlib.import_module(f"bsn_edge.benchmarks.{name}")
 
 
 def test_camvid_counts_road_users_and_open_road_by_the_stated_rule():

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from benchmarks import common
+from bsn_edge.benchmarks import common
 from bsn_edge.benchmarks.bench_runtime import median_table
 
 
