@@ -25,7 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 HIGHWAY = ROOT.parent / "shared" / "data" / "real" / "dashcam_highway.mp4"
-MODEL = ROOT / "models" / "bsn_shared_light_int8.onnx"
+MODEL = ROOT / "bsn_edge" / "default_model" / "bsn_shared_light_int8.onnx"
 MEASURED_SIGNALS = ("Frame_Rate", "Status_CRC")    # the rate is measured, and the status CRC covers it
 MEASURED_KEYS = ("seconds",)                        # how long the labeller took, in its report
 

@@ -1,6 +1,6 @@
 """Accuracy against speed: held-out IoU over model-only frames/s of exported models, on one plot.
 
-    python -m bsn_edge.benchmarks.bench_tradeoff --model "default=models/bsn_shared_light_int8.onnx" \\
+    python -m bsn_edge.benchmarks.bench_tradeoff --model "default=bsn_edge/default_model/bsn_shared_light_int8.onnx" \\
         --model "shared=RUN/model_int8.onnx" [--cameras benchmarks/results/cameras.json] --out benchmarks/results
 
 Speed: every model opened as ``bsn-run`` opens it (:class:`~bsn_edge.runtime.engine.Engine`, 2

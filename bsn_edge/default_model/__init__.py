@@ -1,7 +1,7 @@
 """The shipped default model: int8, signed with the project's release key, with its resolved card beside it.
 
 It travels inside the package, so an installed wheel runs it with no checkout (``bsn-run`` without
-``--model``, ``bsn-demo`` from any folder); ``models/`` in a checkout links to these files.
+``--model``, ``bsn-demo`` from any folder); ``models/default`` in a checkout is the run it was exported from.
 """
 
 from __future__ import annotations
