@@ -1,4 +1,6 @@
-"""The vehicle settings file's JSON Schema and reference page, both generated from the settings themselves.
+"""The vehicle settings file's JSON Schema and reference page, both generated from the settings themselves
+(``python -m bsn_edge.runtime.config_schema`` writes them and the docs' settings table; ``--check`` says which
+is stale).
 
 The types and ranges come from the settings' dataclasses (``config_toml.setting``), the defaults from
 their defaults, and each key's description from its comment in the shipped file
@@ -173,3 +175,44 @@ def reference_page() -> str:
     for name, node in schema()["properties"].items():
         walk(node, name)
     return "\n".join(lines).rstrip() + "\n"
+
+
+def generated(checkout: Path) -> dict[Path, str]:
+    """Every file of ``checkout`` made from the settings, with its text: the JSON Schema, the reference page and
+    the docs' settings table (its block in ``docs/runtime.md``)."""
+    import json
+
+    from bsn_edge.runtime.config_file import settings_table
+
+    runtime_page = checkout / "docs" / "runtime.md"
+    page = runtime_page.read_text(encoding="utf-8")
+    start = page.index("\n", page.index(TABLE_START)) + 1
+    end = page.index(TABLE_END)
+    return {SCHEMA_FILE: json.dumps(schema(), indent=1) + "\n",
+            checkout / "docs" / "settings.md": reference_page(),
+            runtime_page: page[:start] + "\n".join(settings_table()) + "\n" + page[end:]}
+
+
+TABLE_START, TABLE_END = "<!-- settings table:", "<!-- end of settings table -->"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Write the files made from the settings (``--check``: write nothing, exit 1 naming those that are stale)."""
+    import sys
+
+    from bsn_edge.cli.common import CHECKOUT
+
+    check = (sys.argv[1:] if argv is None else argv) == ["--check"]
+    stale = []
+    for path, text in generated(CHECKOUT).items():
+        if path.read_text(encoding="utf-8") != text:
+            stale.append(path)
+            if not check:
+                path.write_text(text, encoding="utf-8")
+    for path in stale:
+        print(f"{path}: {'stale: regenerate it with python -m bsn_edge.runtime.config_schema' if check else 'written'}")
+    return 1 if check and stale else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
