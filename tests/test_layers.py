@@ -48,7 +48,9 @@ def modules(root: Path = PACKAGE):
 def imported(tree: ast.AST, here: str = "bsn_edge") -> list[tuple[int, str]]:
     """``(line, module)`` of every import in ``tree`` of the module ``here`` (dotted, for relative imports):
     ``from X import y`` names ``X`` and ``X.y``, a relative import is resolved, and a call of
-    ``import_module`` or ``__import__`` names its module when written out, else ``<dynamic>``."""
+    ``import_module`` or ``__import__`` names its module when written out, its own package when the name is one
+    of its package's modules (``f"{__package__}.{name}"``: a module checked here like the others), else
+    ``<dynamic>``."""
     out = []
     package = here.split(".")
     for node in ast.walk(tree):
@@ -68,8 +70,15 @@ def imported(tree: ast.AST, here: str = "bsn_edge") -> list[tuple[int, str]]:
             name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
             if name in ("import_module", "__import__"):
                 literal = node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)
-                out.append((node.lineno, node.args[0].value if literal else "<dynamic>"))
+                out.append((node.lineno, node.args[0].value if literal else here if _own(node) else "<dynamic>"))
     return out
+
+
+def _own(call: ast.Call) -> bool:
+    """Whether ``call``'s module is named as one of the caller's own package: ``f"{__package__}.{...}"``."""
+    arg = call.args[0] if call.args else None
+    return (isinstance(arg, ast.JoinedStr) and bool(arg.values) and isinstance(arg.values[0], ast.FormattedValue)
+            and isinstance(arg.values[0].value, ast.Name) and arg.values[0].value.id == "__package__")
 
 
 def dotted(f: Path, root: Path) -> str:
@@ -182,6 +191,8 @@ def test_nothing_the_car_commands_load_names_a_training_tool():
     ("runtime/loop.py", "from .. import export"),
     ("runtime/loop.py", "from onnxruntime import quantization"),
     ("alerts/sectors.py", "importlib.import_module('bsn_edge.' + 'train')"),
+    ("alerts/sectors.py", "importlib.import_module(f'{__name__}.train')"),
+    ("alerts/sectors.py", "importlib.import_module(f'bsn_edge.{__package__}')"),
     ("cli/run.py", "import torch"),
     ("cli/listen.py", "import onnx"),
     ("cli/calibrate.py", "from onnxruntime import quantization"),
@@ -199,6 +210,12 @@ def test_the_checks_catch_each_way_of_importing_upwards(tmp_path, module, line):
     target = copy / module
     target.write_text(target.read_text() + f"\n\ndef _probe():\n    import importlib\n    {line}\n")
     assert upward_imports(copy) + heavy_imports(copy) + car_heavy_imports(copy), f"{line} in {module} was not caught"
+
+
+def test_a_module_of_its_own_package_named_at_run_time_is_its_own_packages():
+    """``import_module(f"{__package__}.{name}")`` (how the outputs are found) stays in the caller's package."""
+    tree = _parsed("import importlib\nimportlib.import_module(f'{__package__}.udp_output')\n")
+    assert imported(tree, "bsn_edge.alerts") == [(1, "importlib"), (2, "bsn_edge.alerts")]
 
 
 def test_the_development_page_shows_the_packages_layers_as_they_are():

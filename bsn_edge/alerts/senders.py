@@ -150,7 +150,7 @@ def load_outputs() -> dict[str, type[Sender]]:
 
     for m in pkgutil.iter_modules(package.__path__):
         if m.name.endswith(OUTPUT_MODULE_SUFFIX):
-            importlib.import_module(f"{package.__name__}.{m.name}")
+            importlib.import_module(f"{__package__}.{m.name}")      # a module of this package, as the layers see it
     return SENDERS
 
 

@@ -196,15 +196,17 @@ def generated(checkout: Path) -> dict[Path, str]:
 TABLE_START, TABLE_END = "<!-- settings table:", "<!-- end of settings table -->"
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Write the files made from the settings (``--check``: write nothing, exit 1 naming those that are stale)."""
-    import sys
+CHECKOUT = Path(__file__).resolve().parents[2]     # the source tree this package sits in
 
-    from bsn_edge.cli.common import CHECKOUT
+
+def main(argv: list[str] | None = None, checkout: Path = CHECKOUT) -> int:
+    """Write the files of ``checkout`` made from the settings (``--check``: write nothing, exit 1 naming those
+    that are stale)."""
+    import sys
 
     check = (sys.argv[1:] if argv is None else argv) == ["--check"]
     stale = []
-    for path, text in generated(CHECKOUT).items():
+    for path, text in generated(checkout).items():
         if path.read_text(encoding="utf-8") != text:
             stale.append(path)
             if not check:

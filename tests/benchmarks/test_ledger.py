@@ -252,9 +252,11 @@ def test_an_architecture_report_refreshed_while_the_machine_trains_takes_its_tim
                "threads": 2, "rows": [{"model": "shared-light", "params_m": 9.0, "gmacs": 9.0, "median_ms": 7.5,
                                        "fps": 133.33, "repeats": 30}]}
     (out / "light.json").write_text(json.dumps(earlier))
-    monkeypatch.setattr(arch, "time_calls", lambda *a, **k: pytest.fail("timed while told not to"))
-    monkeypatch.setattr(arch, "create_model", lambda name: torch.nn.Linear(1000, 1000))   # 1,001,000 parameters
-    monkeypatch.setattr(arch, "count_gmacs", lambda m, size: 1.5)
+    from bsn_edge.benchmarks import arch_speed
+
+    monkeypatch.setattr(arch_speed, "time_calls", lambda *a, **k: pytest.fail("timed while told not to"))
+    monkeypatch.setattr(arch_speed, "create_model", lambda name: torch.nn.Linear(1000, 1000))   # 1,001,000 parameters
+    monkeypatch.setattr(arch_speed, "count_gmacs", lambda m, size: 1.5)
     argv = ["--out", str(out), "--data", str(data), "--train-steps", "6000", "--teacher", "teacher",
             "--only", "shared-light", "--seeds", "0", "--report", "light", "--timing-from", str(out / "light.json")]
     assert arch.main(argv) == 0

@@ -459,17 +459,16 @@ def test_each_range_is_written_once_where_the_setting_is_declared_and_print_conf
         assert f"({v['minimum']:g} to " in line or "to 4_000_000" in line, line
 
 
-def test_one_command_regenerates_what_the_settings_make_and_its_check_names_a_stale_file(tmp_path, monkeypatch, capsys):
+def test_one_command_regenerates_what_the_settings_make_and_its_check_names_a_stale_file(tmp_path, capsys):
     import shutil
 
-    from bsn_edge.cli import common
     from bsn_edge.runtime import config_schema
 
-    assert config_schema.main(["--check"]) == 0, "the checkout's generated files are the settings' own"
+    assert config_schema.main(["--check"], CHECKOUT) == 0, "the checkout's generated files are the settings' own"
     (tmp_path / "docs").mkdir()
     for name in ("settings.md", "runtime.md"):
         shutil.copy(CHECKOUT / "docs" / name, tmp_path / "docs" / name)
     (tmp_path / "docs" / "settings.md").write_text("# stale\n")
-    monkeypatch.setattr(common, "CHECKOUT", tmp_path)
-    assert config_schema.main(["--check"]) == 1 and "settings.md: stale" in capsys.readouterr().out
-    assert config_schema.main([]) == 0 and config_schema.main(["--check"]) == 0, "written, then not stale"
+    assert config_schema.main(["--check"], tmp_path) == 1 and "settings.md: stale" in capsys.readouterr().out
+    assert config_schema.main([], tmp_path) == 0 and config_schema.main(["--check"], tmp_path) == 0, \
+        "written, then not stale"
