@@ -21,6 +21,8 @@ TINT = (40, 40, 255)      # BGR of blind spots, blended in at TINT_WEIGHT
 TINT_WEIGHT = 0.55
 
 
+LABEL_FONT, LABEL_SCALE = cv2.FONT_HERSHEY_SIMPLEX, 0.38
+
 def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
          geometry: SectorGeometry) -> np.ndarray:
     """The raw ``frame`` with the model's mask brought back onto it and tinted, and a bar per
@@ -43,9 +45,10 @@ def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
         x0, x1 = int(xs[0]), int(xs[-1])
         color = UNSEEN_BGR if sector.unseen else LEVEL_BGR[sector.level]
         cv2.rectangle(img, (x0 + 2, 2), (x1 - 2, 20), color, -1)
-        text = sector.level.name if sector.distance_m is None else f"{sector.level.name} {sector.distance_m:.0f}m"
-        text = f"{geometry.cfg.names[s]} " + ("CANNOT SEE" if sector.unseen else text)
-        cv2.putText(img, text, (x0 + 6, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
+        said = "CANNOT SEE" if sector.unseen else sector.level.name if sector.distance_m is None \
+            else f"{sector.level.name} {sector.distance_m:.0f}m"
+        text = _fitted((f"{geometry.cfg.names[s]} {said}", said, said.split()[0]), x1 - x0 - 8)
+        cv2.putText(img, text, (x0 + 6, 15), LABEL_FONT, LABEL_SCALE, (0, 0, 0), 1, cv2.LINE_AA)
         if s < len(alert.sectors) - 1:
             cv2.line(img, (x1, 22), (x1, h), (255, 255, 255), 1)
     camera = "" if alert.camera is Blindness.CLEAR else f"  camera {alert.camera.name}"
@@ -53,6 +56,15 @@ def draw(frame: np.ndarray, mf: ModelFrame, mask: np.ndarray, alert: AlertFrame,
     cv2.putText(img, f"{alert.state.name}{rate}{camera}", (4, h - 6), cv2.FONT_HERSHEY_SIMPLEX,
                 0.38, (255, 255, 255), 1, cv2.LINE_AA)
     return img
+
+
+def _fitted(texts: tuple[str, ...], width: int) -> str:
+    """The first of ``texts`` (longest first) that fits ``width`` pixels, else the last: a narrow sector shows
+    its level without its name rather than a label cut off."""
+    for text in texts:
+        if cv2.getTextSize(text, LABEL_FONT, LABEL_SCALE, 1)[0][0] <= width:
+            return text
+    return texts[-1]
 
 
 class OverlayWriter:

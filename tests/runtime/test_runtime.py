@@ -421,3 +421,15 @@ def test_a_picture_of_another_size_in_a_folder_gets_no_model_frame_of_its_own(se
     summary = run(engine, ImageFolderSource(folder), [], camera=Sizes(engine.card))
     assert summary["frames"] == 8 and summary["valid_frames"] == 7 and summary["faults"]["size_changes"] == 1
     assert set(built) == set(observed) == {(96, 192)}
+
+
+def test_a_sector_label_names_its_sector_when_it_fits_and_drops_the_name_when_not():
+    import cv2
+
+    from bsn_edge.runtime.overlay import LABEL_FONT, LABEL_SCALE, _fitted
+
+    texts = ("FAR_LEFT CAUTION 15m", "CAUTION 15m", "CAUTION")
+    width = [cv2.getTextSize(t, LABEL_FONT, LABEL_SCALE, 1)[0][0] for t in texts]
+    assert width[0] > width[1] > width[2], "each shorter"
+    assert [_fitted(texts, w) for w in (1000, width[0], width[0] - 1, width[1] - 1, 3)] == \
+        ["FAR_LEFT CAUTION 15m", "FAR_LEFT CAUTION 15m", "CAUTION 15m", "CAUTION", "CAUTION"]
