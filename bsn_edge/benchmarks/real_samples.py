@@ -18,9 +18,7 @@ from bsn_edge.calibration.mount_fit import MountFitConfig
 from bsn_edge.calibration.mounting_step import calibrate_mounting
 from bsn_edge.camera import Intrinsics
 from bsn_edge.cli.common import REAL_DATA
-from bsn_edge.metrics import depth_by_bin
 from bsn_edge.mounting import Mounting
-from bsn_edge.runtime.engine import Engine
 from bsn_edge.sequence.images import read_image
 from bsn_edge.sequence.media import read_video
 
@@ -226,43 +224,3 @@ def udacity_samples(every: int = 6) -> tuple[list[Sample], dict[str, Any]]:
     samples = [Sample(f"udacity frame {i}", f, cam, uv, z[idx], np.full(len(idx), "road"))
                for i, f in enumerate(frames) if i % every == 0]
     return samples, info
-
-
-# -- prediction --------------------------------------------------------------------------------
-
-def predict(engine: Engine, sample: Sample, way: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Depth (raw camera z, metres) at the sample's truth pixels, the raw-grid depth and probability."""
-    img = sample.image
-    h, w = img.shape[:2]
-    if way == "resize":
-        # what bsn-run did before the model camera: resize, read depth as it comes
-        mh, mw = engine.size
-        prob, depth = engine.infer(cv2.resize(img, (mw, mh), interpolation=cv2.INTER_AREA)[None])
-        raw_depth = cv2.resize(depth, (w, h), interpolation=cv2.INTER_NEAREST)
-        raw_prob = cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
-    else:
-        mf = sample.camera.model_frame(w, h, engine.card.camera, engine.card.mounting)
-        prob, depth = engine.infer(mf.to_model(img)[None])
-        raw_depth, raw_prob = mf.depth_to_raw(depth), mf.to_raw(prob)
-    u = np.clip(np.rint(sample.uv[:, 0]).astype(int), 0, w - 1)
-    v = np.clip(np.rint(sample.uv[:, 1]).astype(int), 0, h - 1)
-    return raw_depth[v, u], raw_depth, raw_prob
-
-
-def metrics(pred: np.ndarray, truth: np.ndarray) -> dict[str, dict[str, float]]:
-    return depth_by_bin(pred, truth, BINS, min_points=5)
-
-
-def object_distances(pred: np.ndarray, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
-    """Per object in the model's view: its distance by the prediction and by LiDAR, each the nearest
-    (``NEAREST_PCT`` percentile) depth over the object's truth pixels. The bus carries this reading:
-    the nearest blind-spot depth of a sector, not the depth of every point of a car."""
-    pd, td = [], []
-    for o in np.unique(sample.obj[sample.obj >= 0]):
-        m = (sample.obj == o) & (pred > 0)
-        if m.sum() >= OBJECT_MIN_POINTS:
-            pd.append(np.percentile(pred[m], NEAREST_PCT))
-            td.append(np.percentile(sample.z[m], NEAREST_PCT))
-    return np.array(pd), np.array(td)
-
-
