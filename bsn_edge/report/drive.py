@@ -145,7 +145,7 @@ def read_drive(log: str | Path, summary: str | Path | None = None) -> Drive:
     if not log.is_file():
         raise FileNotFoundError(f"frame log {log} not found")
     about = _summary(summary) if summary is not None else {}
-    names = sector_names(about)
+    names: tuple[str, ...] | None = sector_names(about) if summary is not None else None
     records, damage = [], []
     with log.open("rb") as f:
         for n, raw in enumerate(f, 1):
@@ -153,13 +153,16 @@ def read_drive(log: str | Path, summary: str | Path | None = None) -> Drive:
                 line = raw.decode("utf-8")
                 if not line.strip():
                     continue
-                records.append(FrameRecord.from_json(json.loads(line), names))
+                d = json.loads(line)
+                if names is None and isinstance(d, dict) and isinstance(d.get("levels"), list):
+                    names = unnamed(len(d["levels"]))      # no summary to name them: the first frame's count
+                records.append(FrameRecord.from_json(d, names or SECTORS))
             except (UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError, RecursionError,
                     OverflowError) as e:
                 damage.append(Damage(n, f"{type(e).__name__}: {e}"[:200]))
     if not records:
         raise ValueError(f"{log}: no line is a frame of bsn-run's log ({len(damage)} unreadable)")
-    return Drive(records, damage, about, names)
+    return Drive(records, damage, about, names or SECTORS)
 
 
 def _summary(summary: str | Path) -> dict[str, Any]:
@@ -174,6 +177,12 @@ def _summary(summary: str | Path) -> dict[str, Any]:
     if not isinstance(about, dict) or "frames" not in about:
         raise ValueError(f"{p}: not a run's summary (bsn-run --summary writes one)")
     return about
+
+
+def unnamed(count: int) -> tuple[str, ...]:
+    """The sectors of a log read without its summary: the default layout's when there are as many, else
+    ``SECTOR1``... left to right."""
+    return SECTORS if count == len(SECTORS) else tuple(f"SECTOR{k + 1}" for k in range(count))
 
 
 def sector_names(summary: dict[str, Any]) -> tuple[str, ...]:

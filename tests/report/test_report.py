@@ -320,3 +320,26 @@ def test_a_log_without_cycle_numbers_is_compared_by_onsets_only(tmp_path):
     record = make_report(log, tmp_path / "r", can_log=can_log, say=lambda s: None)
     assert record["bus_check"]["agree"] and not record["bus_check"]["cycles"]["numbered"]
     assert "compared by its onsets only" in (tmp_path / "r" / "report.html").read_text()
+
+
+def test_a_log_of_another_layout_is_read_by_its_summarys_sectors_or_numbered_without_one(tmp_path):
+    """A four-sector run's frame log: with its summary the sectors are the layout's names; without, they are
+    numbered from the first frame's count (never the default's three, which would call every line damaged)."""
+    import json
+
+    from bsn_edge.report.drive import read_drive
+
+    log = tmp_path / "frames.jsonl"
+    lines = [{"frame": k, "t": 0.1 * k, "levels": ["NONE", "NONE", "CAUTION" if k else "NONE", "NONE"],
+              "scores": [0.0, 0.0, 0.3 if k else 0.0, 0.0], "distances": [None, None, 8.0, None]} for k in range(3)]
+    log.write_text("".join(json.dumps(x) + "\n" for x in lines))
+    layout = [{"name": "FAR_LEFT", "to_deg": -20.0}, {"name": "LEFT", "to_deg": 0.0},
+              {"name": "RIGHT", "to_deg": 20.0}, {"name": "FAR_RIGHT", "to_deg": None}]
+    summary = tmp_path / "summary.json"
+    summary.write_text(json.dumps({"frames": 3, "settings": {"sectors": {"layout": layout}}}))
+    named = read_drive(log, summary)
+    assert named.names == ("FAR_LEFT", "LEFT", "RIGHT", "FAR_RIGHT") and not named.damage
+    assert [(o.sector, o.level, o.frame) for o in named.onsets] == [("RIGHT", "CAUTION", 1)]
+    bare = read_drive(log)
+    assert bare.names == ("SECTOR1", "SECTOR2", "SECTOR3", "SECTOR4") and not bare.damage
+    assert [o.sector for o in bare.onsets] == ["SECTOR3"]
