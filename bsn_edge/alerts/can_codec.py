@@ -28,6 +28,14 @@ def _counter_signal(msg) -> str:
     return next(s.name for s in msg.signals if s.name.endswith("_Counter"))
 
 
+def _signals(name: str, s: SectorAlert) -> tuple[tuple[str, Any], ...]:
+    """A sector's reading as its hazard signals' values, as the DBC scales and saturates them."""
+    distance = NO_DISTANCE if s.distance_m is None else min(round(s.distance_m * 2) / 2, 63.0)
+    return ((signal_name(name, "Level"), int(s.level)),
+            (signal_name(name, "Score"), round(min(max(s.score, 0.0), 1.0) * 127) / 127),
+            (signal_name(name, "Distance"), distance), (signal_name(name, "Unseen"), int(s.unseen)))
+
+
 class CanEncoder:
     """Encodes AlertFrames into (arbitration id, data) pairs, one counter per message, with the DBC of ``layout``
     (the default layout's when None)."""
@@ -35,11 +43,15 @@ class CanEncoder:
     def __init__(self, layout: BusLayout | None = None) -> None:
         self.layout = layout or bus_layout()
         self.db = self.layout.database()
-        self.counters = {name: AliveCounter() for name in (*self.layout.hazard_names, STATUS)}
+        names = (*self.layout.hazard_names, STATUS)
+        self.counters = {name: AliveCounter() for name in names}
+        # each message, its counter's and its CRC's signal, looked up once rather than every cycle
+        self.messages = {name: (m, _counter_signal(m), _crc_signal(m))
+                         for name in names for m in (self.db.get_message_by_name(name),)}
 
     def _encode(self, name: str, values: dict[str, Any]) -> tuple[int, bytes]:
-        msg = self.db.get_message_by_name(name)
-        values = {**values, _counter_signal(msg): self.counters[name].next(), _crc_signal(msg): 0}
+        msg, counter, crc = self.messages[name]
+        values = {**values, counter: self.counters[name].next(), crc: 0}
         data = bytearray(msg.encode(values, strict=True))
         data[7] = e2e_crc(bytes(data[:7]), msg.frame_id)
         return msg.frame_id, bytes(data)
@@ -53,13 +65,7 @@ class CanEncoder:
         if len(sectors) != len(self.layout.sectors):
             raise ValueError(f"a frame of {len(frame.sectors)} sectors for a bus of {len(self.layout.sectors)} "
                              f"({', '.join(self.layout.sectors)})")
-        hz: dict[str, Any] = {}
-        for name, s in zip(self.layout.sectors, sectors, strict=True):
-            hz[signal_name(name, "Level")] = int(s.level)
-            hz[signal_name(name, "Score")] = round(min(max(s.score, 0.0), 1.0) * 127) / 127
-            hz[signal_name(name, "Distance")] = NO_DISTANCE if s.distance_m is None \
-                else min(round(s.distance_m * 2) / 2, 63.0)
-            hz[signal_name(name, "Unseen")] = int(s.unseen)
+        reading = dict(zip(self.layout.sectors, sectors, strict=True))
         f = frame.faults
         st = {"System_State": int(frame.state), "Frame_Rate": min(round(frame.fps * 2) / 2, 127.5),
               "Decode_Errors": min(f.get(Fault.DECODE_ERRORS, 0) + f.get(Fault.SIZE_CHANGES, 0), SAT),
@@ -74,9 +80,8 @@ class CanEncoder:
             if name == STATUS:
                 out.append(self._encode(STATUS, st))
                 continue
-            for h in self.layout.hazards:      # each hazard frame takes its own sectors' signals
-                msg = self.db.get_message_by_name(h.name)
-                out.append(self._encode(h.name, {sig.name: hz[sig.name] for sig in msg.signals if sig.name in hz}))
+            for h in self.layout.hazards:      # each hazard frame carries its own sectors
+                out.append(self._encode(h.name, {k: v for name in h.sectors for k, v in _signals(name, reading[name])}))
         return out
 
 
